@@ -1,0 +1,144 @@
+// examples/common/cli_args.hpp — strict "--flag value" parsing for the example programs.
+//
+// Every flag a program accepts is declared with its default; an unknown flag, a missing value or
+// a malformed number is a cli::UsageError with a one-line message. Programs turn any error into
+// one line on stderr and exit code 2 (INTEROP.md).
+#pragma once
+
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace cli {
+
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct FlagSpec {
+  std::string name;           // without the leading "--"
+  std::string default_value;  // for switches: "" (off)
+  std::string help;
+  bool is_switch = false;     // takes no value
+};
+
+class Args {
+ public:
+  Args() = default;
+  explicit Args(std::vector<FlagSpec> specs) : specs_(std::move(specs)) {}
+
+  // Parses argv[first..argc): "--name value", "--name=value", switches "--name"; everything
+  // not starting with "--" is a positional. "-" alone is a positional.
+  void parse(int argc, const char* const* argv, int first) {
+    for (int k = first; k < argc; ++k) {
+      std::string a = argv[k];
+      if (a.size() > 2 && a[0] == '-' && a[1] == '-') {
+        std::string name = a.substr(2), value;
+        bool has_value = false;
+        if (auto eq = name.find('='); eq != std::string::npos) {
+          value = name.substr(eq + 1);
+          name = name.substr(0, eq);
+          has_value = true;
+        }
+        const FlagSpec* spec = find(name);
+        if (!spec) throw UsageError("unknown flag --" + name);
+        if (spec->is_switch) {
+          if (has_value) throw UsageError("--" + name + " takes no value");
+          values_[name] = "1";
+        } else {
+          if (!has_value) {
+            if (k + 1 >= argc) throw UsageError("--" + name + " needs a value");
+            value = argv[++k];
+          }
+          values_[name] = value;
+        }
+      } else {
+        positionals_.push_back(a);
+      }
+    }
+  }
+
+  const std::vector<std::string>& positionals() const { return positionals_; }
+  bool given(const std::string& name) const { return values_.count(name) > 0; }
+
+  std::string get(const std::string& name) const {
+    const FlagSpec* spec = find(name);
+    if (!spec) throw std::logic_error("flag --" + name + " was not declared");
+    auto it = values_.find(name);
+    return it == values_.end() ? spec->default_value : it->second;
+  }
+  bool get_switch(const std::string& name) const { return get(name) == "1"; }
+  double get_double(const std::string& name) const { return to_double(name, get(name)); }
+  long long get_int(const std::string& name) const { return to_int(name, get(name)); }
+  std::vector<double> get_doubles(const std::string& name) const {
+    std::vector<double> out;
+    for (const auto& item : split(get(name))) out.push_back(to_double(name, item));
+    return out;
+  }
+  std::vector<long long> get_ints(const std::string& name) const {
+    std::vector<long long> out;
+    for (const auto& item : split(get(name))) out.push_back(to_int(name, item));
+    return out;
+  }
+  // One of `choices`, else a UsageError listing them.
+  std::string get_choice(const std::string& name, const std::vector<std::string>& choices) const {
+    const std::string v = get(name);
+    for (const auto& c : choices)
+      if (c == v) return v;
+    std::string list;
+    for (const auto& c : choices) list += (list.empty() ? "" : " | ") + c;
+    throw UsageError("--" + name + " must be one of " + list + ", got '" + v + "'");
+  }
+
+  std::string help() const {
+    std::ostringstream s;
+    for (const auto& f : specs_) {
+      s << "  --" << f.name;
+      if (!f.is_switch) s << " " << (f.default_value.empty() ? "VALUE" : f.default_value);
+      s << "\n      " << f.help << "\n";
+    }
+    return s.str();
+  }
+
+ private:
+  const FlagSpec* find(const std::string& name) const {
+    for (const auto& f : specs_)
+      if (f.name == name) return &f;
+    return nullptr;
+  }
+  static std::vector<std::string> split(const std::string& s) {
+    std::vector<std::string> out;
+    std::stringstream ss(s);
+    std::string item;
+    while (std::getline(ss, item, ',')) out.push_back(item);
+    return out;
+  }
+  static double to_double(const std::string& name, const std::string& v) {
+    errno = 0;
+    char* end = nullptr;
+    const double d = std::strtod(v.c_str(), &end);
+    if (v.empty() || end != v.c_str() + v.size() || errno == ERANGE || !std::isfinite(d))
+      throw UsageError("--" + name + " expects a finite number, got '" + v + "'");
+    return d;
+  }
+  static long long to_int(const std::string& name, const std::string& v) {
+    errno = 0;
+    char* end = nullptr;
+    const long long i = std::strtoll(v.c_str(), &end, 10);
+    if (v.empty() || end != v.c_str() + v.size() || errno == ERANGE)
+      throw UsageError("--" + name + " expects an integer, got '" + v + "'");
+    return i;
+  }
+
+  std::vector<FlagSpec> specs_;
+  std::map<std::string, std::string> values_;
+  std::vector<std::string> positionals_;
+};
+
+}  // namespace cli

@@ -1,0 +1,264 @@
+// examples/common/npy.hpp — minimal, strict .npy reader/writer (NumPy format 1.0/2.0/3.0).
+//
+// Part of the examples, not the library: smg itself works on views over caller memory; this is
+// how smg_cli and the example programs get such memory from NumPy files.
+// Supported: little-endian float32/float64/int32/int64/uint8/bool, C order. Everything else
+// (big-endian, Fortran order, object arrays, truncated or over-long files, bad headers) is an
+// npy::Error whose message names the file and the problem.
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+namespace npy {
+
+class Error : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+enum class DType { f32, f64, i32, i64, u8, b1 };
+
+inline const char* dtype_name(DType d) {
+  switch (d) {
+    case DType::f32: return "float32";
+    case DType::f64: return "float64";
+    case DType::i32: return "int32";
+    case DType::i64: return "int64";
+    case DType::u8: return "uint8";
+    case DType::b1: return "bool";
+  }
+  return "?";
+}
+inline std::size_t dtype_size(DType d) {
+  switch (d) {
+    case DType::f32: case DType::i32: return 4;
+    case DType::f64: case DType::i64: return 8;
+    case DType::u8: case DType::b1: return 1;
+  }
+  return 0;
+}
+inline bool is_float(DType d) { return d == DType::f32 || d == DType::f64; }
+inline bool is_integer(DType d) { return d == DType::i32 || d == DType::i64; }
+inline bool is_boolish(DType d) { return d == DType::u8 || d == DType::b1; }
+
+template <class T> constexpr DType dtype_of();
+template <> constexpr DType dtype_of<float>() { return DType::f32; }
+template <> constexpr DType dtype_of<double>() { return DType::f64; }
+template <> constexpr DType dtype_of<std::int32_t>() { return DType::i32; }
+template <> constexpr DType dtype_of<std::int64_t>() { return DType::i64; }
+template <> constexpr DType dtype_of<std::uint8_t>() { return DType::u8; }
+template <> constexpr DType dtype_of<bool>() { return DType::b1; }
+
+inline std::string shape_string(const std::vector<std::int64_t>& shape) {
+  std::ostringstream s;
+  s << "[";
+  for (std::size_t i = 0; i < shape.size(); ++i) s << (i ? ", " : "") << shape[i];
+  s << "]";
+  return s.str();
+}
+
+// An array read from disk: dtype, shape and the raw little-endian bytes.
+struct Array {
+  DType dtype = DType::f64;
+  std::vector<std::int64_t> shape;
+  std::vector<unsigned char> bytes;
+
+  std::int64_t size() const {
+    std::int64_t n = 1;
+    for (auto s : shape) n *= s;
+    return n;
+  }
+  // Converted copy. Float arrays convert to float or double; integer and bool arrays to any
+  // integer type (or to float/double); a float array never silently becomes an integer one.
+  template <class T>
+  std::vector<T> as(const std::string& what = "array") const {
+    constexpr bool want_float = std::is_floating_point_v<T>;
+    if (!want_float && is_float(dtype))
+      throw Error(what + ": dtype " + dtype_name(dtype) + " where an integer or bool array is expected");
+    std::vector<T> out(static_cast<std::size_t>(size()));
+    const unsigned char* p = bytes.data();
+    for (std::size_t k = 0; k < out.size(); ++k) {
+      switch (dtype) {
+        case DType::f32: { float v; std::memcpy(&v, p + 4 * k, 4); out[k] = static_cast<T>(v); break; }
+        case DType::f64: { double v; std::memcpy(&v, p + 8 * k, 8); out[k] = static_cast<T>(v); break; }
+        case DType::i32: { std::int32_t v; std::memcpy(&v, p + 4 * k, 4); out[k] = static_cast<T>(v); break; }
+        case DType::i64: { std::int64_t v; std::memcpy(&v, p + 8 * k, 8); out[k] = static_cast<T>(v); break; }
+        case DType::u8: case DType::b1: out[k] = static_cast<T>(p[k]); break;
+      }
+    }
+    return out;
+  }
+};
+
+namespace detail {
+inline bool host_is_little_endian() {
+  const std::uint16_t one = 1;
+  unsigned char c;
+  std::memcpy(&c, &one, 1);
+  return c == 1;
+}
+inline std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t\n");
+  if (b == std::string::npos) return "";
+  const auto e = s.find_last_not_of(" \t\n");
+  return s.substr(b, e - b + 1);
+}
+// Value of 'key' in the header dict, as raw text up to the next top-level comma or brace.
+inline std::string dict_value(const std::string& header, const std::string& key,
+                              const std::string& path) {
+  const std::string k1 = "'" + key + "'";
+  auto pos = header.find(k1);
+  if (pos == std::string::npos) throw Error(path + ": corrupt header (no '" + key + "')");
+  pos = header.find(':', pos + k1.size());
+  if (pos == std::string::npos) throw Error(path + ": corrupt header (no value for '" + key + "')");
+  ++pos;
+  int depth = 0;
+  std::size_t end = pos;
+  for (; end < header.size(); ++end) {
+    const char c = header[end];
+    if (c == '(' || c == '[') ++depth;
+    else if (c == ')' || c == ']') --depth;
+    else if ((c == ',' || c == '}') && depth == 0) break;
+  }
+  return trim(header.substr(pos, end - pos));
+}
+inline DType parse_descr(const std::string& v, const std::string& path) {
+  if (v.size() < 3 || (v.front() != '\'' && v.front() != '"'))
+    throw Error(path + ": corrupt header (descr " + v + ")");
+  const std::string d = v.substr(1, v.size() - 2);
+  if (d == "<f4") return DType::f32;
+  if (d == "<f8") return DType::f64;
+  if (d == "<i4") return DType::i32;
+  if (d == "<i8") return DType::i64;
+  if (d == "|u1" || d == "<u1") return DType::u8;
+  if (d == "|b1") return DType::b1;
+  if (!d.empty() && d[0] == '>')
+    throw Error(path + ": big-endian dtype " + d + " is not supported (use little-endian)");
+  throw Error(path + ": unsupported dtype " + d +
+              " (supported: float32, float64, int32, int64, uint8, bool)");
+}
+inline std::vector<std::int64_t> parse_shape(const std::string& v, const std::string& path) {
+  if (v.size() < 2 || v.front() != '(' || v.back() != ')')
+    throw Error(path + ": corrupt header (shape " + v + ")");
+  std::vector<std::int64_t> shape;
+  std::string inner = v.substr(1, v.size() - 2);
+  std::stringstream ss(inner);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    item = trim(item);
+    if (item.empty()) continue;
+    for (char c : item)
+      if (c < '0' || c > '9') throw Error(path + ": corrupt header (shape " + v + ")");
+    if (item.size() > 15) throw Error(path + ": corrupt header (shape dimension too large)");
+    shape.push_back(std::stoll(item));
+  }
+  return shape;
+}
+}  // namespace detail
+
+// Reads a whole .npy file. Throws npy::Error("<path>: <problem>").
+inline Array read(const std::string& path) {
+  if (!detail::host_is_little_endian()) throw Error(path + ": this reader needs a little-endian host");
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw Error(path + ": cannot open");
+  unsigned char magic[8];
+  if (!f.read(reinterpret_cast<char*>(magic), 8)) throw Error(path + ": truncated (no npy preamble)");
+  if (std::memcmp(magic, "\x93NUMPY", 6) != 0) throw Error(path + ": not an .npy file (bad magic)");
+  const int major = magic[6];
+  std::uint32_t header_len = 0;
+  if (major == 1) {
+    unsigned char b[2];
+    if (!f.read(reinterpret_cast<char*>(b), 2)) throw Error(path + ": truncated header");
+    header_len = b[0] | (b[1] << 8);
+  } else if (major == 2 || major == 3) {
+    unsigned char b[4];
+    if (!f.read(reinterpret_cast<char*>(b), 4)) throw Error(path + ": truncated header");
+    header_len = b[0] | (b[1] << 8) | (b[2] << 16) | (static_cast<std::uint32_t>(b[3]) << 24);
+    if (header_len > (1u << 24)) throw Error(path + ": corrupt header (length)");
+  } else {
+    throw Error(path + ": unsupported npy version " + std::to_string(major));
+  }
+  std::string header(header_len, '\0');
+  if (!f.read(header.data(), header_len)) throw Error(path + ": truncated header");
+  if (header.find('{') == std::string::npos || header.find('}') == std::string::npos)
+    throw Error(path + ": corrupt header (no dict)");
+
+  Array a;
+  a.dtype = detail::parse_descr(detail::dict_value(header, "descr", path), path);
+  const std::string fo = detail::dict_value(header, "fortran_order", path);
+  if (fo == "True") throw Error(path + ": Fortran-order arrays are not supported (save C-order)");
+  if (fo != "False") throw Error(path + ": corrupt header (fortran_order " + fo + ")");
+  a.shape = detail::parse_shape(detail::dict_value(header, "shape", path), path);
+
+  const std::int64_t count = a.size();
+  const std::uint64_t nbytes = static_cast<std::uint64_t>(count) * dtype_size(a.dtype);
+  const std::streampos data_start = f.tellg();
+  f.seekg(0, std::ios::end);
+  const std::uint64_t available = static_cast<std::uint64_t>(f.tellg() - data_start);
+  if (available < nbytes)
+    throw Error(path + ": truncated data (" + std::to_string(available) + " of " +
+                std::to_string(nbytes) + " bytes for shape " + shape_string(a.shape) + ")");
+  if (available > nbytes)
+    throw Error(path + ": corrupt file (" + std::to_string(available - nbytes) +
+                " bytes after the data of shape " + shape_string(a.shape) + ")");
+  f.seekg(data_start);
+  a.bytes.resize(nbytes);
+  if (nbytes > 0 && !f.read(reinterpret_cast<char*>(a.bytes.data()), static_cast<std::streamsize>(nbytes)))
+    throw Error(path + ": read error");
+  if (a.dtype == DType::b1)
+    for (auto c : a.bytes)
+      if (c > 1) throw Error(path + ": corrupt bool data (byte value " + std::to_string(c) + ")");
+  return a;
+}
+
+// Writes data (count = product(shape)) as a version 1.0 .npy file, C order, little-endian.
+// T: float, double, int32_t, int64_t, uint8_t or bool.
+template <class T>
+void write(const std::string& path, const T* data, const std::vector<std::int64_t>& shape) {
+  if (!detail::host_is_little_endian()) throw Error(path + ": this writer needs a little-endian host");
+  const DType d = dtype_of<T>();
+  const char* descr = d == DType::f32 ? "<f4" : d == DType::f64 ? "<f8" : d == DType::i32 ? "<i4"
+                    : d == DType::i64 ? "<i8" : d == DType::u8 ? "|u1" : "|b1";
+  std::string dict = std::string("{'descr': '") + descr + "', 'fortran_order': False, 'shape': (";
+  std::int64_t count = 1;
+  for (std::size_t i = 0; i < shape.size(); ++i) {
+    if (shape[i] < 0) throw Error(path + ": negative dimension");
+    dict += std::to_string(shape[i]) + (shape.size() == 1 ? "," : i + 1 < shape.size() ? ", " : "");
+    count *= shape[i];
+  }
+  dict += "), }";
+  // Pad so that preamble (10 bytes) + header is a multiple of 64, ending in '\n'.
+  const std::size_t unpadded = 10 + dict.size() + 1;
+  dict.append((64 - unpadded % 64) % 64, ' ');
+  dict += '\n';
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  if (!f) throw Error(path + ": cannot open for writing");
+  const unsigned char pre[10] = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0,
+                                 static_cast<unsigned char>(dict.size() & 0xff),
+                                 static_cast<unsigned char>((dict.size() >> 8) & 0xff)};
+  f.write(reinterpret_cast<const char*>(pre), 10);
+  f.write(dict.data(), static_cast<std::streamsize>(dict.size()));
+  if (count > 0)
+    f.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(count * sizeof(T)));
+  f.flush();
+  if (!f) throw Error(path + ": write error");
+}
+
+template <class T>
+void write(const std::string& path, const std::vector<T>& data, const std::vector<std::int64_t>& shape) {
+  std::int64_t count = 1;
+  for (auto s : shape) count *= s;
+  if (static_cast<std::int64_t>(data.size()) != count)
+    throw Error(path + ": " + std::to_string(data.size()) + " values for shape " + shape_string(shape));
+  write(path, data.data(), shape);
+}
+
+}  // namespace npy

@@ -1,0 +1,13 @@
+// smg/core.hpp — everything in smg/core: views, validation, SO(3), dual quaternions, parallel.
+#pragma once
+
+#include "smg/core/dual_quaternion.hpp"
+#include "smg/core/parallel.hpp"
+#include "smg/core/quaternion.hpp"
+#include "smg/core/scalar.hpp"
+#include "smg/core/so3.hpp"
+#include "smg/core/status.hpp"
+#include "smg/core/types.hpp"
+#include "smg/core/validate.hpp"
+#include "smg/core/version.hpp"
+#include "smg/core/views.hpp"

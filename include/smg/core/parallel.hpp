@@ -1,0 +1,150 @@
+// smg/core/parallel.hpp — deterministic parallel loops on std::thread.
+//
+// Determinism contract (DESIGN.md "Conventions"): work over [0, n) is cut into chunks whose
+// boundaries depend only on n and the grain — never on the thread count — and reductions
+// combine per-chunk partial results in chunk order on the calling thread. Hence the same input
+// gives bit-identical output for 1, 2 or 7 threads. Threads only decide who runs a chunk.
+//
+// Thread count: ParallelOptions::threads if > 0, else the process default set by
+// set_num_threads (0 = std::thread::hardware_concurrency()). A parallel loop started from
+// inside another runs serially on its caller's thread (no oversubscription).
+#pragma once
+
+#include <algorithm>
+#include <atomic>
+#include <exception>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "smg/core/types.hpp"
+
+namespace smg {
+
+struct ParallelOptions {
+  int threads = 0;  // 0: the process default (set_num_threads)
+  Index grain = 0;  // items per chunk; 0: automatic, a function of n only
+};
+
+namespace detail {
+inline std::atomic<int>& default_threads_storage() {
+  static std::atomic<int> n{0};
+  return n;
+}
+inline bool& in_parallel_region() {
+  thread_local bool flag = false;
+  return flag;
+}
+struct ParallelRegionGuard {
+  bool previous;
+  ParallelRegionGuard() : previous(in_parallel_region()) { in_parallel_region() = true; }
+  ~ParallelRegionGuard() { in_parallel_region() = previous; }
+  ParallelRegionGuard(const ParallelRegionGuard&) = delete;
+  ParallelRegionGuard& operator=(const ParallelRegionGuard&) = delete;
+};
+}  // namespace detail
+
+// Sets the process-wide default thread count (0 = hardware concurrency).
+inline void set_num_threads(int n) { detail::default_threads_storage() = std::max(0, n); }
+
+// The thread count a loop with ParallelOptions::threads == 0 will use (>= 1).
+inline int num_threads() {
+  const int n = detail::default_threads_storage();
+  if (n > 0) return n;
+  const unsigned hw = std::thread::hardware_concurrency();
+  return hw == 0 ? 1 : static_cast<int>(hw);
+}
+
+// Items per chunk for n items. Automatic: about 256 chunks, at least 1 item each — enough
+// chunks to balance load on any realistic core count, few enough that per-chunk partials are
+// cheap. Depends on n and grain only.
+inline Index parallel_grain(Index n, Index grain = 0) {
+  if (grain > 0) return grain;
+  return std::max<Index>(1, (n + 255) / 256);
+}
+inline Index parallel_chunk_count(Index n, Index grain = 0) {
+  if (n <= 0) return 0;
+  const Index g = parallel_grain(n, grain);
+  return (n + g - 1) / g;
+}
+
+// Calls f(chunk, begin, end) once for each chunk of [0, n). Chunks may run concurrently and in
+// any order; f must only write memory owned by its chunk. The first exception thrown by f is
+// rethrown on the calling thread after all threads have joined (remaining chunks are skipped).
+template <class F>
+void parallel_for_chunks(Index n, F&& f, ParallelOptions options = {}) {
+  if (n <= 0) return;
+  const Index grain = parallel_grain(n, options.grain);
+  const Index chunks = (n + grain - 1) / grain;
+  int threads = options.threads > 0 ? options.threads : num_threads();
+  if (detail::in_parallel_region()) threads = 1;
+  threads = static_cast<int>(std::min<Index>(threads, chunks));
+
+  auto run_chunk = [&](Index c) {
+    const Index begin = c * grain;
+    f(c, begin, std::min(n, begin + grain));
+  };
+  if (threads <= 1) {
+    detail::ParallelRegionGuard guard;
+    for (Index c = 0; c < chunks; ++c) run_chunk(c);
+    return;
+  }
+
+  std::atomic<Index> next{0};
+  std::exception_ptr error;
+  std::mutex error_mutex;
+  auto worker = [&]() {
+    detail::ParallelRegionGuard guard;
+    for (;;) {
+      const Index c = next.fetch_add(1);
+      if (c >= chunks) return;
+      try {
+        run_chunk(c);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = std::current_exception();
+        next = chunks;
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  pool.reserve(static_cast<std::size_t>(threads - 1));
+  for (int t = 1; t < threads; ++t) {
+    try {
+      pool.emplace_back(worker);
+    } catch (...) {
+      break;  // could not start a thread: the caller's thread does the remaining chunks
+    }
+  }
+  worker();
+  for (auto& th : pool) th.join();
+  if (error) std::rethrow_exception(error);
+}
+
+// Calls f(begin, end) over deterministic chunks of [0, n).
+template <class F>
+void parallel_for(Index n, F&& f, ParallelOptions options = {}) {
+  parallel_for_chunks(
+      n, [&](Index, Index begin, Index end) { f(begin, end); }, options);
+}
+
+// Deterministic reduction: partial[c] = map(begin_c, end_c) for each chunk, then
+// result = combine(...combine(combine(identity, partial[0]), partial[1])..., partial[C-1])
+// on the calling thread. Bit-identical for any thread count.
+template <class T, class Map, class Combine>
+T parallel_reduce(Index n, const T& identity, Map&& map, Combine&& combine,
+                  ParallelOptions options = {}) {
+  const Index chunks = parallel_chunk_count(n, options.grain);
+  std::vector<T> partial(static_cast<std::size_t>(chunks), identity);
+  parallel_for_chunks(
+      n,
+      [&](Index c, Index begin, Index end) {
+        partial[static_cast<std::size_t>(c)] = map(begin, end);
+      },
+      options);
+  T result = identity;
+  for (const T& p : partial) result = combine(result, p);
+  return result;
+}
+
+}  // namespace smg

@@ -1,0 +1,4 @@
+// smg/energy.hpp — everything in smg/energy.
+#pragma once
+
+#include "smg/core.hpp"

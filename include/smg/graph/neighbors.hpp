@@ -1,0 +1,77 @@
+// smg/graph/neighbors.hpp — the view every graph consumer takes: K neighbours per node.
+//
+// Layout (INTEROP.md graph_indices.npy / graph_weights.npy):
+//   indices [N][K] int32, neighbour node ids, -1 = none; valid entries first, then -1 padding
+//   weights [N][K] Scalar, topology weights w_ij >= 0 matching indices (0 on padding)
+// Row i lists the out-edges i -> j of node i (N(i) in DESIGN.md). Rows need not be symmetric.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <sstream>
+#include <string>
+
+#include "smg/core/status.hpp"
+#include "smg/core/views.hpp"
+
+namespace smg {
+
+template <class S>
+struct NeighborsView {
+  TableView<const std::int32_t, Eigen::Dynamic> indices;  // [N][K]
+  TableView<const S, Eigen::Dynamic> weights;             // [N][K]
+
+  NeighborsView() = default;
+  NeighborsView(const std::int32_t* idx, const S* w, Index nodes, Index k)
+      : indices(idx, nodes, k), weights(w, nodes, k) {}
+
+  Index nodes() const { return indices.rows(); }
+  Index k() const { return indices.cols(); }
+  // Number of valid (non-negative) entries in row i (they come first).
+  Index degree(Index i) const {
+    Index d = 0;
+    while (d < k() && indices(i, d) >= 0) ++d;
+    return d;
+  }
+};
+
+// Checks a neighbour table against N nodes: shapes, indices in [0, N) or -1, no self edges,
+// padding only at the end of a row (with weight 0), weights finite and >= 0.
+template <class S>
+Status validate_neighbors(const NeighborsView<S>& g, Index nodes,
+                          const std::string& name = "graph") {
+  auto fail = [&](Index i, Index k, const std::string& what) {
+    std::ostringstream s;
+    s << name << ": entry [i=" << i << "][k=" << k << "] " << what;
+    return Status::error(s.str());
+  };
+  if (g.indices.rows() != nodes || g.weights.rows() != nodes ||
+      g.indices.cols() != g.weights.cols()) {
+    std::ostringstream s;
+    s << name << ": expected indices and weights of shape [N=" << nodes << "][K], got ["
+      << g.indices.rows() << "][" << g.indices.cols() << "] and [" << g.weights.rows() << "]["
+      << g.weights.cols() << "]";
+    return Status::error(s.str());
+  }
+  if (nodes * g.k() > 0 && (g.indices.data() == nullptr || g.weights.data() == nullptr))
+    return Status::error(name + ": null data pointer for a non-empty array");
+  for (Index i = 0; i < nodes; ++i) {
+    bool padding = false;
+    for (Index k = 0; k < g.k(); ++k) {
+      const std::int32_t j = g.indices(i, k);
+      const S w = g.weights(i, k);
+      if (!std::isfinite(w) || w < S(0)) return fail(i, k, "has a weight that is negative or not finite");
+      if (j == -1) {
+        padding = true;
+        if (w != S(0)) return fail(i, k, "is padding (-1) with a nonzero weight");
+        continue;
+      }
+      if (padding) return fail(i, k, "is a neighbour after -1 padding");
+      if (j < -1 || j >= nodes) return fail(i, k, "is out of range: " + std::to_string(j));
+      if (j == i) return fail(i, k, "is a self edge");
+    }
+  }
+  return Status::ok();
+}
+
+}  // namespace smg

@@ -1,0 +1,4 @@
+// smg/skin.hpp — everything in smg/skin.
+#pragma once
+
+#include "smg/core.hpp"
