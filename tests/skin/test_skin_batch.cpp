@@ -253,7 +253,7 @@ TEST_CASE("skin_blend_backward equals a dense serial accumulation of per-point V
   const Index T = u.s.T, N = u.s.N, P = u.s.P;
   for (SkinMethod m : kMethods) {
     const std::string method_name = smg::to_string(m);
-      CAPTURE(method_name);
+    CAPTURE(method_name);
     Grads g = random_output_grads(rng, u);
     smg::SkinWorkspace<double> ws;
     run_backward(u, m, 3, g, ws);
@@ -318,7 +318,7 @@ TEST_CASE("whole pipeline against central differences: weights from the state, t
   CAPTURE(rng.seed);
   for (SkinMethod m : kMethods) {
     const std::string method_name = smg::to_string(m);
-      CAPTURE(method_name);
+    CAPTURE(method_name);
     Setup u = make_setup(rng, 2, 5, 3, 6, 2);
     const Index T = u.s.T, N = u.s.N, P = u.s.P;
     Grads g = random_output_grads(rng, u);
@@ -391,7 +391,7 @@ TEST_CASE("results are bit-identical for 1, 2 and 7 threads") {
   Setup u = make_setup(rng, 4, 60, 6, 3000, 2);
   for (SkinMethod m : kMethods) {
     const std::string method_name = smg::to_string(m);
-      CAPTURE(method_name);
+    CAPTURE(method_name);
     const Blended b1 = run_blend(u, m, 1, true);
     Grads g1 = random_output_grads(rng, u);
     Grads g2 = g1, g7 = g1;
@@ -472,7 +472,7 @@ TEST_CASE("a point set whose nodes all move rigidly together moves rigidly") {
   u.compute_weights();
   for (SkinMethod m : kMethods) {
     const std::string method_name = smg::to_string(m);
-      CAPTURE(method_name);
+    CAPTURE(method_name);
     const Blended b = run_blend(u, m, 2, false);
     double worst = 0;
     for (Index q = 0; q < 2; ++q) {

@@ -123,8 +123,9 @@ inline Status check_table(TableView<const T, C> a, Index rows, Index cols, const
     for (Index c = 0; c < a.cols(); ++c)
       if (!std::isfinite(a(i, c))) {
         std::ostringstream s;
-        s << name << ": element [" << i << "][" << c << "] is "
-          << (std::isnan(a(i, c)) ? "NaN" : "Inf");
+        s << name << ": element [" << i << "]";
+        if (a.cols() > 1) s << "[" << c << "]";
+        s << " is " << (std::isnan(a(i, c)) ? "NaN" : "Inf");
         return skin_error(s.str());
       }
   return Status::ok();
