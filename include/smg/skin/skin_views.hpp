@@ -282,6 +282,13 @@ inline void skin_load_query(const SkinNodes<S>& nodes, const SkinPoints<S>& pts,
 
 }  // namespace detail
 
+// A [rows] int32 index array (anchor [P], t_ref [P], t_query [Q]) whose values must lie in
+// [0, bound); `name` and `bound_name` appear in the message (e.g. "anchor.npy", "N").
+inline Status validate_skin_index_array(SkinIndexView a, Index rows, Index bound,
+                                        const std::string& name, const char* bound_name) {
+  return detail::check_index_array(a, rows, bound, name, bound_name);
+}
+
 // Reusable scratch of the backward passes (skin_blend_backward, skinning_weights_backward):
 // the node incidence of the driver table and a per-edge buffer. Keep one per thread of calls
 // and reuse it across iterations; it allocates only when the sizes or the driver table change.

@@ -24,12 +24,12 @@ namespace smg {
 
 namespace detail {
 template <class S>
-inline Status check_sigma(TableView<const S, 1> sigma, Index N) {
-  if (Status s = check_table<S, 1>(sigma, N, 1, "sigma"); !s) return s;
+inline Status check_sigma(TableView<const S, 1> sigma, Index N, const std::string& name = "sigma") {
+  if (Status s = check_table<S, 1>(sigma, N, 1, name); !s) return s;
   for (Index i = 0; i < N; ++i)
     if (!(sigma(i, 0) > S(0))) {
       std::ostringstream s;
-      s << "sigma: element [" << i << "] = " << sigma(i, 0) << " is not positive";
+      s << name << ": element [" << i << "] = " << sigma(i, 0) << " is not positive";
       return skin_error(s.str());
     }
   return Status::ok();
@@ -64,6 +64,13 @@ inline Index skin_load_weight_inputs(PositionsView<const S> positions, SkinDrive
   return D;
 }
 }  // namespace detail
+
+// sigma [N]: finite and > 0 (length units).
+template <class S>
+Status validate_skin_sigma(TableView<const S, 1> sigma, Index nodes,
+                           const std::string& name = "sigma") {
+  return detail::check_sigma<S>(sigma, nodes, name);
+}
 
 // Checks skinning_weights' arguments: positions [T][N][3] finite; drivers [P][D] (entries in
 // [−1, N), padding trailing, entry 0 valid); t_ref [P] in [0, T); points [P][3] finite;
