@@ -219,9 +219,10 @@ void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
   constexpr Index kStride = 9;  // per edge: dL/dx_t (3), dL/dx_ref (3), dL/dφ_t (3) = −dL/dφ_ref
   if (to_nodes) {
     ws.incidence.update(points.drivers, N);
-    ws.edge_buffer.resize(static_cast<std::size_t>(P * Dmax * kStride));
+    ws.edge_buffer.resize(ws.incidence.edges.size() * kStride);
   }
   S* buf = ws.edge_buffer.data();
+  const auto& inc = ws.incidence;
   for (Index q = 0; q < Q; ++q) {
     const Index t = t_query(q, 0);
     parallel_for(
@@ -250,7 +251,7 @@ void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
                 [&](Index k, const SkinDriverGradient<S>& g) {
                   if (grads.weights.data()) grads.weights(p, k) += g.weight;
                   if (!to_nodes) return;
-                  S* e = buf + (p * Dmax + k) * kStride;
+                  S* e = buf + inc.slot[static_cast<std::size_t>(p * Dmax + k)] * kStride;
                   for (int c = 0; c < 3; ++c) {
                     e[c] = g.x_t(c);
                     e[3 + c] = g.x_ref(c);
@@ -274,7 +275,6 @@ void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
         },
         options.parallel);
     if (!to_nodes) continue;
-    const auto& inc = ws.incidence;
     parallel_for(
         N,
         [&](Index begin, Index end) {
@@ -282,7 +282,7 @@ void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
             Vector3<S> gx_t = Vector3<S>::Zero(), gphi_t = Vector3<S>::Zero();
             for (Index i = inc.offsets[n]; i < inc.offsets[n + 1]; ++i) {
               const Index e = inc.edges[static_cast<std::size_t>(i)];
-              const S* g = buf + e * kStride;
+              const S* g = buf + i * kStride;
               const Index tr = points.t_ref(e / Dmax, 0);
               gx_t += Eigen::Map<const Vector3<S>>(g);
               gphi_t += Eigen::Map<const Vector3<S>>(g + 6);

@@ -106,12 +106,46 @@ inline Quaternion<S> skin_motion_rotation(const SkinDriver<S>& d) {
   return d.q_t * d.q_ref.conjugate();
 }
 
+// (0, a) ⊗ q − q ⊗ (0, b) = (q_v·(b − a), q_w (a − b) + (a + b) × q_v): the pattern of the
+// motion's dual part (S7) and of its adjoint (S15), in 12 multiplications instead of 32.
+template <class S>
+inline Quaternion<S> skin_pure_commutator(const Vector3<S>& a, const Quaternion<S>& q,
+                                          const Vector3<S>& b) {
+  const Vector3<S> v = q.vec();
+  const Vector3<S> vec = q.w() * (a - b) + (a + b).cross(v);
+  return Quaternion<S>(v.dot(b - a), vec(0), vec(1), vec(2));
+}
+
+// vec(conj(a) ⊗ b) = a_w b_v − b_w a_v − a_v × b_v (the scalar part is not needed).
+template <class S>
+inline Vector3<S> skin_vec_conj_product(const Quaternion<S>& a, const Quaternion<S>& b) {
+  return a.w() * b.vec() - b.w() * a.vec() - a.vec().cross(b.vec());
+}
+// vec(b ⊗ conj(a)) = a_w b_v − b_w a_v + a_v × b_v.
+template <class S>
+inline Vector3<S> skin_vec_product_conj(const Quaternion<S>& b, const Quaternion<S>& a) {
+  return a.w() * b.vec() - b.w() * a.vec() + a.vec().cross(b.vec());
+}
+
+// R(q) v and R(q)ᵀ v for unit q (t = 2 q_v × v; v ± q_w t + q_v × t), inlined: the hot loops
+// call them once per driver, and Eigen's out-of-line operator* on a conjugated temporary
+// measured several times slower there.
+template <class S>
+inline Vector3<S> skin_rotate(const Quaternion<S>& q, const Vector3<S>& v) {
+  const Vector3<S> t = Literal<S>(2) * q.vec().cross(v);
+  return v + q.w() * t + q.vec().cross(t);
+}
+template <class S>
+inline Vector3<S> skin_inverse_rotate(const Quaternion<S>& q, const Vector3<S>& v) {
+  const Vector3<S> t = Literal<S>(2) * q.vec().cross(v);
+  return v - q.w() * t + q.vec().cross(t);
+}
+
 // Dual part of the motion's unit dual quaternion, s_k = ½ (0, t_k) ⊗ r_k, written without
 // forming R(r_k):  s_k = ½ (x̂_t ⊗ r_k − r_k ⊗ x̂_ref).  (S7)
 template <class S>
 inline Quaternion<S> skin_motion_dual(const SkinDriver<S>& d, const Quaternion<S>& r) {
-  return Quaternion<S>(Literal<S>(0.5) *
-                       ((skin_pure(d.x_t) * r).coeffs() - (r * skin_pure(d.x_ref)).coeffs()));
+  return Quaternion<S>(Literal<S>(0.5) * skin_pure_commutator(d.x_t, r, d.x_ref).coeffs());
 }
 
 // The blended, normalised motion of one point (everything the outputs and the backward need
@@ -145,7 +179,7 @@ inline void skin_blend_forward(SkinMethod method, const SkinDriver<S>* d, Index 
     if (method == SkinMethod::dqb)
       bs += a * skin_motion_dual(d[k], r).coeffs();
     else
-      lbs += d[k].weight * (Vector3<S>(r * Vector3<S>(p - d[k].x_ref)) + d[k].x_t);
+      lbs += d[k].weight * (skin_rotate(r, Vector3<S>(p - d[k].x_ref)) + d[k].x_t);
   }
   st.inv_norm = Literal<S>(1) / sqrt(br.squaredNorm());
   st.c0 = Quaternion<S>(br * st.inv_norm);
@@ -153,7 +187,7 @@ inline void skin_blend_forward(SkinMethod method, const SkinDriver<S>* d, Index 
   if (method == SkinMethod::dqb) {
     // (S11): R(c0) p + 2 vec(ce ⊗ conj(c0)); the scalar part of ce ⊗ conj(c0), nonzero when the
     // blend is not orthogonal, is ignored (as in Kavan et al. 2008; core D2).
-    st.position = Vector3<S>(st.c0 * p) + Literal<S>(2) * (st.ce * st.c0.conjugate()).vec();
+    st.position = skin_rotate(st.c0, p) + Literal<S>(2) * skin_vec_product_conj(st.ce, st.c0);
   } else {
     st.position = lbs;
   }
@@ -174,11 +208,11 @@ inline void skin_blend_backward(SkinMethod method, const SkinDriver<S>* d, Index
   const Quaternion<S>& c0 = st.c0;
   const Quaternion<S>& ce = st.ce;
   // Output stage (S14): adjoints u_c0, u_ce w.r.t. the normalised blend (c0, ce).
-  Vector3<S> psi = q_p * g_rotation;  // R_p gθ: rotation output through ω = 2 vec(c0* ⊗ δc0)
+  Vector3<S> psi = skin_rotate(q_p, g_rotation);  // R_p gθ: rotation output through ω = 2 vec(c0* ⊗ δc0)
   Vector4<S> u_ce = Vector4<S>::Zero();
   Vector4<S> u_c0_extra = Vector4<S>::Zero();
   if (method == SkinMethod::dqb) {
-    const Vector3<S> R0t_gp = c0.conjugate() * g_position;
+    const Vector3<S> R0t_gp = skin_inverse_rotate(c0, g_position);
     psi += p.cross(R0t_gp);
     const Quaternion<S> gp_hat = skin_pure(g_position);
     u_ce = two * (gp_hat * c0).coeffs();
@@ -202,7 +236,6 @@ inline void skin_blend_backward(SkinMethod method, const SkinDriver<S>* d, Index
     const bool positive = r.coeffs().dot(rp.coeffs()) >= zero;
     const S a = positive ? dk.weight : S(-dk.weight);
     const Quaternion<S> g_r(a * g_br);
-    const Quaternion<S> rc = r.conjugate();
     Vector3<S> g_rho;
     if (method == SkinMethod::dqb) {
       // (S15): b += a (r, s), s = ½ (x̂_t ⊗ r − r ⊗ x̂_ref).
@@ -210,24 +243,24 @@ inline void skin_blend_backward(SkinMethod method, const SkinDriver<S>* d, Index
       const Quaternion<S> g_s(a * g_bs);
       const S dot = r.coeffs().dot(g_br) + s.coeffs().dot(g_bs);
       g.weight = positive ? dot : S(-dot);
-      g.x_t = half * (g_s * rc).vec();
-      g.x_ref = -half * (rc * g_s).vec();
-      const Quaternion<S> g_rt(g_r.coeffs() + half * ((g_s * skin_pure(dk.x_ref)).coeffs() -
-                                                      (skin_pure(dk.x_t) * g_s).coeffs()));
-      g_rho = half * (rc * g_rt).vec();
+      g.x_t = half * skin_vec_product_conj(g_s, r);
+      g.x_ref = -half * skin_vec_conj_product(r, g_s);
+      const Quaternion<S> g_rt(g_r.coeffs() -
+                               half * skin_pure_commutator(dk.x_t, g_s, dk.x_ref).coeffs());
+      g_rho = half * skin_vec_conj_product(r, g_rt);
     } else {
       // (S18): p' = Σ w (R(r)(p − x_ref) + x_t); the rotation output as in DQB.
       const Vector3<S> v = p - dk.x_ref;
-      const Vector3<S> u = rc * g_position;  // R(r)^T g_p'
+      const Vector3<S> u = skin_inverse_rotate(r, g_position);  // R(r)ᵀ g_p'
       g.x_t = dk.weight * g_position;
       g.x_ref = -dk.weight * u;
       g_p += dk.weight * u;
-      g_rho = dk.weight * v.cross(u) + half * (rc * g_r).vec();
+      g_rho = dk.weight * v.cross(u) + half * skin_vec_conj_product(r, g_r);
       const S rot = r.coeffs().dot(g_br);
-      g.weight = g_position.dot(Vector3<S>(r * v) + dk.x_t) + (positive ? rot : S(-rot));
+      g.weight = g_position.dot(skin_rotate(r, v) + dk.x_t) + (positive ? rot : S(-rot));
     }
     // (S16): the right tangent of r moves by R(q_ref) (φ_t − φ_ref).
-    g.phi_t = dk.q_ref.conjugate() * g_rho;
+    g.phi_t = skin_inverse_rotate(dk.q_ref, g_rho);
     g.phi_ref = -g.phi_t;
     emit(k, g);
   }

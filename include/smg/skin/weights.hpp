@@ -167,9 +167,10 @@ void skinning_weights_backward(PositionsView<const S> positions, SkinDriversView
   constexpr Index kStride = 4;  // per edge: dL/dx (3), dL/dσ (1)
   if (to_nodes) {
     ws.incidence.update(drivers, N);
-    ws.edge_buffer.resize(static_cast<std::size_t>(P * Dmax * kStride));
+    ws.edge_buffer.resize(ws.incidence.edges.size() * kStride);
   }
   S* buf = ws.edge_buffer.data();
+  const auto& inc = ws.incidence;
   parallel_for(
       P,
       [&](Index begin, Index end) {
@@ -186,7 +187,7 @@ void skinning_weights_backward(PositionsView<const S> positions, SkinDriversView
           if (grads.points.data()) grads.points.row(p) += gp;
           if (to_nodes)
             for (Index k = 0; k < D; ++k) {
-              S* e = buf + (p * Dmax + k) * kStride;
+              S* e = buf + inc.slot[static_cast<std::size_t>(p * Dmax + k)] * kStride;
               e[0] = gx[k](0);
               e[1] = gx[k](1);
               e[2] = gx[k](2);
@@ -196,7 +197,6 @@ void skinning_weights_backward(PositionsView<const S> positions, SkinDriversView
       },
       options);
   if (!to_nodes) return;
-  const auto& inc = ws.incidence;
   parallel_for(
       N,
       [&](Index begin, Index end) {
@@ -204,7 +204,7 @@ void skinning_weights_backward(PositionsView<const S> positions, SkinDriversView
           S g_sigma = S(0);
           for (Index i = inc.offsets[n]; i < inc.offsets[n + 1]; ++i) {
             const Index e = inc.edges[static_cast<std::size_t>(i)];
-            const S* g = buf + e * kStride;
+            const S* g = buf + i * kStride;
             if (grads.node_positions.data()) {
               S* out = grads.node_positions.ptr(t_ref(e / Dmax, 0), n);
               out[0] += g[0];
