@@ -164,6 +164,12 @@ TEST_CASE("Jacobians of DQB and LBS against central differences") {
       }
       CHECK(Jp.block<3, 3>(3, 3).isIdentity(0));
       CHECK(Jp.block<3, 3>(0, 3).isZero(0));
+      if (m == SkinMethod::dqb) {
+        // DQB is invariant to scaling all weights: Σ_k w_k ∂/∂w_k = 0.
+        Eigen::Matrix<double, 6, 1> euler = Eigen::Matrix<double, 6, 1>::Zero();
+        for (int k = 0; k < D; ++k) euler += d[k].weight * J[k].col(12);
+        CHECK(euler.norm() < 1e-13 * (1 + J[0].col(12).norm()));
+      }
     }
   }
 }
