@@ -1,0 +1,303 @@
+// smg/skin/blend.hpp — dual-quaternion blending (and LBS) of many points at many query times:
+// forward, per-point Jacobians, and the batched vector-Jacobian product (backward) into node and
+// point gradient buffers.
+//
+// For every query frame t = t_query[q] and point p (drivers, weights, t_ref, reference pose:
+// SkinPoints), out[q][p] = the blended motion t_ref[p] -> t applied to the point's reference
+// position and rotation (equations (S6)-(S13), smg/skin/blend_point.hpp). Node and point
+// quaternions are normalised on entry; rotation gradients are right-tangent 3-vectors of the
+// normalised quaternions unless a field says "raw".
+//
+// Determinism: points are split into chunks that depend only on P; each point's outputs and
+// point gradients are written by its own chunk; gradients into node buffers are scatter-added
+// through SkinWorkspace's incidence in the fixed order (node, query, point, driver). Results
+// are bit-identical for any thread count. Allocation: per parallel chunk (scratch of D drivers)
+// and in the workspace (resized only when the sizes or the driver table change).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "smg/core/parallel.hpp"
+#include "smg/core/validate.hpp"
+#include "smg/skin/blend_point.hpp"
+#include "smg/skin/skin_views.hpp"
+
+namespace smg {
+
+// What skin_blend writes; each view is optional (null data = not computed).
+template <class S>
+struct SkinBlendOutputs {
+  SequenceView<S, 3> positions;    // [Q][P][3] blended positions p'
+  SequenceView<S, 4> quaternions;  // [Q][P][4] blended rotations q' (w, x, y, z), unit
+  // [Q][P][D·78]: for driver column k, a row-major 6x13 block (SkinDriverJacobian: rows p', θ';
+  // columns x_ref, φ_ref, x_t, φ_t, weight); zero for padding columns. The nodes are
+  // drivers[p][k] at frames t_ref[p] (x_ref, φ_ref) and t_query[q] (x_t, φ_t).
+  SequenceView<S, Eigen::Dynamic> J_drivers;
+  SequenceView<S, Eigen::Dynamic> J_point;  // [Q][P][36]: row-major 6x6 (SkinPointJacobian)
+};
+
+namespace detail {
+template <class S>
+inline Status check_skin_common(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
+                                SkinIndexView t_query) {
+  const Index T = nodes.frames(), N = nodes.nodes();
+  if (Status s = validate_positions<S>(nodes.positions, -1, -1, "positions"); !s) return s;
+  if (Status s = validate_quaternions<S>(nodes.quaternions, T, N,
+                                         QuaternionNorm::normalize_on_entry, "quaternions");
+      !s)
+    return s;
+  if (Status s = check_points(points, T, N, true); !s) return s;
+  return check_index_array(t_query, t_query.rows(), T, "t_query", "T");
+}
+template <class S, int Dim>
+inline Status check_qp_view(SequenceView<S, Dim> v, Index Q, Index P, Index dim,
+                            const std::string& name) {
+  if (v.frames() != Q || v.nodes() != P || v.dim() != dim) {
+    std::ostringstream s;
+    s << name << ": expected shape [Q=" << Q << "][P=" << P << "][" << dim << "], got ["
+      << v.frames() << "][" << v.nodes() << "][" << v.dim() << "]";
+    return skin_error(s.str());
+  }
+  if (v.size() > 0 && v.data() == nullptr) return skin_error(name + ": null data pointer");
+  return Status::ok();
+}
+}  // namespace detail
+
+// Checks skin_blend's arguments: positions [T][N][3] finite; quaternions [T][N][4] finite,
+// nonzero; drivers [P][D] (entries in [−1, N), trailing padding, entry 0 valid); weights [P][D]
+// finite, >= 0, 0 on padding, positive maximum per point; t_ref [P] and t_query [Q] in [0, T);
+// points [P][3] finite; point_quats absent or [P][4] finite nonzero; each non-empty output's
+// shape.
+template <class S>
+Status validate_skin_blend(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
+                           SkinIndexView t_query, const SkinBlendOutputs<S>& out) {
+  if (Status s = detail::check_skin_common(nodes, points, t_query); !s) return s;
+  const Index Q = t_query.rows(), P = points.count(), D = points.width();
+  if (out.positions.data())
+    if (Status s = detail::check_qp_view(out.positions, Q, P, 3, "out_positions"); !s) return s;
+  if (out.quaternions.data())
+    if (Status s = detail::check_qp_view(out.quaternions, Q, P, 4, "out_quaternions"); !s) return s;
+  if (out.J_drivers.data())
+    if (Status s = detail::check_qp_view(out.J_drivers, Q, P, D * 78, "J_drivers"); !s) return s;
+  if (out.J_point.data())
+    if (Status s = detail::check_qp_view(out.J_point, Q, P, 36, "J_point"); !s) return s;
+  return Status::ok();
+}
+
+// Blends every point at every query frame (S6)-(S13) with options.method (DQB or LBS) and writes
+// the requested outputs.
+template <class S>
+void skin_blend(const SkinNodes<S>& nodes, const SkinPoints<S>& points, SkinIndexView t_query,
+                const SkinBlendOutputs<S>& out, const SkinOptions& options = {}) {
+  const Index Q = t_query.rows(), Dmax = points.width();
+  const SkinMethod method = options.method;
+  parallel_for(
+      points.count(),
+      [&](Index begin, Index end) {
+        std::vector<SkinDriver<S>> d(static_cast<std::size_t>(Dmax));
+        detail::SkinBlendState<S> st;
+        for (Index p = begin; p < end; ++p) {
+          const Index D = detail::skin_load_ref(nodes, points, p, true, d.data());
+          const Vector3<S> x = points.positions.row(p);
+          const Quaternion<S> qp = detail::skin_point_quaternion(points.quaternions, p);
+          for (Index q = 0; q < Q; ++q) {
+            detail::skin_load_query(nodes, points, p, t_query(q, 0), D, d.data());
+            detail::skin_blend_forward(method, d.data(), D, x, qp, st);
+            if (out.positions.data()) out.positions(q, p) = st.position;
+            if (out.quaternions.data()) to_wxyz(st.rotation, out.quaternions.ptr(q, p));
+            if (out.J_drivers.data()) {
+              S* J = out.J_drivers.ptr(q, p);
+              std::fill(J + D * 78, J + Dmax * 78, S(0));
+            }
+            if (!out.J_drivers.data() && !out.J_point.data()) continue;
+            detail::skin_blend_jacobian_rows(
+                method, d.data(), D, x, qp, st,
+                [&](int row, Index k, const SkinDriverGradient<S>& g) {
+                  if (!out.J_drivers.data()) return;
+                  S* J = out.J_drivers.ptr(q, p) + k * 78 + row * 13;
+                  for (int c = 0; c < 3; ++c) {
+                    J[c] = g.x_ref(c);
+                    J[3 + c] = g.phi_ref(c);
+                    J[6 + c] = g.x_t(c);
+                    J[9 + c] = g.phi_t(c);
+                  }
+                  J[12] = g.weight;
+                },
+                [&](int row, const Vector3<S>& g_p, const Vector3<S>& g_phi_p) {
+                  if (!out.J_point.data()) return;
+                  S* J = out.J_point.ptr(q, p) + row * 6;
+                  for (int c = 0; c < 3; ++c) {
+                    J[c] = g_p(c);
+                    J[3 + c] = g_phi_p(c);
+                  }
+                });
+          }
+        }
+      },
+      options.parallel);
+}
+
+// dL/d(outputs) given to skin_blend_backward; each optional (null data = zero). The rotation
+// gradient may be given in the right tangent of q' ([Q][P][3]) and/or as the raw 4-vector
+// dL/dq' ([Q][P][4], w, x, y, z — what an autograd framework holding q' as a tensor produces;
+// its component along q' is ignored, q' being unit by construction). Both are summed.
+template <class S>
+struct SkinBlendOutputGradients {
+  SequenceView<const S, 3> positions;    // [Q][P][3]
+  SequenceView<const S, 3> rotations;    // [Q][P][3], right tangent of q'
+  SequenceView<const S, 4> quaternions;  // [Q][P][4], raw
+};
+
+// Where skin_blend_backward adds (+=) its gradients; each optional (null data = not computed).
+// Zero them before the first call if they should hold only this gradient.
+template <class S>
+struct SkinBlendGradients {
+  PositionsView<S> node_positions;        // [T][N][3]
+  TangentsView<S> node_rotations;         // [T][N][3], right tangent of the normalised node quats
+  TableView<S, 3> points;                 // [P][3] reference positions
+  TableView<S, 3> point_rotations;        // [P][3], right tangent of the normalised point quats
+  TableView<S, 4> point_quaternions;      // [P][4], raw: w.r.t. the given (unnormalised) 4-vector
+  TableView<S, Eigen::Dynamic> weights;   // [P][D], the weights as free inputs (see weights.hpp)
+};
+
+// Checks skin_blend_backward's arguments: those of skin_blend, each non-empty output gradient
+// [Q][P][3|4] finite, and each non-empty gradient buffer's shape.
+template <class S>
+Status validate_skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
+                                    SkinIndexView t_query,
+                                    const SkinBlendOutputGradients<S>& grad_out,
+                                    const SkinBlendGradients<S>& grads) {
+  if (Status s = detail::check_skin_common(nodes, points, t_query); !s) return s;
+  const Index Q = t_query.rows(), P = points.count(), T = nodes.frames(), N = nodes.nodes();
+  auto finite = [&](auto v, Index dim, const char* name) -> Status {
+    if (!v.data()) return Status::ok();
+    if (Status s = detail::check_qp_view(v, Q, P, dim, name); !s) return s;
+    return detail::check_finite(name, v, "q", "p");
+  };
+  if (Status s = finite(grad_out.positions, 3, "grad_out_positions"); !s) return s;
+  if (Status s = finite(grad_out.rotations, 3, "grad_out_rotations"); !s) return s;
+  if (Status s = finite(grad_out.quaternions, 4, "grad_out_quaternions"); !s) return s;
+  if (grads.node_positions.data())
+    if (Status s = validate_output(grads.node_positions, T, N, "grad_node_positions"); !s) return s;
+  if (grads.node_rotations.data())
+    if (Status s = validate_output(grads.node_rotations, T, N, "grad_node_rotations"); !s) return s;
+  if (grads.points.data())
+    if (Status s = detail::check_output_table<S, 3>(grads.points, P, 3, "grad_points"); !s) return s;
+  if (grads.point_rotations.data())
+    if (Status s = detail::check_output_table<S, 3>(grads.point_rotations, P, 3,
+                                                    "grad_point_rotations");
+        !s)
+      return s;
+  if (grads.point_quaternions.data())
+    if (Status s = detail::check_output_table<S, 4>(grads.point_quaternions, P, 4,
+                                                    "grad_point_quaternions");
+        !s)
+      return s;
+  if (grads.weights.data())
+    if (Status s = detail::check_output_table<S, Eigen::Dynamic>(grads.weights, P, points.width(),
+                                                                 "grad_weights");
+        !s)
+      return s;
+  return Status::ok();
+}
+
+// Backward of skin_blend (the vector-Jacobian product): adds to `grads` the gradient of a loss
+// L given dL/d(outputs) (S14)-(S18). Weights are treated as inputs (their gradient goes to
+// grads.weights if requested; chain with skinning_weights_backward to differentiate the
+// weights themselves). The forward is recomputed (it costs about as much as reading a cache).
+// Each query frame is one pass over the points (writing per-edge contributions into the
+// workspace) and one pass over the nodes (adding them in the fixed order).
+template <class S>
+void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
+                         SkinIndexView t_query, const SkinBlendOutputGradients<S>& grad_out,
+                         const SkinBlendGradients<S>& grads, SkinWorkspace<S>& ws,
+                         const SkinOptions& options = {}) {
+  const Index Q = t_query.rows(), P = points.count(), Dmax = points.width(), N = nodes.nodes();
+  const SkinMethod method = options.method;
+  const bool to_nodes = grads.node_positions.data() || grads.node_rotations.data();
+  constexpr Index kStride = 9;  // per edge: dL/dx_t (3), dL/dx_ref (3), dL/dφ_t (3) = −dL/dφ_ref
+  if (to_nodes) {
+    ws.incidence.update(points.drivers, N);
+    ws.edge_buffer.resize(ws.incidence.edges.size() * kStride);
+  }
+  S* buf = ws.edge_buffer.data();
+  const auto& inc = ws.incidence;
+  for (Index q = 0; q < Q; ++q) {
+    const Index t = t_query(q, 0);
+    parallel_for(
+        P,
+        [&](Index begin, Index end) {
+          std::vector<SkinDriver<S>> d(static_cast<std::size_t>(Dmax));
+          detail::SkinBlendState<S> st;
+          for (Index p = begin; p < end; ++p) {
+            const Index D = detail::skin_load_ref(nodes, points, p, true, d.data());
+            detail::skin_load_query(nodes, points, p, t, D, d.data());
+            const Vector3<S> x = points.positions.row(p);
+            S qnorm;
+            const Quaternion<S> qp = detail::skin_point_quaternion(points.quaternions, p, &qnorm);
+            detail::skin_blend_forward(method, d.data(), D, x, qp, st);
+            Vector3<S> gp = Vector3<S>::Zero(), gr = Vector3<S>::Zero();
+            if (grad_out.positions.data()) gp = grad_out.positions(q, p);
+            if (grad_out.rotations.data()) gr = grad_out.rotations(q, p);
+            if (grad_out.quaternions.data()) {
+              // (S17): raw 4-vector -> right tangent of the unit q': ½ vec(conj(q') ⊗ g).
+              const Quaternion<S> g = from_wxyz(grad_out.quaternions.ptr(q, p));
+              gr += Literal<S>(0.5) * (st.rotation.conjugate() * g).vec();
+            }
+            Vector3<S> g_p, g_phi_p;
+            detail::skin_blend_backward(
+                method, d.data(), D, x, qp, st, gp, gr,
+                [&](Index k, const SkinDriverGradient<S>& g) {
+                  if (grads.weights.data()) grads.weights(p, k) += g.weight;
+                  if (!to_nodes) return;
+                  S* e = buf + inc.slot[static_cast<std::size_t>(p * Dmax + k)] * kStride;
+                  for (int c = 0; c < 3; ++c) {
+                    e[c] = g.x_t(c);
+                    e[3 + c] = g.x_ref(c);
+                    e[6 + c] = g.phi_t(c);
+                  }
+                },
+                g_p, g_phi_p);
+            if (grads.points.data()) grads.points.row(p) += g_p;
+            if (grads.point_rotations.data()) grads.point_rotations.row(p) += g_phi_p;
+            if (grads.point_quaternions.data() && points.quaternions.rows() != 0) {
+              // (S17): right tangent of q̂ = q/|q| -> raw q: (2/|q|) q̂ ⊗ (0, g).
+              const Quaternion<S> g =
+                  qp * detail::skin_pure(Vector3<S>((Literal<S>(2) / qnorm) * g_phi_p));
+              S* o = grads.point_quaternions.ptr(p);
+              o[0] += g.w();
+              o[1] += g.x();
+              o[2] += g.y();
+              o[3] += g.z();
+            }
+          }
+        },
+        options.parallel);
+    if (!to_nodes) continue;
+    parallel_for(
+        N,
+        [&](Index begin, Index end) {
+          for (Index n = begin; n < end; ++n) {
+            Vector3<S> gx_t = Vector3<S>::Zero(), gphi_t = Vector3<S>::Zero();
+            for (Index i = inc.offsets[n]; i < inc.offsets[n + 1]; ++i) {
+              const Index e = inc.edges[static_cast<std::size_t>(i)];
+              const S* g = buf + i * kStride;
+              const Index tr = points.t_ref(e / Dmax, 0);
+              gx_t += Eigen::Map<const Vector3<S>>(g);
+              gphi_t += Eigen::Map<const Vector3<S>>(g + 6);
+              if (grads.node_positions.data())
+                grads.node_positions(tr, n) += Eigen::Map<const Vector3<S>>(g + 3);
+              if (grads.node_rotations.data())
+                grads.node_rotations(tr, n) -= Eigen::Map<const Vector3<S>>(g + 6);
+            }
+            if (inc.offsets[n + 1] == inc.offsets[n]) continue;
+            if (grads.node_positions.data()) grads.node_positions(t, n) += gx_t;
+            if (grads.node_rotations.data()) grads.node_rotations(t, n) += gphi_t;
+          }
+        },
+        options.parallel);
+  }
+}
+
+}  // namespace smg

@@ -1,0 +1,56 @@
+// smg/skin/drivers.hpp — the driving set of each point: its anchor node and the anchor's
+// graph neighbours (DESIGN.md "Pinned details: DQB").  (S1)
+#pragma once
+
+#include <cstdint>
+
+#include "smg/graph/neighbors.hpp"
+#include "smg/skin/skin_views.hpp"
+
+namespace smg {
+
+// Columns of the driver table for a graph with K neighbours per node: the anchor + K.
+template <class S>
+inline Index skin_driver_width(const NeighborsView<S>& graph) {
+  return graph.k() + 1;
+}
+
+// Checks skin_drivers' arguments: the graph against N nodes (validate_neighbors), anchor [P] in
+// [0, N), out [P][K + 1].
+template <class S>
+Status validate_skin_drivers(const NeighborsView<S>& graph, SkinIndexView anchor, Index nodes,
+                             TableView<std::int32_t, Eigen::Dynamic> out) {
+  if (Status s = validate_neighbors(graph, nodes); !s) return s;
+  if (Status s = detail::check_index_array(anchor, anchor.rows(), nodes, "anchor", "N"); !s)
+    return s;
+  return detail::check_output_table<std::int32_t, Eigen::Dynamic>(out, anchor.rows(),
+                                                                   skin_driver_width(graph),
+                                                                   "drivers");
+}
+
+// out[p] = (anchor[p], the valid neighbours of anchor[p] in graph order, −1 padding):
+// D = K + 1 columns. A node without neighbours drives its points alone.  (S1)
+template <class S>
+void skin_drivers(const NeighborsView<S>& graph, SkinIndexView anchor,
+                  TableView<std::int32_t, Eigen::Dynamic> out, ParallelOptions options = {}) {
+  const Index K = graph.k();
+  parallel_for(
+      anchor.rows(),
+      [&](Index begin, Index end) {
+        for (Index p = begin; p < end; ++p) {
+          const std::int32_t a = anchor(p, 0);
+          std::int32_t* row = out.ptr(p);
+          row[0] = a;
+          Index c = 1;
+          for (Index k = 0; k < K; ++k) {
+            const std::int32_t j = graph.indices(a, k);
+            if (j < 0) break;
+            row[c++] = j;
+          }
+          for (; c <= K; ++c) row[c] = -1;
+        }
+      },
+      options);
+}
+
+}  // namespace smg
