@@ -14,7 +14,6 @@ using smg::Quaternion;
 using smg::SkinMethod;
 using smg::Vector3;
 using smg::test::Drivers;
-using smg::test::relative_error;
 
 namespace {
 constexpr double kPi = 3.14159265358979323846;
