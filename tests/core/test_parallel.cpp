@@ -8,6 +8,7 @@
 #include <cstring>
 #include <random>
 #include <stdexcept>
+#include <thread>
 #include <vector>
 
 #include "smg/core/parallel.hpp"
@@ -107,4 +108,38 @@ TEST_CASE("a nested parallel loop runs serially on its caller's thread") {
       },
       {2, 1});
   CHECK(total.load() == 800);
+}
+
+TEST_CASE("the helper-thread pool: many short loops, changing thread counts, concurrent callers") {
+  // Thousands of short loops reuse the pool's threads; every index is still visited once.
+  for (int rep = 0; rep < 2000; ++rep) {
+    const int threads = 1 + rep % 7;
+    std::vector<int> hits(97, 0);
+    smg::parallel_for(97, [&](Index b, Index e) { for (Index k = b; k < e; ++k) ++hits[static_cast<std::size_t>(k)]; },
+                      {threads, 3});
+    bool ok = true;
+    for (int h : hits) ok = ok && h == 1;
+    REQUIRE(ok);
+  }
+  // Two user threads running loops at the same time: one gets the pool, the other starts its
+  // own threads; both results are complete and deterministic.
+  auto sum = [](int threads) {
+    return smg::parallel_reduce(
+        200000, 0.0,
+        [](Index b, Index e) {
+          double s = 0;
+          for (Index k = b; k < e; ++k) s += 1.0 / static_cast<double>(k + 1);
+          return s;
+        },
+        [](double a, double b) { return a + b; }, {threads, 0});
+  };
+  const double reference = sum(1);
+  std::vector<double> results(4, 0.0);
+  std::vector<std::thread> callers;
+  for (int c = 0; c < 4; ++c)
+    callers.emplace_back([&, c] {
+      for (int rep = 0; rep < 50; ++rep) results[static_cast<std::size_t>(c)] = sum(2 + c);
+    });
+  for (auto& t : callers) t.join();
+  for (double r : results) CHECK(bits(r) == bits(reference));
 }

@@ -8,11 +8,19 @@
 // Thread count: ParallelOptions::threads if > 0, else the process default set by
 // set_num_threads (0 = std::thread::hardware_concurrency()). A parallel loop started from
 // inside another runs serially on its caller's thread (no oversubscription).
+//
+// Threads: a process-wide pool of helper threads is started on first use and grows to the
+// largest count requested, so a loop costs a wake-up instead of thread creation (trainers call
+// smg thousands of times per second). The calling thread always takes part. If the pool is
+// busy with another caller's loop, the loop starts its own threads for that call.
 #pragma once
 
 #include <algorithm>
 #include <atomic>
+#include <condition_variable>
+#include <cstdint>
 #include <exception>
+#include <functional>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -41,6 +49,82 @@ struct ParallelRegionGuard {
   ~ParallelRegionGuard() { in_parallel_region() = previous; }
   ParallelRegionGuard(const ParallelRegionGuard&) = delete;
   ParallelRegionGuard& operator=(const ParallelRegionGuard&) = delete;
+};
+
+// Persistent helper threads. run() hands `work` to up to `helpers` pool threads and runs it on
+// the caller too; it returns when every participant has returned. `work` must not throw and
+// must tolerate any number of participants (parallel_for_chunks' work pulls chunks from an
+// atomic counter, so a helper that joins late — or never — only changes who runs a chunk).
+class ThreadPool {
+ public:
+  static ThreadPool& instance() {
+    static ThreadPool pool;
+    return pool;
+  }
+  ThreadPool(const ThreadPool&) = delete;
+  ThreadPool& operator=(const ThreadPool&) = delete;
+  ~ThreadPool() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    work_cv_.notify_all();
+    for (auto& t : threads_) t.join();
+  }
+
+  // False (nothing run) when another loop is using the pool.
+  bool try_run(int helpers, const std::function<void()>& work) {
+    std::unique_lock<std::mutex> busy(run_mutex_, std::try_to_lock);
+    if (!busy.owns_lock()) return false;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      while (static_cast<int>(threads_.size()) < helpers) {
+        try {
+          threads_.emplace_back([this] { loop(); });
+        } catch (...) {
+          break;  // fewer helpers: the caller runs the remaining chunks
+        }
+      }
+      job_ = &work;
+      wanted_ = helpers;
+      ++generation_;
+    }
+    work_cv_.notify_all();
+    work();
+    std::unique_lock<std::mutex> lock(mutex_);
+    wanted_ = 0;  // helpers that have not started by now are not needed any more
+    done_cv_.wait(lock, [this] { return active_ == 0; });
+    job_ = nullptr;
+    return true;
+  }
+
+ private:
+  ThreadPool() = default;
+  void loop() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    std::uint64_t seen = 0;
+    for (;;) {
+      work_cv_.wait(lock, [&] { return stop_ || (wanted_ > 0 && generation_ != seen); });
+      if (stop_) return;
+      seen = generation_;
+      --wanted_;
+      ++active_;
+      const std::function<void()>* job = job_;
+      lock.unlock();
+      (*job)();
+      lock.lock();
+      if (--active_ == 0) done_cv_.notify_all();
+    }
+  }
+
+  std::mutex run_mutex_;  // one loop at a time
+  std::mutex mutex_;
+  std::condition_variable work_cv_, done_cv_;
+  std::vector<std::thread> threads_;
+  const std::function<void()>* job_ = nullptr;
+  int wanted_ = 0, active_ = 0;
+  std::uint64_t generation_ = 0;
+  bool stop_ = false;
 };
 }  // namespace detail
 
@@ -107,17 +191,21 @@ void parallel_for_chunks(Index n, F&& f, ParallelOptions options = {}) {
       }
     }
   };
-  std::vector<std::thread> pool;
-  pool.reserve(static_cast<std::size_t>(threads - 1));
-  for (int t = 1; t < threads; ++t) {
-    try {
-      pool.emplace_back(worker);
-    } catch (...) {
-      break;  // could not start a thread: the caller's thread does the remaining chunks
+  const std::function<void()> job = worker;
+  if (!detail::ThreadPool::instance().try_run(threads - 1, job)) {
+    // The pool serves another caller's loop: start threads for this call.
+    std::vector<std::thread> pool;
+    pool.reserve(static_cast<std::size_t>(threads - 1));
+    for (int t = 1; t < threads; ++t) {
+      try {
+        pool.emplace_back(worker);
+      } catch (...) {
+        break;  // could not start a thread: the caller's thread does the remaining chunks
+      }
     }
+    worker();
+    for (auto& th : pool) th.join();
   }
-  worker();
-  for (auto& th : pool) th.join();
   if (error) std::rethrow_exception(error);
 }
 
