@@ -8,7 +8,6 @@
 #include <string>
 #include <unordered_set>
 
-#include "smg/core/quaternion.hpp"
 #include "trainer/random.hpp"
 
 namespace trainer {

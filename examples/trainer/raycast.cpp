@@ -238,16 +238,21 @@ RenderOutput render(const Scene& scene, int t, const Camera& camera, const Rende
               if (options.surface_points)
                 for (int c = 0; c < 3; ++c) out.surface[pix * 3 + c] = static_cast<float>(hit.local(c));
             }
-            // Colour: k x k stratified sub-pixel rays (the centre ray when k = 1).
+            // Colour: k x k stratified sub-pixel rays. For odd k the middle one is the centre ray
+            // (bit for bit: (k/2 + 0.5)/k == 0.5), so its hit is reused.
             Eigen::Vector3d sum = Eigen::Vector3d::Zero();
             for (int sy = 0; sy < k; ++sy)
               for (int sx = 0; sx < k; ++sx) {
-                const Eigen::Vector2d p(x + (sx + 0.5) / k, y + (sy + 0.5) / k);
                 Hit h;
-                if (intersect_scene(scene, t, camera.ray(p), 0.0, inf, &h))
-                  sum += surface_color(scene, h.body, h.local, h.normal_local);
-                else
-                  sum += scene.background;
+                bool any;
+                if (k % 2 == 1 && sx == k / 2 && sy == k / 2) {
+                  h = hit;
+                  any = hit.body >= 0;
+                } else {
+                  any = intersect_scene(scene, t, camera.ray(Eigen::Vector2d(x + (sx + 0.5) / k, y + (sy + 0.5) / k)),
+                                        0.0, inf, &h);
+                }
+                sum += any ? surface_color(scene, h.body, h.local, h.normal_local) : scene.background;
               }
             sum /= static_cast<double>(k * k);
             for (int c = 0; c < 3; ++c) out.rgb.at(x, y, c) = static_cast<float>(sum(c));

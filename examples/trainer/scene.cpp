@@ -6,6 +6,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "smg/core/quaternion.hpp"
 #include "trainer/random.hpp"
 
 namespace trainer {
@@ -104,6 +105,20 @@ double point_to_core(const Core& c, const Eigen::Vector3d& p) {
   return 0.0;
 }
 
+// Points along a round core (a sphere's centre, or a capsule's axis every `step` metres) and the
+// slack to subtract for a certified bound: the distance to any set is 1-Lipschitz, so the true
+// minimum over the axis is at most half a spacing below the sampled one.
+double round_core_points(const Core& c, double step, std::vector<Eigen::Vector3d>* pts) {
+  if (c.kind == ShapeKind::sphere) {
+    pts->push_back(c.pose.t);
+    return 0.0;
+  }
+  const double L = c.size.x();
+  const int n = std::max(1, static_cast<int>(std::ceil(L / step)));
+  for (int k = 0; k <= n; ++k) pts->push_back(c.pose.apply(Eigen::Vector3d(L * k / n, 0, 0)));
+  return 0.5 * L / n;
+}
+
 void extend_bounds(const Scene& s, int b, int t, Eigen::AlignedBox3d* box) {
   const Body& body = s.bodies[static_cast<std::size_t>(b)];
   const Pose& P = s.poses[static_cast<std::size_t>(t)][static_cast<std::size_t>(b)];
@@ -141,8 +156,9 @@ Eigen::Vector3d jitter_color(Random& rng, const Eigen::Vector3d& c, double amoun
                                      rng.uniform(-amount, amount)));
 }
 
-// Times at which gaps are checked: 8 per frame interval.
-int gap_samples(const Scene& s) { return 8 * std::max(1, s.config.frames - 1); }
+// Times at which gaps are checked: motions are functions of u = frame / (T - 1), so a fixed
+// number of samples in u resolves them equally for any T (at T = 32, 13 per frame).
+int gap_samples(const Scene&) { return 400; }
 double gap_time(const Scene& s, int k) { return (s.config.frames - 1) * static_cast<double>(k) / gap_samples(s); }
 
 // The smallest certified gap between bodies a and b over the sequence.
@@ -153,7 +169,7 @@ double pair_min_gap(const Scene& s, int a, int b) {
 }
 
 // The smallest certified gap between a moving body and the bodies it must not touch, over the
-// whole sequence (sampled 8 times per frame). Writes the worst pair.
+// whole sequence. Writes the worst pair.
 double sequence_min_gap(const Scene& s, int* worst_a, int* worst_b) {
   double best = std::numeric_limits<double>::infinity();
   const int n = s.body_count();
@@ -186,7 +202,7 @@ Eigen::Vector4d Pose::quaternion_wxyz() const {
   Eigen::Quaterniond q(R);
   q.normalize();
   if (q.w() < 0) q.coeffs() = -q.coeffs();
-  return Eigen::Vector4d(q.w(), q.x(), q.y(), q.z());
+  return smg::to_wxyz(q);
 }
 
 Eigen::Vector3d OrbitPath::eye(double u) const {
@@ -212,8 +228,8 @@ smg::Status validate_scene_config(const SceneConfig& c) {
                "x" + std::to_string(c.height));
   if (!(c.fov_y_deg >= 10 && c.fov_y_deg <= 120))
     return err("fov_y_deg must be in [10, 120], got " + std::to_string(c.fov_y_deg));
-  if (!(c.clearance >= 0 && c.clearance <= 0.1))
-    return err("clearance must be in [0, 0.1] metres, got " + std::to_string(c.clearance));
+  if (!(c.clearance >= 0.005 && c.clearance <= 0.05))
+    return err("clearance must be in [0.005, 0.05] metres, got " + std::to_string(c.clearance));
   if (!(c.box_gap >= c.clearance && c.box_gap <= 0.3))
     return err("box_gap must be in [clearance, 0.3] metres, got " + std::to_string(c.box_gap));
   return smg::Status::ok();
@@ -284,17 +300,10 @@ double min_gap(const Scene& s, int a, int b, double frame, double step) {
   };
   if (!is_round(ca)) std::swap(ca, cb);
   if (!is_round(ca)) throw std::invalid_argument("min_gap: one body must be a sphere or a capsule");
+  std::vector<Eigen::Vector3d> pts;
+  const double slack = round_core_points(ca, step, &pts);
   double d = std::numeric_limits<double>::infinity();
-  double slack = 0.0;
-  if (ca.kind == ShapeKind::sphere) {
-    d = point_to_core(cb, ca.pose.t);
-  } else {
-    const double L = ca.size.x();
-    const int n = std::max(1, static_cast<int>(std::ceil(L / step)));
-    slack = 0.5 * L / n;
-    for (int k = 0; k <= n; ++k)
-      d = std::min(d, point_to_core(cb, ca.pose.apply(Eigen::Vector3d(L * k / n, 0, 0))));
-  }
+  for (const Eigen::Vector3d& p : pts) d = std::min(d, point_to_core(cb, p));
   return std::max(0.0, d - slack - ca.radius - cb.radius);
 }
 
@@ -356,7 +365,8 @@ Scene make_scene(const SceneConfig& config) {
   s.arm.shoulder = Eigen::Vector3d(-0.55 + rng.uniform(-0.02, 0.02), -0.02, 0.25);
   s.arm.upper_length = 0.30;
   s.arm.fore_length = 0.30;
-  s.arm.radius = 0.05;
+  s.arm.upper_radius = 0.05;
+  s.arm.fore_radius = 0.042;
   const double amp = rng.uniform(0.9, 1.1);
   s.arm.yaw_mean = -0.25 + rng.uniform(-0.03, 0.03);
   s.arm.yaw_amplitude = 0.42 * amp;
@@ -377,11 +387,11 @@ Scene make_scene(const SceneConfig& config) {
     m.detail = 0.15;
     m.seed = tex.next();
     add("upper_arm", classes::arm, true, Motion::upper_arm,
-        {ShapeKind::capsule, {s.arm.upper_length, s.arm.radius, 0}}, m, {});
+        {ShapeKind::capsule, {s.arm.upper_length, s.arm.upper_radius, 0}}, m, {});
     m.seed = tex.next();
     m.stripe_axis = Eigen::Vector3d(1.0, -0.35, 0.0).normalized();
     add("forearm", classes::arm, true, Motion::forearm,
-        {ShapeKind::capsule, {s.arm.fore_length, s.arm.radius, 0}}, m, {});
+        {ShapeKind::capsule, {s.arm.fore_length, s.arm.fore_radius, 0}}, m, {});
   }
 
   // Static box on the floor behind the arm's sweep, pushed back until the arm's closest
@@ -397,13 +407,32 @@ Scene make_scene(const SceneConfig& config) {
     const double h = 0.1;
     add("box", classes::box, true, Motion::fixed, {ShapeKind::box, {h, h, h}}, m,
         {rot_z(0.35 + rng.uniform(-0.15, 0.15)), {0.02 + rng.uniform(-0.02, 0.02), 0.1, h}});
+    // The arm's axis samples at every checked time, computed once (same samples and slack as
+    // min_gap, so the result equals pair_min_gap's); then a coarse and a fine scan in y.
     Body& box = s.bodies.back();
-    for (int k = 0; k < 200; ++k) {
-      const double g = std::min(pair_min_gap(s, s.find_body("upper_arm"), box.id),
-                                pair_min_gap(s, s.find_body("forearm"), box.id));
-      if (g >= config.box_gap) break;
-      box.rest.t.y() += 0.005;
-    }
+    std::vector<Eigen::Vector3d> pts;
+    std::vector<double> reach;  // radius + slack per point
+    for (int k = 0; k <= gap_samples(s); ++k)
+      for (const char* link : {"upper_arm", "forearm"}) {
+        const Core c = core_of(s, s.find_body(link), gap_time(s, k));
+        const double slack = round_core_points(c, 0.005, &pts);
+        reach.resize(pts.size(), c.radius + slack);
+      }
+    const auto gap_at = [&](double y) {
+      Core c = core_of(s, box.id, 0.0);
+      c.pose.t.y() = y;
+      double g = std::numeric_limits<double>::infinity();
+      for (std::size_t i = 0; i < pts.size(); ++i) g = std::min(g, point_to_core(c, pts[i]) - reach[i]);
+      return std::max(0.0, g);
+    };
+    double y = box.rest.t.y();
+    while (gap_at(y) < config.box_gap && y < 1.0) y += 0.02;
+    for (double fine = std::max(box.rest.t.y(), y - 0.02); fine <= y; fine += 0.005)
+      if (gap_at(fine) >= config.box_gap) {
+        y = fine;
+        break;
+      }
+    box.rest.t.y() = y;
   }
 
   // Ball rolling on its own ellipse, right of the box and in front of it.

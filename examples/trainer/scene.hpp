@@ -102,10 +102,13 @@ struct Body {
 //   pitch = pitch_mean + pitch_amplitude sin(w + pi/2)       (raises the upper arm)
 //   elbow = elbow_mean + elbow_amplitude sin(w - elbow_lag)  (about the upper arm's z axis)
 // Upper arm: R1 = Rz(yaw) Ry(-pitch), origin at the shoulder. Forearm: R2 = R1 Rz(elbow), origin at
-// the elbow S + R1 (upper_length, 0, 0). Each link is a capsule along its local +x.
+// the elbow S + R1 (upper_length, 0, 0). Each link is a capsule along its local +x; the forearm
+// is thinner, so its start cap lies inside the upper arm's elbow cap and no surface belongs to
+// both links (a shared surface would make a track's body, hence its motion, ambiguous).
 struct ArmMotion {
   Eigen::Vector3d shoulder = Eigen::Vector3d::Zero();
-  double upper_length = 0.36, fore_length = 0.34, radius = 0.05;
+  double upper_length = 0.3, fore_length = 0.3;
+  double upper_radius = 0.05, fore_radius = 0.042;
   double yaw_mean = 0, yaw_amplitude = 0;
   double pitch_mean = 0, pitch_amplitude = 0;
   double elbow_mean = 0, elbow_amplitude = 0;
@@ -141,8 +144,8 @@ struct SceneConfig {
   int width = 160;          // pixels, every camera
   int height = 120;
   double fov_y_deg = 50.0;  // vertical field of view of every camera
-  double clearance = 0.03;  // minimum gap (metres) between moving bodies and anything else
-  double box_gap = 0.06;    // closest approach (metres) of the arm to the static box
+  double clearance = 0.03;  // minimum gap (metres) between moving bodies and anything else, [0.005, 0.05]
+  double box_gap = 0.06;    // closest approach (metres) of the arm to the static box, [clearance, 0.3]
 };
 
 // The two test views: yaw and elevation (radians) of the fixed test cameras on the orbit.
@@ -173,7 +176,7 @@ struct Scene {
   Eigen::AlignedBox3d object_bounds;
   double extent = 0;
   // The smallest gap between a moving body and any other body over the sequence (a certified
-  // lower bound, see min_gap), >= config.clearance.
+  // lower bound in space, see min_gap; 400 samples in time), >= config.clearance.
   double min_gap = 0;
 
   int frames() const { return config.frames; }
