@@ -1,0 +1,94 @@
+// The scene_preview program: one JSON line and its pictures; bad flags or an unwritable output
+// folder give one line on stderr and exit code 2. Runs when the examples are built (the CMake
+// block in examples/CMakeLists.txt passes SMG_SCENE_PREVIEW_PATH).
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+#ifdef SMG_SCENE_PREVIEW_PATH
+namespace {
+struct Run {
+  int code;
+  std::string out, err;
+};
+std::string slurp(const fs::path& p) {
+  std::ifstream f(p);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+Run run(const std::string& args) {
+  const fs::path dir = fs::temp_directory_path() / "smg_test_scene_preview_io";
+  fs::create_directories(dir);
+  const std::string cmd = std::string(SMG_SCENE_PREVIEW_PATH) + " " + args + " >" + (dir / "out").string() +
+                          " 2>" + (dir / "err").string();
+  const int status = std::system(cmd.c_str());
+  return {WEXITSTATUS(status), slurp(dir / "out"), slurp(dir / "err")};
+}
+int lines(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
+}  // namespace
+
+TEST_CASE("scene_preview writes its pictures and one JSON line") {
+  const fs::path out = fs::temp_directory_path() / "smg_test_scene_preview_out";
+  fs::remove_all(out);
+  const Run r = run("--out " + out.string() + " --frames 4 --width 48 --height 36 --tracks 40 --show 2");
+  CHECK(r.code == 0);
+  CHECK(r.err.empty());
+  CHECK(lines(r.out) == 1);
+  for (const char* key : {"\"program\":\"scene_preview\"", "\"T\":4", "\"width\":48", "\"tracks\":40",
+                          "\"visible_fraction\":", "\"outlier_fraction\":", "\"seconds_total\":"})
+    CHECK(r.out.find(key) != std::string::npos);
+  for (const char* png : {"train.png", "test_right.png", "test_left.png", "depth.png", "features.png", "tracks.png",
+                          "covisible.png", "overview.png"}) {
+    CAPTURE(png);
+    CHECK(fs::exists(out / png));
+    CHECK(fs::file_size(out / png) > 100);
+  }
+  CHECK_FALSE(fs::exists(out / ".scene_preview_probe"));
+}
+
+TEST_CASE("scene_preview: bad flags and unwritable folders are one line on stderr and exit code 2") {
+  const fs::path file = fs::temp_directory_path() / "smg_test_scene_preview_plain_file";
+  std::ofstream(file) << "x";
+  const struct {
+    std::string args, message;
+  } cases[] = {
+      {"--nope 1", "unknown flag --nope"},
+      {"--frames", "--frames needs a value"},
+      {"--frames abc", "--frames expects an integer"},
+      {"--frames 1", "--frames must be in [2, 1000]"},
+      {"--jitter-px -1", "jitter_px"},
+      {"stray", "unexpected argument 'stray'"},
+      {"--out " + (file / "sub").string(), "cannot create output folder"},
+  };
+  for (const auto& c : cases) {
+    CAPTURE(c.args);
+    const Run r = run(c.args);
+    CHECK(r.code == 2);
+    CHECK(r.out.empty());
+    CHECK(lines(r.err) == 1);
+    CHECK(r.err.rfind("scene_preview: error: ", 0) == 0);
+    CHECK(r.err.find(c.message) != std::string::npos);
+  }
+  if (::geteuid() != 0) {  // root can write anywhere
+    const fs::path ro = fs::temp_directory_path() / "smg_test_scene_preview_readonly";
+    fs::create_directories(ro);
+    fs::permissions(ro, fs::perms::owner_read | fs::perms::owner_exec);
+    const Run r = run("--out " + ro.string() + " --frames 2 --width 16 --height 16 --tracks 4");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("not writable") != std::string::npos);
+    fs::permissions(ro, fs::perms::owner_all);
+  }
+}
+#else
+TEST_CASE("scene_preview tests need the examples (configure with SMG_BUILD_EXAMPLES=ON)") {
+  MESSAGE("scene_preview not built: its command-line tests are skipped");
+}
+#endif
