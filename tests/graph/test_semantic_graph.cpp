@@ -187,19 +187,19 @@ TEST_CASE("graph: a zero descriptor loses its gated edges; a node without frames
 }
 
 TEST_CASE("graph: the gate is inclusive") {
-  // Two nodes, features (3, 4) and (4, 3): cos = 24 / 25 exactly as rounded.
+  // Two nodes with unit features (1, 0, 0, 0) and (1/2, 1/2, 1/2, 1/2): cos = 1/2 exactly.
   std::vector<double> x = {0, 0, 0, 1, 0, 0};
-  std::vector<double> f = {3, 4, 4, 3};
+  std::vector<double> f = {1, 0, 0, 0, 0.5, 0.5, 0.5, 0.5};
   std::vector<std::int32_t> idx(2);
   std::vector<double> w(2), d(2);
   smg::GraphOptions o;
   o.knn.k = 1;
   o.isolated = smg::IsolatedPolicy::leave;
-  for (double tau : {0.96, std::nextafter(0.96, 1.0)}) {
+  for (double tau : {0.5, std::nextafter(0.5, 1.0)}) {
     o.tau = tau;
-    const auto st = smg::build_semantic_graph<double>({x.data(), 1, 2}, {}, {f.data(), 2, 2}, o, {idx.data(), 2, 1},
+    const auto st = smg::build_semantic_graph<double>({x.data(), 1, 2}, {}, {f.data(), 2, 4}, o, {idx.data(), 2, 1},
                                                       {w.data(), 2, 1}, {d.data(), 2, 1});
-    CHECK(st.edges == (tau == 0.96 ? 2 : 0));
+    CHECK(st.edges == (tau == 0.5 ? 2 : 0));
   }
 }
 

@@ -7,7 +7,7 @@
 //   keep the max(1, floor(rho n)) samples with the largest score (ties: earlier frame)
 //   f_i = normalize(sum of the kept u^t)   (zero when that sum is zero)             (G8)
 // A node with no visible frame gets the zero descriptor; cos(0, f) = 0 in the gate, so such a
-// node loses its gated edges. Scores are computed as (u^t . sum_t' u^t' - |u^t|^2) / (n - 1),
+// node loses its gated edges. Norms are overflow- and underflow-safe (any finite sample). Scores are computed as (u^t . sum_t' u^t' - |u^t|^2) / (n - 1),
 // O(n C) per node instead of O(n^2 C); they equal the pairwise mean up to rounding. Ties go to
 // the earlier frame when the computed scores are equal: always for two samples (both get
 // u^1 . u^2), and for duplicate samples; scores equal only in exact arithmetic (symmetric
@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numeric>
 #include <sstream>
 #include <string>
@@ -29,6 +30,18 @@
 #include "smg/graph/trajectory_distance.hpp"
 
 namespace smg {
+
+namespace detail {
+// |g| without overflow or underflow for any finite g: the plain sqrt of the squared norm where
+// that is exact enough, Eigen's scaled stableNorm where the square would leave the normal range.
+template <class Derived>
+typename Derived::Scalar safe_norm(const Eigen::MatrixBase<Derived>& g) {
+  using S = typename Derived::Scalar;
+  const S sq = g.squaredNorm();
+  if (sq >= std::numeric_limits<S>::min() && sq <= std::numeric_limits<S>::max()) return std::sqrt(sq);
+  return g.stableNorm();
+}
+}  // namespace detail
 
 struct DescriptorOptions {
   double rho = 0.5;  // fraction of the most consistent samples kept, in (0, 1]
@@ -66,7 +79,7 @@ Status validate_semantic_descriptors(FeatureSamplesView<const S> samples,
 }
 
 // Writes the descriptor of every node into out [N][C], (G7)-(G8): unit vectors, or zero.
-// Deterministic and bit-identical for any thread count; scratch O(T + C) per task.
+// Deterministic and bit-identical for any thread count; scratch O(T * C) per task.
 template <class S>
 DescriptorStats semantic_descriptors(FeatureSamplesView<const S> samples,
                                      VisibilityView<const std::uint8_t> v,
@@ -78,7 +91,8 @@ DescriptorStats semantic_descriptors(FeatureSamplesView<const S> samples,
       N,
       [&](Index chunk, Index begin, Index end) {
         std::vector<Index> frames;
-        std::vector<S> inv_norm, score;
+        std::vector<S> score;
+        Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic> U(C, T);  // unit samples, one per column
         std::vector<Index> rank;
         Eigen::Matrix<S, Eigen::Dynamic, 1> sum(C), avg(C);
         frames.reserve(static_cast<std::size_t>(T));
@@ -94,30 +108,28 @@ DescriptorStats semantic_descriptors(FeatureSamplesView<const S> samples,
             ++zero[static_cast<std::size_t>(chunk)];
             continue;
           }
-          inv_norm.resize(static_cast<std::size_t>(n));
           score.resize(static_cast<std::size_t>(n));
           sum.setZero();
+          // u = g / |g| (zero stays zero); dividing by a safe norm keeps tiny and huge samples.
+          auto unit = [&](Index a) { return U.col(a); };
           for (Index a = 0; a < n; ++a) {
             const auto g = samples(frames[static_cast<std::size_t>(a)], i);
-            const S norm = g.norm();
-            const S inv = norm > S(0) ? S(1) / norm : S(0);
-            inv_norm[static_cast<std::size_t>(a)] = inv;
-            sum += g * inv;
+            const S norm = detail::safe_norm(g);
+            if (norm > S(0)) {
+              U.col(a) = g / norm;
+            } else {
+              U.col(a).setZero();
+            }
+            sum += unit(a);
           }
           // (G7): mean cosine to the other samples, through the sum of unit samples. With two
           // samples the scores are equal in exact arithmetic: give both the same value, so
           // that the tie goes to the earlier frame as pinned.
           if (n == 2) {
-            const auto g0 = samples(frames[0], i);
-            const auto g1 = samples(frames[1], i);
-            score[0] = score[1] = (g0 * inv_norm[0]).dot(g1 * inv_norm[1]);
+            score[0] = score[1] = unit(0).dot(unit(1));
           } else {
-            for (Index a = 0; a < n; ++a) {
-              const auto g = samples(frames[static_cast<std::size_t>(a)], i);
-              const S inv = inv_norm[static_cast<std::size_t>(a)];
-              const S self = (g * inv).squaredNorm();
-              score[static_cast<std::size_t>(a)] = n > 1 ? ((g * inv).dot(sum) - self) / S(n - 1) : S(0);
-            }
+            for (Index a = 0; a < n; ++a)
+              score[static_cast<std::size_t>(a)] = n > 1 ? (unit(a).dot(sum) - unit(a).squaredNorm()) / S(n - 1) : S(0);
           }
           // floor(rho n), with a tolerance so that e.g. rho = 0.29, n = 100 keeps 29.
           const Index keep = std::max<Index>(
@@ -133,9 +145,9 @@ DescriptorStats semantic_descriptors(FeatureSamplesView<const S> samples,
           avg.setZero();
           for (Index q = 0; q < keep; ++q) {
             const Index a = rank[static_cast<std::size_t>(q)];
-            avg += samples(frames[static_cast<std::size_t>(a)], i) * inv_norm[static_cast<std::size_t>(a)];
+            avg += unit(a);
           }
-          const S norm = avg.norm();
+          const S norm = detail::safe_norm(avg);
           if (norm > S(0)) {
             f = avg / norm;
           } else {

@@ -25,6 +25,7 @@
 #include "smg/core/status.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
+#include "smg/graph/descriptor.hpp"
 #include "smg/graph/knn.hpp"
 #include "smg/graph/neighbors.hpp"
 
@@ -147,12 +148,18 @@ GraphStats gate_and_weight(TableView<const std::int32_t, Eigen::Dynamic> knn_ind
   GraphStats stats;
   stats.nodes = N;
   stats.gated = o.gate;
-  std::vector<S> norm;
+  // Unit descriptors (zero rows stay zero), so cos(f_i, f_j) is one dot product and cannot
+  // overflow for huge or tiny features.
+  const Index C = o.gate ? features.cols() : 0;
+  std::vector<S> unit(static_cast<std::size_t>(N * C), S(0));
   if (o.gate) {
-    norm.resize(static_cast<std::size_t>(N));
     for (Index i = 0; i < N; ++i) {
-      norm[static_cast<std::size_t>(i)] = features.row(i).norm();
-      if (!(norm[static_cast<std::size_t>(i)] > S(0))) ++stats.zero_feature_nodes;
+      const S n = detail::safe_norm(features.row(i));
+      if (n > S(0)) {
+        Eigen::Map<Eigen::Matrix<S, Eigen::Dynamic, 1>>(unit.data() + i * C, C) = features.row(i) / n;
+      } else {
+        ++stats.zero_feature_nodes;
+      }
     }
   }
   const S tau = static_cast<S>(o.tau);
@@ -175,8 +182,8 @@ GraphStats gate_and_weight(TableView<const std::int32_t, Eigen::Dynamic> knn_ind
             const std::int32_t j = knn_indices(i, q);
             bool pass = true;
             if (o.gate) {
-              const S nij = norm[static_cast<std::size_t>(i)] * norm[static_cast<std::size_t>(j)];
-              const S cosine = nij > S(0) ? features.row(i).dot(features.row(j)) / nij : S(0);
+              const S cosine = Eigen::Map<const Eigen::Matrix<S, Eigen::Dynamic, 1>>(unit.data() + i * C, C)
+                                   .dot(Eigen::Map<const Eigen::Matrix<S, Eigen::Dynamic, 1>>(unit.data() + j * C, C));
               pass = cosine >= tau;
             }
             if (pass) {
