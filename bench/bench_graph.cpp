@@ -10,6 +10,8 @@
 //                          the double reference on the same (float-rounded) inputs
 //     dist_rel_err_vs_f64  float only: max relative error of the neighbour distances against it
 //     pairs_per_node       exact pair distances evaluated per node (brute force: N - 1)
+//     main_thread_cpu_ms   CPU time of the calling thread (a worker) per build: about the wall
+//                          time on an otherwise idle machine
 //     scratch_mb           memory the builder allocated (tracked: store, trees, state, scratch)
 //     peak_rss_mb          peak resident memory of a fresh process that generates the scene
 //                          and builds once (getrusage ru_maxrss); input_mb of it are the
@@ -23,6 +25,7 @@
 #include <benchmark/benchmark.h>
 
 #include <sys/resource.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -80,6 +83,12 @@ const char* type_name() {
 
 constexpr int kK = 16;
 
+double thread_cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
 // ---- peak memory of a fresh process ---------------------------------------------------------
 // The benchmark re-runs itself as `bench_graph --rss-probe N T float|double`: the child builds
 // the scene and the KNN once and prints its ru_maxrss, so each figure starts from an empty process.
@@ -127,10 +136,15 @@ void BM_knn(benchmark::State& state, Index N, Index T) {
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<S> dist(idx.size());
   smg::KnnStats st;
+  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     st = smg::trajectory_knn<S>(xv, vv, o, {idx.data(), N, kK}, {dist.data(), N, kK});
     benchmark::DoNotOptimize(idx.data());
   }
+  // The calling thread is one of the workers: its CPU time per build is close to the wall time
+  // of an unloaded machine, whatever else runs on a shared one.
+  state.counters["main_thread_cpu_ms"] =
+      (thread_cpu_seconds() - cpu0) * 1e3 / static_cast<double>(std::max<benchmark::IterationCount>(1, state.iterations()));
   // Error columns (not timed): brute-force rows, in S and in double on the same inputs.
   const bool all = static_cast<double>(N) * static_cast<double>(N) * static_cast<double>(T) <= 2.5e9;
   std::vector<Index> rows;
