@@ -89,6 +89,13 @@ double thread_cpu_seconds() {
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
+// The calling thread is one of the workers: its CPU time per iteration is close to the wall time
+// of an otherwise idle machine, whatever else runs on a shared one.
+void report_cpu(benchmark::State& state, double cpu0) {
+  state.counters["main_thread_cpu_ms"] =
+      (thread_cpu_seconds() - cpu0) * 1e3 / static_cast<double>(std::max<benchmark::IterationCount>(1, state.iterations()));
+}
+
 // ---- peak memory of a fresh process ---------------------------------------------------------
 // The benchmark re-runs itself as `bench_graph --rss-probe N T float|double`: the child builds
 // the scene and the KNN once and prints its ru_maxrss, so each figure starts from an empty process.
@@ -141,10 +148,7 @@ void BM_knn(benchmark::State& state, Index N, Index T) {
     st = smg::trajectory_knn<S>(xv, vv, o, {idx.data(), N, kK}, {dist.data(), N, kK});
     benchmark::DoNotOptimize(idx.data());
   }
-  // The calling thread is one of the workers: its CPU time per build is close to the wall time
-  // of an unloaded machine, whatever else runs on a shared one.
-  state.counters["main_thread_cpu_ms"] =
-      (thread_cpu_seconds() - cpu0) * 1e3 / static_cast<double>(std::max<benchmark::IterationCount>(1, state.iterations()));
+  report_cpu(state, cpu0);
   // Error columns (not timed): brute-force rows, in S and in double on the same inputs.
   const bool all = static_cast<double>(N) * static_cast<double>(N) * static_cast<double>(T) <= 2.5e9;
   std::vector<Index> rows;
@@ -226,11 +230,13 @@ void BM_knn_brute_force(benchmark::State& state, Index N, Index T) {
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<S> dist(idx.size());
   smg::KnnStats st;
+  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     st = smg::trajectory_knn_brute_force<S>({x.data(), T, N}, {sc.visibility.data(), T, N}, o, {idx.data(), N, kK},
                                             {dist.data(), N, kK});
     benchmark::DoNotOptimize(idx.data());
   }
+  report_cpu(state, cpu0);
   state.counters["pairs_per_node"] = static_cast<double>(st.pairs_evaluated) / static_cast<double>(N);
   state.counters["scratch_mb"] = static_cast<double>(st.scratch_bytes) / (1024.0 * 1024.0);
 }
@@ -243,11 +249,13 @@ void BM_knn_segments(benchmark::State& state, Index N, Index T, double speed, in
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<double> dist(idx.size());
   smg::KnnStats st;
+  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     st = smg::trajectory_knn<double>({sc.positions.data(), T, N}, {sc.visibility.data(), T, N}, o, {idx.data(), N, kK},
                                      {dist.data(), N, kK});
     benchmark::DoNotOptimize(idx.data());
   }
+  report_cpu(state, cpu0);
   state.counters["segment_frames"] = st.segment_frames;
   state.counters["pairs_per_node"] = static_cast<double>(st.pairs_evaluated) / static_cast<double>(N);
   state.counters["scratch_mb"] = static_cast<double>(st.scratch_bytes) / (1024.0 * 1024.0);
@@ -260,10 +268,12 @@ void BM_descriptors(benchmark::State& state, Index N, Index T, Index C) {
   const auto g = cast<S>(sc.samples);
   std::vector<S> f(static_cast<std::size_t>(N * C));
   smg::DescriptorOptions o;
+  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     smg::semantic_descriptors<S>({g.data(), T, N, C}, {sc.visibility.data(), T, N}, o, {f.data(), N, C});
     benchmark::DoNotOptimize(f.data());
   }
+  report_cpu(state, cpu0);
   if (std::is_same_v<S, float>) {
     // Against double on the same (float-rounded) samples: the largest angle between descriptors.
     const std::vector<double> gd(g.begin(), g.end());
@@ -293,12 +303,14 @@ void BM_graph(benchmark::State& state, Index N, Index T, Index C) {
   std::vector<S> w(idx.size()), d(idx.size());
   smg::GraphOptions o;
   smg::GraphStats st;
+  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     smg::semantic_descriptors<S>({g.data(), T, N, C}, {sc.visibility.data(), T, N}, {}, {f.data(), N, C});
     st = smg::build_semantic_graph<S>({x.data(), T, N}, {sc.visibility.data(), T, N}, {f.data(), N, C}, o,
                                       {idx.data(), N, kK}, {w.data(), N, kK}, {d.data(), N, kK});
     benchmark::DoNotOptimize(idx.data());
   }
+  report_cpu(state, cpu0);
   // Edges that join different objects (the gate's job: only keep_nearest may leave some).
   Index cross = 0;
   for (Index i = 0; i < N; ++i)
@@ -322,11 +334,13 @@ void BM_node_selection(benchmark::State& state, Index N, Index T, double unit) {
   smg::NodeSelectionOptions o;
   o.unit = unit;
   smg::NodeSelectionStats<double> st;
+  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     st = smg::select_nodes<double>({sc.positions.data(), T, N}, {sc.visibility.data(), T, N}, o, {sel.data(), N},
                                    {asg.data(), N}, {err.data(), N});
     benchmark::DoNotOptimize(sel.data());
   }
+  report_cpu(state, cpu0);
   state.counters["nodes"] = static_cast<double>(st.selected);
   state.counters["nodes_frac"] = static_cast<double>(st.selected) / static_cast<double>(std::max<Index>(1, st.eligible));
   state.counters["max_error"] = st.max_error;

@@ -8,7 +8,7 @@
 // trajectory_knn is exact (the same rows as trajectory_knn_brute_force, bit for bit) without
 // evaluating all pairs: candidates come from range queries in per-segment bounding-volume trees
 // (segment_index.hpp) with a radius that shrinks to node i's current k-th distance; the proof
-// is in docs/math/graph.md "Exact candidate search". Work per node is
+// is in docs/math/graph.md "Exact trajectory KNN". Work per node is
 // O(segments * log N + candidates * T); memory is O(N*T) (a node-major copy of the positions,
 // visibility bitsets and the segment trees), never O(N^2).
 #pragma once

@@ -1,5 +1,5 @@
 // smg/graph/segment_index.hpp — the candidate index behind the exact trajectory KNN and node
-// selection (docs/math/graph.md "Exact candidate search", (G5)-(G6)).
+// selection (docs/math/graph.md "Exact trajectory KNN", (G5)-(G6)).
 //
 // Frames are cut into segments of L consecutive frames. In segment s a node that is visible in
 // at least one of its frames is an axis-aligned box: the bounds of its positions over the
