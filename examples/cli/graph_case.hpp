@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "subcommand.hpp"
@@ -11,7 +12,8 @@
 namespace cli {
 
 // Flags of the graph equations (DESIGN.md "Trajectory distance", "KNN and gate",
-// "Descriptor"; names and defaults from INTEROP.md).
+// "Descriptor"; names and defaults from INTEROP.md), plus --weighting, --no-gate and
+// --segment-frames.
 std::vector<FlagSpec> graph_flags();
 
 struct CaseGraph {
@@ -19,9 +21,29 @@ struct CaseGraph {
   std::vector<std::int32_t> indices;  // [N][K], -1 padded
   std::vector<double> weights;        // [N][K]
   bool built = false;                 // true when built here rather than loaded
+
+  // Filled only when built (build_case_graph):
+  std::int64_t frames = 0, channels = 0;  // T, and C of the descriptors (0: none)
+  std::vector<double> distances;          // [N][K] trajectory distances, 0 on padding
+  std::vector<double> features;           // [N][C] node descriptors (empty when C = 0)
+  std::string features_source = "none";  // "features.npy", "feature_samples.npy" or "none"
+  bool gated = false;                     // false: purely geometric graph (no features, or --no-gate)
+  std::string aggregation;                // "paper" | "robust_max"
+  std::int64_t edges = 0, isolated_nodes = 0, nodes_without_candidates = 0, gate_removed_edges = 0,
+               kept_nearest = 0, zero_feature_nodes = 0, pairs_evaluated = 0, segment_frames = 0;
+  double mean_degree = 0, seconds = 0;  // seconds: descriptors + KNN + gate, no file I/O
 };
 
 // positions: the case's positions.npy [T][N][3] (already loaded and checked).
 CaseGraph load_or_build_graph(const Invocation& inv, const Tensor<double>& positions);
+
+// Builds the semantic motion graph from the case's node files, ignoring any graph_indices.npy:
+// visibility.npy [T][N] (absent: all visible); features.npy [N][C] used as the descriptors, else
+// descriptors computed from feature_samples.npy [T][N][C]; with neither (or with --no-gate) the
+// graph is purely geometric (no semantic gate, gated = false). Computes in float with --float.
+CaseGraph build_case_graph(const Invocation& inv, const Tensor<double>& positions);
+
+// Adds the build statistics of a built graph to a summary line ("gated", "edges", ...).
+void add_graph_summary(const CaseGraph& g, JsonLine& summary);
 
 }  // namespace cli
