@@ -202,11 +202,17 @@ TEST_CASE("smg_cli dqb: bad inputs give one line on stderr, exit code 2, nothing
   fs::remove(c.dir / "sigma.npy");
   expect_error((c.dir / "sigma.npy").string() + ": missing required file");
 
+  // Without graph files the graph is built from the case (graph module); the missing sigma is
+  // still the error, and nothing is written.
   fs::remove(c.dir / "graph_indices.npy");
   const Run r = run_cli("dqb " + c.dir.string() + " " + out.string());
   CHECK(r.code == 2);
-  CHECK(r.err.find("graph_indices.npy") != std::string::npos);
+  CHECK(r.err.find("sigma.npy: missing required file") != std::string::npos);
   CHECK_FALSE(fs::exists(out));
+  npy::write((c.dir / "sigma.npy").string(), s.sigma, {s.N});
+  const Run built = run_cli("dqb " + c.dir.string() + " " + out.string());
+  CHECK(built.code == 0);
+  CHECK(fs::exists(out / "blended_points.npy"));
   fs::remove_all(c.dir);
 }
 #endif
