@@ -140,4 +140,46 @@ inline Scene<double> random_scene(Index T, Index N, Index K, Rng& rng, bool knn 
   return s;
 }
 
+// A rigidly moving point cloud: x_i^t = Q_t p_i + t v, R_i^t = Q_t R_i with Q_t = Exp(t θ a),
+// i.e. a constant angular velocity θ a (radians per frame, world frame) and velocity v. All
+// visible; confidences 1; K-nearest-neighbour graph.
+inline Scene<double> rigid_scene(Index T, Index N, Index K, double theta, const Vector3<double>& v,
+                                 Rng& rng, Vector3<double> axis = Vector3<double>(0.3, -0.5, 0.8)) {
+  axis.normalize();
+  Scene<double> s;
+  s.T = T;
+  s.N = N;
+  s.x.resize(static_cast<std::size_t>(T * N * 3));
+  s.q.resize(static_cast<std::size_t>(T * N * 4));
+  s.v.assign(static_cast<std::size_t>(T * N), 1);
+  s.c.assign(static_cast<std::size_t>(T * N), 1.0);
+  std::vector<Vector3<double>> p(static_cast<std::size_t>(N));
+  std::vector<Quaternion<double>> r(static_cast<std::size_t>(N));
+  for (Index i = 0; i < N; ++i) {
+    p[static_cast<std::size_t>(i)] = rng.vec3(1.0);
+    r[static_cast<std::size_t>(i)] = rng.quaternion();
+  }
+  for (Index t = 0; t < T; ++t) {
+    const Quaternion<double> Q = so3::exp(Vector3<double>(double(t) * theta * axis));
+    for (Index i = 0; i < N; ++i) {
+      s.set_pos(t, i, Q * p[static_cast<std::size_t>(i)] + double(t) * v);
+      s.set_rot(t, i, Q * r[static_cast<std::size_t>(i)]);
+    }
+  }
+  knn_graph(s, K);
+  return s;
+}
+
+// The same sequence seen after a global rigid transform x -> Q x + c, R -> Q R.
+inline Scene<double> transformed(const Scene<double>& s, const Quaternion<double>& Q,
+                                 const Vector3<double>& c) {
+  Scene<double> o = s;
+  for (Index t = 0; t < s.T; ++t)
+    for (Index i = 0; i < s.N; ++i) {
+      o.set_pos(t, i, Q * s.pos(t, i) + c);
+      o.set_rot(t, i, Q * s.rot(t, i));
+    }
+  return o;
+}
+
 }  // namespace smg::test
