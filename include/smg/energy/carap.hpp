@@ -200,11 +200,6 @@ inline void lengths(Index n, const S* SMG_RESTRICT ex, const S* SMG_RESTRICT ey,
   }
 }
 
-template <class S>
-inline void zero4(Index n, S* SMG_RESTRICT a, S* SMG_RESTRICT b, S* SMG_RESTRICT c,
-                  S* SMG_RESTRICT d) {
-  for (Index k = 0; k < n; ++k) a[k] = b[k] = c[k] = d[k] = S(0);
-}
 
 // Energy of the pairs (a, a + δ) of one gap (E9), added to eacc[a].
 template <class S>
@@ -242,28 +237,29 @@ inline void pair_gradient(Index n, Index d, const S* SMG_RESTRICT mk, const S* S
   }
 }
 
+// G[a] = Σ_g (P_g[a − δ_g] − P_g[a]) for one component and up to three gaps in one pass:
+// ∂/∂d^s collects +P from the pair (s − δ, s) and −P from the pair (s, s + δ) (E10). Each P_g
+// is preceded by max(δ) zeros, so a − δ_g < 0 reads 0.
 template <class S>
-inline void add4(Index n, S* SMG_RESTRICT a, S* SMG_RESTRICT b, S* SMG_RESTRICT c,
-                 S* SMG_RESTRICT d, const S* SMG_RESTRICT pa, const S* SMG_RESTRICT pb,
-                 const S* SMG_RESTRICT pc, const S* SMG_RESTRICT pd) {
-  for (Index k = 0; k < n; ++k) {
-    a[k] += pa[k];
-    b[k] += pb[k];
-    c[k] += pc[k];
-    d[k] += pd[k];
-  }
+inline void gather_pairs(Index m, S* SMG_RESTRICT G, const S* SMG_RESTRICT p0, Index d0) {
+  for (Index a = 0; a < m; ++a) G[a] = p0[a - d0] - p0[a];
 }
 template <class S>
-inline void sub4(Index n, S* SMG_RESTRICT a, S* SMG_RESTRICT b, S* SMG_RESTRICT c,
-                 S* SMG_RESTRICT d, const S* SMG_RESTRICT pa, const S* SMG_RESTRICT pb,
-                 const S* SMG_RESTRICT pc, const S* SMG_RESTRICT pd) {
-  for (Index k = 0; k < n; ++k) {
-    a[k] -= pa[k];
-    b[k] -= pb[k];
-    c[k] -= pc[k];
-    d[k] -= pd[k];
-  }
+inline void gather_pairs(Index m, S* SMG_RESTRICT G, const S* SMG_RESTRICT p0, Index d0,
+                         const S* SMG_RESTRICT p1, Index d1) {
+  for (Index a = 0; a < m; ++a) G[a] = (p0[a - d0] - p0[a]) + (p1[a - d1] - p1[a]);
 }
+template <class S>
+inline void gather_pairs(Index m, S* SMG_RESTRICT G, const S* SMG_RESTRICT p0, Index d0,
+                         const S* SMG_RESTRICT p1, Index d1, const S* SMG_RESTRICT p2, Index d2) {
+  for (Index a = 0; a < m; ++a)
+    G[a] = (p0[a - d0] - p0[a]) + (p1[a - d1] - p1[a]) + (p2[a - d2] - p2[a]);
+}
+template <class S>
+inline void gather_pairs_add(Index m, S* SMG_RESTRICT G, const S* SMG_RESTRICT p0, Index d0) {
+  for (Index a = 0; a < m; ++a) G[a] += p0[a - d0] - p0[a];
+}
+
 
 // One edge over n frames: F = R G + (H/‖e‖) e (world-frame gradient of x_j) overwrites G;
 // fi += F and ri += G × d (right-tangent gradient of R_i), both [3][n].
@@ -294,10 +290,12 @@ inline void backprop(Index n, const S* SMG_RESTRICT R, S* SMG_RESTRICT gx, S* SM
 
 }  // namespace carap_loops
 
-// Frames per block of the C-ARAP frame partition: a function of T only (determinism). Eight
-// frames keep the recomputed overlap (max δ frames per block) cheap for small gaps while giving
-// ~T/8 blocks to share between threads; long sequences use ~32 blocks.
-inline Index carap_block_frames(Index frames) { return std::max<Index>(8, (frames + 31) / 32); }
+// Frames per block of the C-ARAP frame partition: a function of T only (determinism). A block
+// recomputes max(δ) frames past its end, so longer blocks waste less; about 8 blocks (at least
+// 8, at most 32 frames each) still give every thread of a small machine equal shares.
+inline Index carap_block_frames(Index frames) {
+  return std::min<Index>(32, std::max<Index>(8, (frames + 7) / 8));
+}
 
 // Hands out scratch slots to concurrently running chunks. A chunk takes a free slot, clears
 // what it reads, and gives it back: which slot a chunk gets never affects its result, so the
@@ -347,11 +345,13 @@ struct CarapKernel {
   bool gradient() const { return gx.data() != nullptr || gr.data() != nullptr; }
   Index span() const { return B + G; }  // max frames touched by a block
 
-  // Scratch scalars per slot: 18 flattened [edge][frame] arrays, one mask per gap, 16 per-node
-  // [component][frame] arrays, and the block's frames node-major: positions [N][3][span],
-  // confidences [N][span], position and rotation gradients [N][3][span] each.
-  static Index scratch_size(Index K, Index N, Index span, Index n_gaps) {
-    return (18 + n_gaps) * K * span + 16 * span + 10 * N * span;
+  // Scratch scalars per slot: 14 flattened [edge][frame] arrays, one mask and four P arrays
+  // (with max(δ) leading zeros) per gap, 16 per-node [component][frame] arrays, and the block's
+  // frames node-major: positions and confidences [N][4][span], position and rotation gradients
+  // [N][3][span] each.
+  Index scratch_size() const {
+    const Index n_gaps = static_cast<Index>(gaps.size()), M = K * span();
+    return 14 * M + n_gaps * (M + 4 * (M + G)) + 16 * span() + 10 * N * span();
   }
 
   S* spill_x(Index b) const { return spill + b * G * N * 3; }
@@ -379,27 +379,31 @@ struct CarapKernel {
     S *Ex = take(M), *Ey = take(M), *Ez = take(M), *Dx = take(M), *Dy = take(M), *Dz = take(M);
     S *Len = take(M), *InvLen = take(M), *Wb = take(M), *Eacc = take(M);
     S *Gx = take(M), *Gy = take(M), *Gz = take(M), *H = take(M);
-    S *Px = take(M), *Py = take(M), *Pz = take(M), *Q = take(M);
     S* masks = take(static_cast<Index>(gaps.size()) * M);  // γ_δ [s − t0 < n_δ], per gap
+    // Per gap: P (3 components) and Q of every pair, each after max(δ) zeros.
+    S* pbase = take(static_cast<Index>(gaps.size()) * 4 * (M + G));
+    auto P = [&](std::size_t g, int c) { return pbase + (Index(g) * 4 + c) * (M + G) + G; };
+    if (grad) std::fill(pbase, pbase + static_cast<Index>(gaps.size()) * 4 * (M + G), S(0));
     S *R = take(9 * span()), *Fi = take(3 * span()), *Ri = take(3 * span());
     take(span());  // keeps scratch_size's count of per-node arrays
-    S *Xb = take(3 * N * span()), *Cb = take(N * span());
+    S* Xb = take(4 * N * span());  // per node: x, y, z, c over the block's frames
     S *GBx = take(3 * N * span()), *GBr = take(3 * N * span());
-    const Index n3 = 3 * ne;  // stride of one node in Xb, GBx, GBr
+    const Index n3 = 3 * ne;  // stride of one node in GBx, GBr
+    const Index n4 = 4 * ne;  // stride of one node in Xb (positions and confidence together)
 
     // The block's frames node-major (contiguous per neighbour: the strided [T][N][3] layout
     // would cost a cache line per frame and neighbour).
     for (Index l = 0; l < ne; ++l) {
       const S* row = x.ptr(t0 + l, 0);
       for (Index j = 0; j < N; ++j) {
-        S* dst = Xb + j * n3 + l;
+        S* dst = Xb + j * n4 + l;
         dst[0] = row[3 * j];
         dst[ne] = row[3 * j + 1];
         dst[2 * ne] = row[3 * j + 2];
       }
     }
     for (Index l = 0; l < nown; ++l)
-      for (Index j = 0; j < N; ++j) Cb[j * ne + l] = conf.data() ? conf(t0 + l, j) : S(1);
+      for (Index j = 0; j < N; ++j) Xb[j * n4 + 3 * ne + l] = conf.data() ? conf(t0 + l, j) : S(1);
     if (want_x) std::fill(GBx, GBx + N * n3, S(0));
     if (want_r) std::fill(GBr, GBr + N * n3, S(0));
     for (std::size_t g = 0; g < gaps.size(); ++g) {
@@ -413,11 +417,11 @@ struct CarapKernel {
     // computes (a neighbour's block data would otherwise arrive from L3 one edge at a time).
     auto prefetch_node = [&](Index i) {
       constexpr Index line = 64 / static_cast<Index>(sizeof(S));
+      for (Index l = 0; l < ne; ++l) SMG_PREFETCH(q.ptr(t0 + l, i), 0);
       for (Index k = 0; k < K; ++k) {
         const Index j = graph.indices(i, k);
         if (j < 0) break;
-        for (Index o = 0; o < n3; o += line) SMG_PREFETCH(Xb + j * n3 + o, 0);
-        SMG_PREFETCH(Cb + j * ne, 0);
+        for (Index o = 0; o < n4; o += line) SMG_PREFETCH(Xb + j * n4 + o, 0);
         if (want_x)
           for (Index o = 0; o < n3; o += line) SMG_PREFETCH(GBx + j * n3 + o, 1);
       }
@@ -425,6 +429,7 @@ struct CarapKernel {
     if (N > 0) prefetch_node(0);
 
     Acc energy(0);
+    std::vector<std::size_t> active(gaps.size());  // gaps with a pair in this block
     std::vector<Index> nbr(static_cast<std::size_t>(K));
     std::vector<S> wgt(static_cast<std::size_t>(K));
     for (Index i = 0; i < N; ++i) {
@@ -447,23 +452,23 @@ struct CarapKernel {
         rotation_from_wxyz(q.ptr(t0 + l, i), Rl);
         for (int c = 0; c < 9; ++c) R[c * ne + l] = Rl[c];
       }
-      const S* Xi = Xb + i * n3;
+      const S* Xi = Xb + i * n4;
       // e = x_j − x_i and d = Rᵀ e (E8), and the pair weights w̃ at the earlier frame (E7).
       for (Index e = 0; e < m_e; ++e) {
         const Index j = nbr[e], o = e * ne;
-        carap_loops::edge_frames(ne, R, Xi, Xb + j * n3, Ex + o, Ey + o, Ez + o, Dx + o, Dy + o,
+        carap_loops::edge_frames(ne, R, Xi, Xb + j * n4, Ex + o, Ey + o, Ez + o, Dx + o, Dy + o,
                                  Dz + o);
         const S w = wgt[e];
-        const S* cj = Cb + j * ne;
+        const S* cj = Xb + j * n4 + 3 * ne;
         for (Index l = 0; l < ne; ++l)
           Wb[o + l] = l < nown ? w * (alp + (L(1) - alp) * cj[l]) : S(0);
       }
       carap_loops::lengths(m, Ex, Ey, Ez, Len, InvLen, Eacc);
-      if (grad) carap_loops::zero4(m, Gx, Gy, Gz, H);
 
       // Pair terms (E9) and their d-gradients, flattened over [edge][frame]: the mask zeroes
       // pairs whose earlier frame is not this block's or whose later frame is past T − 1, and
       // pairs that would straddle two edges.
+      std::size_t n_active = 0;
       for (std::size_t g = 0; g < gaps.size(); ++g) {
         const Index d = gaps[g].delta;
         if (d >= ne) continue;  // no pair of this gap inside the block
@@ -473,12 +478,34 @@ struct CarapKernel {
           carap_loops::pair_energy(n, d, mk, Wb, Dx, Dy, Dz, Len, lam_c, lam_l, Eacc);
           continue;
         }
-        carap_loops::pair_gradient(n, d, mk, Wb, Dx, Dy, Dz, Len, lam_c, lam_l, Eacc, Px, Py,
-                                   Pz, Q);
-        // ∂/∂d^{t+δ} = +P and ∂/∂d^t = −P: two loops (one would carry a dependence of
-        // distance δ and not vectorise).
-        carap_loops::add4(n, Gx + d, Gy + d, Gz + d, H + d, Px, Py, Pz, Q);
-        carap_loops::sub4(n, Gx, Gy, Gz, H, Px, Py, Pz, Q);
+        carap_loops::pair_gradient(n, d, mk, Wb, Dx, Dy, Dz, Len, lam_c, lam_l, Eacc, P(g, 0),
+                                   P(g, 1), P(g, 2), P(g, 3));
+        for (int c = 0; c < 4; ++c) std::fill(P(g, c) + n, P(g, c) + m, S(0));
+        active[n_active++] = g;
+      }
+      if (grad) {
+        // ∂/∂d^s = Σ_δ (P_δ(s − δ) − P_δ(s)), one pass per component over up to three gaps.
+        S* Gc[4] = {Gx, Gy, Gz, H};
+        for (int c = 0; c < 4; ++c) {
+          auto d_of = [&](std::size_t k) { return Index(gaps[active[k]].delta); };
+          std::size_t k = 0;
+          if (n_active == 0) {
+            std::fill(Gc[c], Gc[c] + m, S(0));
+          } else if (n_active == 1) {
+            carap_loops::gather_pairs(m, Gc[c], P(active[0], c), d_of(0));
+            k = 1;
+          } else if (n_active == 2) {
+            carap_loops::gather_pairs(m, Gc[c], P(active[0], c), d_of(0), P(active[1], c),
+                                      d_of(1));
+            k = 2;
+          } else {
+            carap_loops::gather_pairs(m, Gc[c], P(active[0], c), d_of(0), P(active[1], c),
+                                      d_of(1), P(active[2], c), d_of(2));
+            k = 3;
+          }
+          for (; k < n_active; ++k)
+            carap_loops::gather_pairs_add(m, Gc[c], P(active[k], c), d_of(k));
+        }
       }
       energy += Acc(sum_array(Eacc, m));
       if (!grad) continue;
@@ -569,8 +596,7 @@ Accumulator<S> carap(PositionsView<const S> positions, QuaternionsView<const S> 
   const Index requested = parallel.threads > 0 ? parallel.threads : num_threads();
   const Index slots = std::max<Index>(1, std::min<Index>(requested, k.blocks));
   detail::WorkspaceRef<S> ws(workspace);
-  k.scratch_per_slot = detail::CarapKernel<S>::scratch_size(k.K, N, k.span(),
-                                                            static_cast<Index>(k.gaps.size()));
+  k.scratch_per_slot = k.scratch_size();
   k.scratch = ws->scratch(static_cast<std::size_t>(slots * k.scratch_per_slot));
   if (k.gradient()) k.spill = ws->spill(static_cast<std::size_t>(2 * k.blocks * k.G * N * 3));
 

@@ -48,6 +48,7 @@ struct LrmResidualBlock {
   S energy = S(0);  // scale Σ_k ŵ_k ρ_H(‖r_k‖): the exact LRM term of this block
   MatrixX J_x;      // 3n x 3n: ∂f/∂x_m^t (ψ frozen)
   MatrixX J_u;      // 3n x 3n: ∂f/∂u_m^t
+  std::vector<S> scratch;  // reused between evaluations (no allocation once grown)
 };
 
 // options.weight, divided by the number of terms under Normalization::mean (O(N K) to count:
@@ -80,7 +81,8 @@ bool lrm_residual_block(PositionsView<const S> positions, FrameScalarsView<const
   out.frames = velocity_frames(t, T);
   out.neighbors.resize(static_cast<std::size_t>(n));
   // The neighbourhood's SoA inputs, as the fast kernel sees them (lane = scalar).
-  std::vector<S> buf(static_cast<std::size_t>(7 * n + detail::lrm_scratch_size(n) + 3));
+  std::vector<S>& buf = out.scratch;
+  buf.resize(static_cast<std::size_t>(8 * n + detail::lrm_scratch_size(n) + 3));
   S* xs = buf.data();
   S* us = xs + 3 * n;
   S* a = us + 3 * n;
@@ -128,14 +130,15 @@ bool lrm_residual_block(PositionsView<const S> positions, FrameScalarsView<const
     out.J_u.setZero(3 * n, 3 * n);
     return false;
   }
-  std::vector<S> sk(static_cast<std::size_t>(n));
+  S* sk_p = scratch + detail::lrm_scratch_size(n);  // after the neighbourhood's scratch
+  auto sk = [sk_p](Index k) -> S& { return sk_p[k]; };
   for (Index k = 0; k < n; ++k) {
     out.weight(k) = w[k];
     out.irls(k) = psi[k];
-    sk[static_cast<std::size_t>(k)] = sqrt(L(scale) * w[k] * psi[k] * L(0.5));
+    sk(k) = sqrt(L(scale) * w[k] * psi[k] * L(0.5));
     for (int c = 0; c < 3; ++c) {
       out.raw(3 * k + c) = r[c * n + k];
-      out.r(3 * k + c) = sk[static_cast<std::size_t>(k)] * r[c * n + k];
+      out.r(3 * k + c) = sk(k) * r[c * n + k];
     }
   }
   if (!jacobians) return true;
@@ -175,7 +178,7 @@ bool lrm_residual_block(PositionsView<const S> positions, FrameScalarsView<const
   const Matrix3<S> om_hat = so3::hat(out.omega);
   for (Index k = 0; k < n; ++k) {
     const Matrix3<S> xk_hat = so3::hat(xt_of(k));
-    const S s = sk[static_cast<std::size_t>(k)];
+    const S s = sk(k);
     for (Index m = 0; m < n; ++m) {
       const S delta = (k == m ? S(1) : S(0)) - w[m];
       Matrix3<S> ju = delta * Matrix3<S>::Identity();
