@@ -149,7 +149,7 @@ TEST_CASE("C-ARAP gradient matches central finite differences") {
 TEST_CASE("C-ARAP is bit-identical for 1, 2 and 7 threads (with spill blocks)") {
   Rng rng(403);
   CAPTURE(rng.seed);
-  const Scene<double> s = smg::test::random_scene(37, 60, 6, rng);  // 5 blocks of 8 frames
+  const Scene<double> s = smg::test::random_scene(37, 60, 6, rng);  // several short blocks
   smg::CarapOptions o;
   o.gaps = {{1, 1.0}, {3, 0.5}, {11, 1.0}};  // a gap longer than a block
   const Grad a = run_carap(s, o, true, 1), b = run_carap(s, o, true, 2),

@@ -195,7 +195,11 @@ inline void lengths(Index n, const S* SMG_RESTRICT ex, const S* SMG_RESTRICT ey,
   for (Index a = 0; a < n; ++a) inv_len[a] = ex[a] * ex[a] + ey[a] * ey[a] + ez[a] * ez[a];
   sqrt_array(inv_len, len, n);
   for (Index a = 0; a < n; ++a) {
-    inv_len[a] = len[a] > S(0) ? L(1) / len[a] : S(0);
+    // Divide by a safe value, then select: a division under the condition would not be
+    // vectorised (it could trap on 0).
+    const S safe = len[a] > S(0) ? len[a] : S(1);
+    const S inv = L(1) / safe;
+    inv_len[a] = len[a] > S(0) ? inv : S(0);
     eacc[a] = S(0);
   }
 }
@@ -290,11 +294,14 @@ inline void backprop(Index n, const S* SMG_RESTRICT R, S* SMG_RESTRICT gx, S* SM
 
 }  // namespace carap_loops
 
-// Frames per block of the C-ARAP frame partition: a function of T only (determinism). A block
-// recomputes max(δ) frames past its end, so longer blocks waste less; about 8 blocks (at least
-// 8, at most 32 frames each) still give every thread of a small machine equal shares.
-inline Index carap_block_frames(Index frames) {
-  return std::min<Index>(32, std::max<Index>(8, (frames + 7) / 8));
+// Frames per block of the C-ARAP frame partition: a function of T and the largest gap only
+// (determinism). A block recomputes max δ frames past its end, so longer blocks waste less;
+// about 8 blocks (8 to 32 frames each) still give every thread of a small machine equal shares.
+// Rounded down so that block + max δ is a multiple of 4 (loops over a block's frames then have
+// no scalar remainder).
+inline Index carap_block_frames(Index frames, Index max_gap) {
+  const Index b = std::min<Index>(32, std::max<Index>(8, (frames + 7) / 8));
+  return std::max<Index>(4, b - (b + max_gap) % 4);
 }
 
 // Hands out scratch slots to concurrently running chunks. A chunk takes a free slot, clears
@@ -343,7 +350,10 @@ struct CarapKernel {
   Index scratch_per_slot = 0;
 
   bool gradient() const { return gx.data() != nullptr || gr.data() != nullptr; }
-  Index span() const { return B + G; }  // max frames touched by a block
+  // Frames stored per block: at most B + max δ, padded to a multiple of 4 so that the loops over
+  // a block's frames have no scalar remainder (padding frames carry zeros and weight 0).
+  static Index padded(Index frames) { return (frames + 3) / 4 * 4; }
+  Index span() const { return padded(B + G); }
 
   // Scratch scalars per slot: 14 flattened [edge][frame] arrays, one mask and four P arrays
   // (with max(δ) leading zeros) per gap, 16 per-node [component][frame] arrays, and the block's
@@ -360,7 +370,8 @@ struct CarapKernel {
   // Energy of block b (already scaled); gradients added to the owned rows and the spill.
   Acc block(Index b, Index slot) const {
     const Index t0 = b * B, t1 = std::min(T, t0 + B), te = std::min(T, t1 + G);
-    const Index ne = te - t0;    // frames of this block incl. the overlap
+    const Index nr = te - t0;    // frames of this block incl. the overlap
+    const Index ne = padded(nr); // their storage stride (frames nr .. ne − 1 are zero padding)
     const Index nown = t1 - t0;  // frames whose terms this block computes
     const Index M = K * span();  // capacity of the flattened [edge][frame] arrays
     const bool grad = gradient();
@@ -393,7 +404,8 @@ struct CarapKernel {
 
     // The block's frames node-major (contiguous per neighbour: the strided [T][N][3] layout
     // would cost a cache line per frame and neighbour).
-    for (Index l = 0; l < ne; ++l) {
+    std::fill(Xb, Xb + N * n4, S(0));
+    for (Index l = 0; l < nr; ++l) {
       const S* row = x.ptr(t0 + l, 0);
       for (Index j = 0; j < N; ++j) {
         S* dst = Xb + j * n4 + l;
@@ -417,7 +429,7 @@ struct CarapKernel {
     // computes (a neighbour's block data would otherwise arrive from L3 one edge at a time).
     auto prefetch_node = [&](Index i) {
       constexpr Index line = 64 / static_cast<Index>(sizeof(S));
-      for (Index l = 0; l < ne; ++l) SMG_PREFETCH(q.ptr(t0 + l, i), 0);
+      for (Index l = 0; l < nr; ++l) SMG_PREFETCH(q.ptr(t0 + l, i), 0);
       for (Index k = 0; k < K; ++k) {
         const Index j = graph.indices(i, k);
         if (j < 0) break;
@@ -448,8 +460,8 @@ struct CarapKernel {
       if (m_e == 0) continue;
       const Index m = m_e * ne;
       for (Index l = 0; l < ne; ++l) {
-        S Rl[9];
-        rotation_from_wxyz(q.ptr(t0 + l, i), Rl);
+        S Rl[9] = {S(0), S(0), S(0), S(0), S(0), S(0), S(0), S(0), S(0)};
+        if (l < nr) rotation_from_wxyz(q.ptr(t0 + l, i), Rl);
         for (int c = 0; c < 9; ++c) R[c * ne + l] = Rl[c];
       }
       const S* Xi = Xb + i * n4;
@@ -471,7 +483,7 @@ struct CarapKernel {
       std::size_t n_active = 0;
       for (std::size_t g = 0; g < gaps.size(); ++g) {
         const Index d = gaps[g].delta;
-        if (d >= ne) continue;  // no pair of this gap inside the block
+        if (d >= nr) continue;  // no pair of this gap inside the block
         const Index n = m - d;
         const S* mk = masks + static_cast<Index>(g) * M;
         if (!grad) {
@@ -525,7 +537,7 @@ struct CarapKernel {
 
     // Owned frames into the caller's rows, the overlap into this block's spill.
     auto flush = [&](const S* GB, PositionsView<S> out, S* spill_b) {
-      for (Index l = 0; l < ne; ++l) {
+      for (Index l = 0; l < nr; ++l) {
         S* row = l < nown ? out.ptr(t0 + l, 0) : spill_b + (l - nown) * N * 3;
         if (l < nown) {
           for (Index j = 0; j < N; ++j) {
@@ -591,7 +603,7 @@ Accumulator<S> carap(PositionsView<const S> positions, QuaternionsView<const S> 
   k.alpha = L(options.alpha);
   k.lambda_c = L(options.lambda_c);
   k.lambda_l = L(options.lambda_l);
-  k.B = detail::carap_block_frames(T);
+  k.B = detail::carap_block_frames(T, k.G);
   k.blocks = (T + k.B - 1) / k.B;
   const Index requested = parallel.threads > 0 ? parallel.threads : num_threads();
   const Index slots = std::max<Index>(1, std::min<Index>(requested, k.blocks));
