@@ -19,11 +19,13 @@
 
 #include <cmath>
 #include <cstdint>
+#include <vector>
 
 #include "smg/core/parallel.hpp"
 #include "smg/core/scalar.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
+#include "smg/energy/carap.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/velocity.hpp"
 #include "smg/energy/workspace.hpp"
@@ -84,25 +86,47 @@ void node_confidences(PositionsView<const S> positions,
   if (T == 0 || N == 0) return;
   detail::WorkspaceRef<S> ws(workspace);
   S* const edge_change = ws->edge_change(static_cast<std::size_t>(T * N));
+  // Velocities once (E1) and 1 / Σ_k w_ik per row (0 for an empty row).
+  S* const vel = ws->velocity(static_cast<std::size_t>(T * N * 3 + N));
+  S* const inv_w = vel + T * N * 3;
+  velocities<S>(positions, PositionsView<S>(vel, T, N), parallel);
+  for (Index i = 0; i < N; ++i) {
+    const S W = detail::row_weight(graph, i);
+    inv_w[i] = W > S(0) ? S(L(1) / W) : S(0);
+  }
+  auto u_of = [vel](Index t, Index N_, Index j) { return vel + (t * N_ + j) * 3; };
 
-  // Pass 1: e_i^t, the weighted mean change of node i's edge lengths (E4).
-  parallel_for(
+  // Pass 1: e_i^t, the weighted mean change of node i's edge lengths (E4). Squared lengths
+  // are collected per node and square-rooted together (vectorised through Eigen).
+  parallel_for_chunks(
       T * N,
-      [&](Index begin, Index end) {
+      [&](Index, Index begin, Index end) {
+        std::vector<S> sq(static_cast<std::size_t>(2 * K)), len(static_cast<std::size_t>(2 * K));
         for (Index item = begin; item < end; ++item) {
           const Index t = item / N, i = item % N;
           const VelocityFrames f = velocity_frames(t, T);
-          const S W = detail::row_weight(graph, i);
           S e(0);
-          if (f.moving && W > S(0)) {
-            for (Index k = 0; k < K; ++k) {
+          const Index n = graph.degree(i);
+          if (f.moving && inv_w[i] > S(0) && n > 0) {
+            const S* pi = positions.ptr(f.plus, i);
+            const S* mi = positions.ptr(f.minus, i);
+            for (Index k = 0; k < n; ++k) {
               const Index j = graph.indices(i, k);
-              if (j < 0) break;
-              const S lp = (positions(f.plus, j) - positions(f.plus, i)).norm();
-              const S lm = (positions(f.minus, j) - positions(f.minus, i)).norm();
-              e += graph.weights(i, k) * abs(lp - lm);
+              const S* pj = positions.ptr(f.plus, j);
+              const S* mj = positions.ptr(f.minus, j);
+              S a(0), b(0);
+              for (int c = 0; c < 3; ++c) {
+                a += (pj[c] - pi[c]) * (pj[c] - pi[c]);
+                b += (mj[c] - mi[c]) * (mj[c] - mi[c]);
+              }
+              sq[static_cast<std::size_t>(k)] = a;
+              sq[static_cast<std::size_t>(n + k)] = b;
             }
-            e /= W;
+            detail::sqrt_array(sq.data(), len.data(), 2 * n);
+            for (Index k = 0; k < n; ++k)
+              e += graph.weights(i, k) * abs(len[static_cast<std::size_t>(k)] -
+                                             len[static_cast<std::size_t>(n + k)]);
+            e *= inv_w[i];
           }
           edge_change[item] = e;
         }
@@ -112,34 +136,40 @@ void node_confidences(PositionsView<const S> positions,
   // Pass 2: the residuals, their normalisers and the two factors.
   const L kappa_m(options.kappa_m), kappa_r(options.kappa_r), lambda_m(options.lambda_m),
       lambda_r(options.lambda_r), eps(options.eps);
-  parallel_for(
+  parallel_for_chunks(
       T * N,
-      [&](Index begin, Index end) {
+      [&](Index, Index begin, Index end) {
+        std::vector<S> sq(static_cast<std::size_t>(K)), nrm(static_cast<std::size_t>(K));
         for (Index item = begin; item < end; ++item) {
           const Index t = item / N, i = item % N;
-          const S W = detail::row_weight(graph, i);
           const S* e_t = edge_change + t * N;
-          const Vector3<S> u_i = velocity(positions, t, i);
-          Vector3<S> v_bar = Vector3<S>::Zero();
-          S s_v(0), e_bar(0), s_l(0);
-          if (W > S(0)) {
-            const S inv_W = L(1) / W;
-            for (Index k = 0; k < K; ++k) {
-              const Index j = graph.indices(i, k);
-              if (j < 0) break;
-              const S w = graph.weights(i, k) * inv_W;
-              v_bar += w * velocity(positions, t, j);
-              e_bar += w * e_t[j];
-            }
-            for (Index k = 0; k < K; ++k) {
-              const Index j = graph.indices(i, k);
-              if (j < 0) break;
-              const S w = graph.weights(i, k) * inv_W;
-              s_v += w * (velocity(positions, t, j) - v_bar).norm();
-              s_l += w * abs(e_t[j] - e_bar);
-            }
+          const S* ui = u_of(t, N, i);
+          S vb0(0), vb1(0), vb2(0), s_v(0), e_bar(0), s_l(0);
+          const Index n = inv_w[i] > S(0) ? graph.degree(i) : 0;
+          for (Index k = 0; k < n; ++k) {
+            const Index j = graph.indices(i, k);
+            const S w = graph.weights(i, k) * inv_w[i];
+            const S* uj = u_of(t, N, j);
+            vb0 += w * uj[0];
+            vb1 += w * uj[1];
+            vb2 += w * uj[2];
+            e_bar += w * e_t[j];
           }
-          const S r_v = (u_i - v_bar).norm();
+          for (Index k = 0; k < n; ++k) {
+            const S* uj = u_of(t, N, graph.indices(i, k));
+            const S d0 = uj[0] - vb0, d1 = uj[1] - vb1, d2 = uj[2] - vb2;
+            sq[static_cast<std::size_t>(k)] = d0 * d0 + d1 * d1 + d2 * d2;
+          }
+          detail::sqrt_array(sq.data(), nrm.data(), n);
+          for (Index k = 0; k < n; ++k) {
+            const Index j = graph.indices(i, k);
+            const S w = graph.weights(i, k) * inv_w[i];
+            s_v += w * nrm[static_cast<std::size_t>(k)];
+            s_l += w * abs(e_t[j] - e_bar);
+          }
+          const S d0 = ui[0] - vb0, d1 = ui[1] - vb1, d2 = ui[2] - vb2;
+          using std::sqrt;
+          const S r_v = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
           const S r_l = abs(e_t[i] - e_bar);
           const S a = r_v / (kappa_m * (s_v + eps));
           const S b = r_l / (kappa_r * (s_l + eps));
