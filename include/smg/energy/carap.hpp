@@ -300,7 +300,7 @@ inline void backprop(Index n, const S* SMG_RESTRICT R, S* SMG_RESTRICT gx, S* SM
 // Rounded down so that block + max δ is a multiple of 4 (loops over a block's frames then have
 // no scalar remainder).
 inline Index carap_block_frames(Index frames, Index max_gap) {
-  const Index b = std::min<Index>(32, std::max<Index>(8, (frames + 7) / 8));
+  const Index b = std::min<Index>(32, std::max<Index>(8, (frames + 5) / 6));
   return std::max<Index>(4, b - (b + max_gap) % 4);
 }
 
