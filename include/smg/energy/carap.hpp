@@ -296,7 +296,7 @@ inline void backprop(Index n, const S* SMG_RESTRICT R, S* SMG_RESTRICT gx, S* SM
 
 // Frames per block of the C-ARAP frame partition: a function of T and the largest gap only
 // (determinism). A block recomputes max δ frames past its end, so longer blocks waste less;
-// about 8 blocks (8 to 32 frames each) still give every thread of a small machine equal shares.
+// about 6 blocks (8 to 32 frames each) still give the threads of a small machine fair shares.
 // Rounded down so that block + max δ is a multiple of 4 (loops over a block's frames then have
 // no scalar remainder).
 inline Index carap_block_frames(Index frames, Index max_gap) {
