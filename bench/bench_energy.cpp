@@ -1,0 +1,544 @@
+// Energies at the size: N = 5000 nodes, T = 100 frames, K = 16 neighbours, gaps {1, 2, 4}
+// (bench/notes/energy.md describes every row and counter).
+//
+// Counters beside each time:
+//   ms                  wall time of one call (median of the repetitions)
+//   err_vs_double       float rows: ‖g_float − g_double‖ / ‖g_double‖ over the gradients the
+//                       row computes (energy-only rows: relative energy error); 0 for double
+//   err_detach_vs_exact LRM with ω held constant: ‖g_detached − g_exact‖ / ‖g_exact‖ (double)
+//   ad_ratio            autodiff rows: AutoDiffScalar time / analytic time on the same problem
+//   ns_per_block        residual rows: time per residual block (with its Jacobians)
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+#include <unsupported/Eigen/AutoDiff>
+
+#include "energy/reference_energies.hpp"
+#include "energy/scene.hpp"
+#include "smg/energy.hpp"
+
+namespace {
+
+using smg::Index;
+using smg::Vector3;
+using smg::test::Scene;
+
+constexpr Index kN = 5000, kT = 100, kK = 16;
+
+// Several rigid bodies moving smoothly (rotation + translation), each node with a little
+// non-rigid noise, some nodes corrupted: a scene where every factor and Huber's both zones
+// are exercised. K nearest neighbours by frame-0 distance, weights 1/K.
+Scene<double> make_scene(Index T, Index N) {
+  smg::test::Rng rng(2024);
+  Scene<double> s;
+  s.T = T;
+  s.N = N;
+  s.x.resize(static_cast<std::size_t>(T * N * 3));
+  s.q.resize(static_cast<std::size_t>(T * N * 4));
+  s.v.assign(static_cast<std::size_t>(T * N), 1);
+  s.c.assign(static_cast<std::size_t>(T * N), 1.0);
+  const int bodies = 12;
+  std::vector<Vector3<double>> centre, spin, vel;
+  for (int b = 0; b < bodies; ++b) {
+    centre.push_back(rng.vec3(2.0));
+    spin.push_back(rng.vec3(0.03));
+    vel.push_back(rng.vec3(0.01));
+  }
+  for (Index i = 0; i < N; ++i) {
+    const int b = static_cast<int>(i % bodies);
+    const Vector3<double> p = centre[b] + rng.vec3(0.4);
+    const smg::Quaternion<double> r0 = rng.quaternion();
+    const bool corrupted = rng.uniform(0, 1) < 0.02;
+    for (Index t = 0; t < T; ++t) {
+      const smg::Quaternion<double> Q = smg::so3::exp(Vector3<double>(double(t) * spin[b]));
+      Vector3<double> x = Q * (p - centre[b]) + centre[b] + double(t) * vel[b] + rng.vec3(0.002);
+      if (corrupted) x += rng.vec3(0.03);
+      s.set_pos(t, i, x);
+      s.set_rot(t, i, Q * r0 * smg::so3::exp(rng.vec3(0.01)));
+      s.v[static_cast<std::size_t>(t * N + i)] = rng.uniform(0, 1) < 0.95 ? 1 : 0;
+    }
+  }
+  smg::test::knn_graph(s, kK);
+  std::vector<double> c(s.v.size());
+  smg::node_confidences<double>(s.positions(), s.visibility(), s.graph(), {},
+                                {c.data(), s.T, s.N});
+  s.c = c;
+  return s;
+}
+
+const Scene<double>& scene() {
+  static const Scene<double> s = make_scene(kT, kN);
+  return s;
+}
+template <class S>
+const Scene<S>& scene_as() {
+  static const Scene<S> s = scene().cast<S>();
+  return s;
+}
+
+smg::CarapOptions carap_options() { return {}; }  // gaps {1, 2, 4}, α 0.6, λc = λl = 1
+smg::LrmOptions lrm_options(bool detach = false) {
+  smg::LrmOptions o;
+  o.detach_omega = detach;
+  return o;
+}
+
+// Double-precision results, the references of the error columns.
+struct Reference {
+  double carap = 0, lrm = 0, lrm_detached = 0, arap = 0, conf_sum = 0;
+  std::vector<double> carap_x, carap_r, lrm_x, lrm_detached_x, arap_x, arap_r, conf;
+};
+const Reference& reference() {
+  static const Reference r = [] {
+    Reference f;
+    const Scene<double>& s = scene();
+    const std::size_t n = s.x.size();
+    f.carap_x.assign(n, 0.0);
+    f.carap_r.assign(n, 0.0);
+    f.lrm_x.assign(n, 0.0);
+    f.lrm_detached_x.assign(n, 0.0);
+    f.arap_x.assign(n, 0.0);
+    f.arap_r.assign(n, 0.0);
+    f.conf.assign(s.v.size(), 0.0);
+    smg::node_confidences<double>(s.positions(), s.visibility(), s.graph(), {},
+                                  {f.conf.data(), s.T, s.N});
+    f.carap = smg::carap<double>(s.positions(), s.rotations(), s.confidence(), s.graph(),
+                                 carap_options(), {f.carap_x.data(), s.T, s.N},
+                                 {f.carap_r.data(), s.T, s.N});
+    f.lrm = smg::lrm<double>(s.positions(), s.confidence(), s.graph(), lrm_options(),
+                             {f.lrm_x.data(), s.T, s.N});
+    f.lrm_detached = smg::lrm<double>(s.positions(), s.confidence(), s.graph(),
+                                      lrm_options(true), {f.lrm_detached_x.data(), s.T, s.N});
+    f.arap = smg::arap<double>(s.positions(), s.rotations(), s.graph(), {},
+                               {f.arap_x.data(), s.T, s.N}, {f.arap_r.data(), s.T, s.N});
+    return f;
+  }();
+  return r;
+}
+
+template <class A>
+double rel_error(const std::vector<A>& a, const std::vector<double>& b) {
+  double num = 0, den = 0;
+  for (std::size_t k = 0; k < b.size(); ++k) {
+    const double d = double(a[k]) - b[k];
+    num += d * d;
+    den += b[k] * b[k];
+  }
+  return std::sqrt(num) / std::max(std::sqrt(den), 1e-300);
+}
+template <class A>
+double rel_error2(const std::vector<A>& a1, const std::vector<double>& b1,
+                  const std::vector<A>& a2, const std::vector<double>& b2) {
+  double num = 0, den = 0;
+  for (std::size_t k = 0; k < b1.size(); ++k) {
+    num += (double(a1[k]) - b1[k]) * (double(a1[k]) - b1[k]) +
+           (double(a2[k]) - b2[k]) * (double(a2[k]) - b2[k]);
+    den += b1[k] * b1[k] + b2[k] * b2[k];
+  }
+  return std::sqrt(num) / std::max(std::sqrt(den), 1e-300);
+}
+
+smg::ParallelOptions threads(const benchmark::State& state) {
+  smg::ParallelOptions p;
+  p.threads = static_cast<int>(state.range(0));
+  return p;
+}
+void set_ms(benchmark::State& state) {
+  state.counters["ms"] = benchmark::Counter(static_cast<double>(state.iterations()) * 1e-3,
+                                            benchmark::Counter::kIsRate |
+                                                benchmark::Counter::kInvert);
+}
+template <class S>
+constexpr bool is_double() {
+  return sizeof(S) == sizeof(double);
+}
+
+// ---- confidences ----
+template <class S>
+void BM_confidence(benchmark::State& state) {
+  const Scene<S>& s = scene_as<S>();
+  std::vector<S> c(s.v.size());
+  smg::EnergyWorkspace<S> ws;
+  for (auto _ : state) {
+    smg::node_confidences<S>(s.positions(), s.visibility(), s.graph(), {}, {c.data(), s.T, s.N},
+                             {}, {}, &ws, threads(state));
+    benchmark::DoNotOptimize(c.data());
+  }
+  set_ms(state);
+  state.counters["err_vs_double"] = is_double<S>() ? 0.0 : rel_error(c, reference().conf);
+}
+
+// ---- C-ARAP (with_gradient: positions and rotations) ----
+template <class S, bool kGradient>
+void BM_carap(benchmark::State& state) {
+  const Scene<S>& s = scene_as<S>();
+  std::vector<S> gx(s.x.size()), gr(s.x.size());
+  smg::EnergyWorkspace<S> ws;
+  double e = 0;
+  for (auto _ : state) {
+    if (kGradient) {
+      std::fill(gx.begin(), gx.end(), S(0));
+      std::fill(gr.begin(), gr.end(), S(0));
+    }
+    e = double(smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(),
+                             carap_options(), kGradient ? smg::PositionsView<S>(gx.data(), s.T, s.N)
+                                                        : smg::PositionsView<S>(),
+                             kGradient ? smg::TangentsView<S>(gr.data(), s.T, s.N)
+                                       : smg::TangentsView<S>(),
+                             &ws, threads(state)));
+    benchmark::DoNotOptimize(e);
+  }
+  set_ms(state);
+  const Reference& r = reference();
+  state.counters["err_vs_double"] =
+      is_double<S>() ? 0.0
+                     : (kGradient ? rel_error2(gx, r.carap_x, gr, r.carap_r)
+                                  : std::abs(e - r.carap) / r.carap);
+}
+
+// ---- plain ARAP ----
+template <class S, bool kGradient>
+void BM_arap(benchmark::State& state) {
+  const Scene<S>& s = scene_as<S>();
+  std::vector<S> gx(s.x.size()), gr(s.x.size());
+  smg::EnergyWorkspace<S> ws;
+  double e = 0;
+  for (auto _ : state) {
+    if (kGradient) {
+      std::fill(gx.begin(), gx.end(), S(0));
+      std::fill(gr.begin(), gr.end(), S(0));
+    }
+    e = double(smg::arap<S>(s.positions(), s.rotations(), s.graph(), {},
+                            kGradient ? smg::PositionsView<S>(gx.data(), s.T, s.N)
+                                      : smg::PositionsView<S>(),
+                            kGradient ? smg::TangentsView<S>(gr.data(), s.T, s.N)
+                                      : smg::TangentsView<S>(),
+                            &ws, threads(state)));
+    benchmark::DoNotOptimize(e);
+  }
+  set_ms(state);
+  const Reference& r = reference();
+  state.counters["err_vs_double"] =
+      is_double<S>() ? 0.0
+                     : (kGradient ? rel_error2(gx, r.arap_x, gr, r.arap_r)
+                                  : std::abs(e - r.arap) / r.arap);
+}
+
+// ---- LRM: 0 energy only, 1 exact gradient, 2 gradient with ω held constant ----
+template <class S, int kMode>
+void BM_lrm(benchmark::State& state) {
+  const Scene<S>& s = scene_as<S>();
+  std::vector<S> gx(s.x.size());
+  smg::EnergyWorkspace<S> ws;
+  double e = 0;
+  for (auto _ : state) {
+    if (kMode > 0) std::fill(gx.begin(), gx.end(), S(0));
+    e = double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(kMode == 2),
+                           kMode > 0 ? smg::PositionsView<S>(gx.data(), s.T, s.N)
+                                     : smg::PositionsView<S>(),
+                           &ws, threads(state)));
+    benchmark::DoNotOptimize(e);
+  }
+  set_ms(state);
+  const Reference& r = reference();
+  if (!is_double<S>()) {
+    state.counters["err_vs_double"] =
+        kMode == 0 ? std::abs(e - r.lrm) / r.lrm
+                   : rel_error(gx, kMode == 1 ? r.lrm_x : r.lrm_detached_x);
+  } else {
+    state.counters["err_vs_double"] = 0.0;
+  }
+  if (kMode == 2) state.counters["err_detach_vs_exact"] = rel_error(r.lrm_detached_x, r.lrm_x);
+}
+
+// ---- The target: C-ARAP + LRM, energy + exact gradient, into one gradient buffer ----
+template <class S>
+void BM_carap_plus_lrm(benchmark::State& state) {
+  const Scene<S>& s = scene_as<S>();
+  std::vector<S> gx(s.x.size()), gr(s.x.size());
+  smg::EnergyWorkspace<S> ws;
+  for (auto _ : state) {
+    std::fill(gx.begin(), gx.end(), S(0));
+    std::fill(gr.begin(), gr.end(), S(0));
+    const double e = double(smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(),
+                                          carap_options(), {gx.data(), s.T, s.N},
+                                          {gr.data(), s.T, s.N}, &ws, threads(state))) +
+                     double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(),
+                                        {gx.data(), s.T, s.N}, &ws, threads(state)));
+    benchmark::DoNotOptimize(e);
+  }
+  set_ms(state);
+  const Reference& r = reference();
+  std::vector<double> sum(r.carap_x.size());
+  for (std::size_t k = 0; k < sum.size(); ++k) sum[k] = r.carap_x[k] + r.lrm_x[k];
+  state.counters["err_vs_double"] = is_double<S>() ? 0.0 : rel_error2(gx, sum, gr, r.carap_r);
+  state.counters["target_ms"] = 100.0;
+}
+
+// ---- Residual + Jacobian forms, streamed through a visitor that forms 2 Jᵀ r per chunk-free
+// sum (the sum of squares, so nothing is optimised away). Run on the first kResFrames frames:
+// the per-block cost does not depend on T. ----
+constexpr Index kResFrames = 10;
+template <class S>
+const Scene<S>& residual_scene() {
+  static const Scene<S> s = [] {
+    const Scene<double>& f = scene();
+    Scene<double> r = f;
+    r.T = kResFrames;
+    r.x.resize(static_cast<std::size_t>(kResFrames * kN * 3));
+    r.q.resize(static_cast<std::size_t>(kResFrames * kN * 4));
+    r.v.resize(static_cast<std::size_t>(kResFrames * kN));
+    r.c.resize(static_cast<std::size_t>(kResFrames * kN));
+    return r.cast<S>();
+  }();
+  return s;
+}
+template <class S>
+void BM_carap_residuals(benchmark::State& state) {
+  const Scene<S>& s = residual_scene<S>();
+  const auto par = threads(state);
+  const Index chunks = smg::carap_residual_chunks(s.T, s.N, carap_options().gaps.size());
+  // One partial per chunk, 16 doubles apart (no false sharing between threads).
+  constexpr std::size_t kPad = 16;
+  std::vector<double> partial(static_cast<std::size_t>(chunks) * kPad);
+  Index blocks = 0;
+  for (auto _ : state) {
+    std::fill(partial.begin(), partial.end(), 0.0);
+    smg::for_each_carap_residual<S>(
+        s.positions(), s.rotations(), s.confidence(), s.graph(), carap_options(),
+        [&](const smg::CarapResidualBlock<S>& b, Index chunk) {
+          partial[static_cast<std::size_t>(chunk) * kPad] +=
+              double(b.r.squaredNorm()) + double((b.J_xj_s.transpose() * b.r).sum()) +
+              double((b.J_rot_i_t.transpose() * b.r).sum());
+        },
+        true, par);
+    benchmark::DoNotOptimize(partial.data());
+  }
+  blocks = smg::carap_residual_count(s.graph(), s.T, carap_options());
+  set_ms(state);
+  state.counters["ns_per_block"] = benchmark::Counter(
+      static_cast<double>(state.iterations()) * static_cast<double>(blocks) * 1e-9,
+      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+template <class S>
+void BM_lrm_residuals(benchmark::State& state) {
+  const Scene<S>& s = residual_scene<S>();
+  const auto par = threads(state);
+  constexpr std::size_t kPad = 16;  // no false sharing between threads
+  std::vector<double> partial(static_cast<std::size_t>(smg::lrm_residual_chunks(s.T, s.N)) * kPad);
+  for (auto _ : state) {
+    std::fill(partial.begin(), partial.end(), 0.0);
+    smg::for_each_lrm_residual<S>(
+        s.positions(), s.confidence(), s.graph(), lrm_options(),
+        [&](const smg::LrmResidualBlock<S>& b, Index chunk) {
+          partial[static_cast<std::size_t>(chunk) * kPad] +=
+              double(b.r.squaredNorm()) + double((b.J_x.transpose() * b.r).sum());
+        },
+        true, par);
+    benchmark::DoNotOptimize(partial.data());
+  }
+  set_ms(state);
+  state.counters["ns_per_block"] = benchmark::Counter(
+      static_cast<double>(state.iterations()) * static_cast<double>(s.T * s.N) * 1e-9,
+      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+
+// ---- Eigen AutoDiffScalar, per term (the fair comparison): each C-ARAP pair term with an
+// 18-entry fixed-size derivative vector (x_i, x_j at both frames, the two right tangents of
+// R_i), each LRM neighbourhood with a derivative vector of 6·|N(i)| <= 96 entries (x_j and u_j
+// of every neighbour, then u chained to x). Same equations, written straight from DESIGN.md in
+// tests/energy/reference_energies.hpp. Double, one thread, on the first kAdFrames frames; the
+// analytic kernel is timed on the same sub-problem for ad_ratio. ----
+constexpr Index kAdFrames = 8;
+const Scene<double>& ad_scene() {
+  static const Scene<double> s = [] {
+    Scene<double> r = scene();
+    r.T = kAdFrames;
+    r.x.resize(static_cast<std::size_t>(kAdFrames * kN * 3));
+    r.q.resize(static_cast<std::size_t>(kAdFrames * kN * 4));
+    r.v.resize(static_cast<std::size_t>(kAdFrames * kN));
+    r.c.resize(static_cast<std::size_t>(kAdFrames * kN));
+    return r;
+  }();
+  return s;
+}
+template <class F>
+double seconds_of(F&& f, int reps) {
+  double best = 1e300;
+  for (int k = 0; k < reps; ++k) {
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  }
+  return best;
+}
+
+using AD18 = Eigen::AutoDiffScalar<Eigen::Matrix<double, 18, 1>>;
+void carap_autodiff(const Scene<double>& s, std::vector<double>& gx, std::vector<double>& gr) {
+  const smg::CarapOptions o = carap_options();
+  std::fill(gx.begin(), gx.end(), 0.0);
+  std::fill(gr.begin(), gr.end(), 0.0);
+  auto var3 = [](const Vector3<double>& v, int off) {
+    Vector3<AD18> a;
+    for (int c = 0; c < 3; ++c) a(c) = AD18(v(c), 18, off + c);
+    return a;
+  };
+  auto rot = [](const smg::Quaternion<double>& q, int off) {
+    Vector3<AD18> phi;
+    for (int c = 0; c < 3; ++c) phi(c) = AD18(0.0, 18, off + c);
+    const smg::Quaternion<AD18> qa = q.normalized().cast<AD18>() * smg::so3::exp(phi);
+    return smg::Matrix3<AD18>(qa.toRotationMatrix());
+  };
+  for (const smg::Gap& g : o.gaps)
+    for (Index t = 0; t + g.delta < s.T; ++t)
+      for (Index i = 0; i < s.N; ++i)
+        for (Index k = 0; k < s.K; ++k) {
+          const Index j = s.idx[i * s.K + k], u = t + g.delta;
+          if (j < 0) break;
+          const double w = g.weight * s.w[i * s.K + k] *
+                           (o.alpha + (1 - o.alpha) * s.c[t * s.N + j]);
+          const AD18 e = smg::test::ref::carap_pair<AD18>(
+              var3(s.pos(t, i), 0), var3(s.pos(t, j), 3), rot(s.rot(t, i), 12),
+              var3(s.pos(u, i), 6), var3(s.pos(u, j), 9), rot(s.rot(u, i), 15), w, o.lambda_c,
+              o.lambda_l);
+          const auto& d = e.derivatives();
+          for (int c = 0; c < 3; ++c) {
+            gx[(t * s.N + i) * 3 + c] += d(c);
+            gx[(t * s.N + j) * 3 + c] += d(3 + c);
+            gx[(u * s.N + i) * 3 + c] += d(6 + c);
+            gx[(u * s.N + j) * 3 + c] += d(9 + c);
+            gr[(t * s.N + i) * 3 + c] += d(12 + c);
+            gr[(u * s.N + i) * 3 + c] += d(15 + c);
+          }
+        }
+}
+
+using ADN = Eigen::AutoDiffScalar<Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 96, 1>>;
+void lrm_autodiff(const Scene<double>& s, std::vector<double>& gx) {
+  const smg::LrmOptions o = lrm_options();
+  std::fill(gx.begin(), gx.end(), 0.0);
+  const auto X = smg::test::ref::positions_of<double>(s);
+  for (Index t = 0; t < s.T; ++t) {
+    const smg::VelocityFrames vf = smg::velocity_frames(t, s.T);
+    for (Index i = 0; i < s.N; ++i) {
+      Index n = 0;
+      while (n < s.K && s.idx[i * s.K + n] >= 0) ++n;
+      const int nv = static_cast<int>(6 * n);
+      std::vector<Vector3<ADN>> x(static_cast<std::size_t>(n)), u(static_cast<std::size_t>(n));
+      std::vector<double> a(static_cast<std::size_t>(n));
+      for (Index k = 0; k < n; ++k) {
+        const Index j = s.idx[i * s.K + k];
+        const Vector3<double> uj = smg::test::ref::velocity(X, s.T, s.N, t, j);
+        for (int c = 0; c < 3; ++c) {
+          x[k](c) = ADN(X[t * s.N + j](c), nv, static_cast<int>(3 * k + c));
+          u[k](c) = ADN(uj(c), nv, static_cast<int>(3 * (n + k) + c));
+        }
+        a[k] = s.w[i * s.K + k] * (o.alpha + (1 - o.alpha) * s.c[t * s.N + j]);
+      }
+      const ADN e = smg::test::ref::lrm_neighbourhood<ADN>(x, u, a, o.huber_delta, 1e-10, false);
+      if (e.derivatives().size() != nv) continue;
+      for (Index k = 0; k < n; ++k) {
+        const Index j = s.idx[i * s.K + k];
+        for (int c = 0; c < 3; ++c) {
+          const double dx = e.derivatives()(3 * k + c), du = e.derivatives()(3 * (n + k) + c);
+          gx[(t * s.N + j) * 3 + c] += dx;
+          if (vf.moving) {
+            gx[(vf.plus * s.N + j) * 3 + c] += du;
+            gx[(vf.minus * s.N + j) * 3 + c] -= du;
+          }
+        }
+      }
+    }
+  }
+}
+
+void BM_autodiff_carap(benchmark::State& state) {
+  const Scene<double>& s = ad_scene();
+  std::vector<double> gx(s.x.size()), gr(s.x.size());
+  for (auto _ : state) {
+    carap_autodiff(s, gx, gr);
+    benchmark::DoNotOptimize(gx.data());
+  }
+  set_ms(state);
+  std::vector<double> ax(s.x.size(), 0.0), ar(s.x.size(), 0.0);
+  smg::ParallelOptions one;
+  one.threads = 1;
+  smg::EnergyWorkspace<double> ws;
+  const double analytic = seconds_of(
+      [&] {
+        std::fill(ax.begin(), ax.end(), 0.0);
+        std::fill(ar.begin(), ar.end(), 0.0);
+        smg::carap<double>(s.positions(), s.rotations(), s.confidence(), s.graph(),
+                           carap_options(), {ax.data(), s.T, s.N}, {ar.data(), s.T, s.N}, &ws,
+                           one);
+      },
+      5);
+  const double ad = seconds_of([&] { carap_autodiff(s, gx, gr); }, 1);
+  state.counters["ad_ratio"] = ad / analytic;
+  state.counters["err_vs_analytic"] = rel_error2(gx, ax, gr, ar);
+}
+void BM_autodiff_lrm(benchmark::State& state) {
+  const Scene<double>& s = ad_scene();
+  std::vector<double> gx(s.x.size());
+  for (auto _ : state) {
+    lrm_autodiff(s, gx);
+    benchmark::DoNotOptimize(gx.data());
+  }
+  set_ms(state);
+  std::vector<double> ax(s.x.size(), 0.0);
+  smg::ParallelOptions one;
+  one.threads = 1;
+  smg::EnergyWorkspace<double> ws;
+  const double analytic = seconds_of(
+      [&] {
+        std::fill(ax.begin(), ax.end(), 0.0);
+        smg::lrm<double>(s.positions(), s.confidence(), s.graph(), lrm_options(),
+                         {ax.data(), s.T, s.N}, &ws, one);
+      },
+      5);
+  const double ad = seconds_of([&] { lrm_autodiff(s, gx); }, 1);
+  state.counters["ad_ratio"] = ad / analytic;
+  state.counters["err_vs_analytic"] = rel_error(gx, ax);
+}
+
+void Threads(benchmark::internal::Benchmark* b) {
+  b->ArgName("threads")->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond)
+      ->Repetitions(3)->ReportAggregatesOnly(true);
+}
+
+}  // namespace
+
+BENCHMARK_TEMPLATE(BM_confidence, float)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_confidence, double)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_carap, float, false)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_carap, double, false)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_carap, float, true)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_carap, double, true)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_lrm, float, 0)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_lrm, double, 0)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_lrm, float, 1)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_lrm, double, 1)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_lrm, float, 2)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_lrm, double, 2)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_arap, float, false)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_arap, float, true)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_arap, double, true)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_carap_plus_lrm, float)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_carap_plus_lrm, double)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_carap_residuals, float)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_carap_residuals, double)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_lrm_residuals, float)->Apply(Threads);
+BENCHMARK_TEMPLATE(BM_lrm_residuals, double)->Apply(Threads);
+// Two repetitions so that the report (which keeps median aggregates) lists them.
+BENCHMARK(BM_autodiff_carap)->Iterations(1)->Repetitions(2)->ReportAggregatesOnly(true)
+    ->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_autodiff_lrm)->Iterations(1)->Repetitions(2)->ReportAggregatesOnly(true)
+    ->UseRealTime()->Unit(benchmark::kMillisecond);
+
+BENCHMARK_MAIN();

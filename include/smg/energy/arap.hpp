@@ -1,0 +1,31 @@
+// smg/energy/arap.hpp — plain as-rigid-as-possible energy for ablations (DESIGN.md "Plain
+// ARAP"): C-ARAP with every confidence 1 and α = 1, so w̃_ij^t = w_ij (docs/math/energy.md
+// (E9) with c ≡ 1). Same kernel, same gradients, same determinism.
+#pragma once
+
+#include "smg/energy/carap.hpp"
+
+namespace smg {
+
+// Checks the inputs and outputs of arap().
+template <class S>
+Status validate_arap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
+                     const NeighborsView<S>& graph, const ArapOptions& options,
+                     PositionsView<S> grad_positions = {}, TangentsView<S> grad_rotations = {}) {
+  if (Status s = validate_options(options); !s) return s;
+  return validate_carap<S>(positions, rotations, {}, graph, carap_options_for_arap(options),
+                           grad_positions, grad_rotations);
+}
+
+// Plain ARAP energy; gradients (positions, right-tangent rotations) are added to the given
+// buffers like carap(). Precondition: validate_arap.
+template <class S>
+Accumulator<S> arap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
+                    const NeighborsView<S>& graph, const ArapOptions& options,
+                    PositionsView<S> grad_positions = {}, TangentsView<S> grad_rotations = {},
+                    EnergyWorkspace<S>* workspace = nullptr, ParallelOptions parallel = {}) {
+  return carap<S>(positions, rotations, {}, graph, carap_options_for_arap(options),
+                  grad_positions, grad_rotations, workspace, parallel);
+}
+
+}  // namespace smg

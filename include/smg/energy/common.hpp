@@ -1,0 +1,36 @@
+// smg/energy/common.hpp — small pieces shared by the energies: the accumulator type of energy
+// sums, the confidence-aware edge weight (E7) and the per-Scalar regulariser factor of LRM.
+#pragma once
+
+#include <type_traits>
+
+#include <Eigen/Core>
+
+#include "smg/core/scalar.hpp"
+#include "smg/core/types.hpp"
+
+namespace smg {
+
+// Energies are summed in double when the computation runs in float (millions of terms would
+// otherwise lose ~1e-4 relative); for double (and AutoDiffScalar) in the Scalar itself.
+template <class S>
+using Accumulator = std::conditional_t<std::is_same_v<S, float>, double, S>;
+
+// w̃_ij^t = w_ij (α + (1 − α) c_{t,j}): the asymmetric, confidence-aware weight of edge i -> j
+// at frame t (the confidence of the *neighbour* j).  (E7)
+template <class S>
+inline S confidence_edge_weight(const S& w_ij, Literal<S> alpha, const S& c_j) {
+  return w_ij * (alpha + (Literal<S>(1) - alpha) * c_j);
+}
+
+// μ / trace(A) of the LRM 3x3 solve (DESIGN.md pinned: 1e-10 in double, 1e-5 in float): just
+// above the rounding level of the solve in each precision, so the regulariser decides a
+// degenerate direction instead of rounding noise, while biasing ordinary neighbourhoods by
+// less than 1e-6 (double).  (E13)
+template <class S>
+inline Literal<S> lrm_mu_factor() {
+  using L = Literal<S>;
+  return Eigen::NumTraits<L>::epsilon() > L(1e-10) ? L(1e-5) : L(1e-10);
+}
+
+}  // namespace smg

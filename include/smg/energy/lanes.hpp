@@ -1,0 +1,199 @@
+// smg/energy/lanes.hpp — a small "lane" type for SIMD across independent problems.
+//
+// The LRM neighbourhood maths is written once, templated on its lane type V: a plain scalar
+// (float, double, Eigen::AutoDiffScalar — residual form, autodiff checks) or Lanes<S, W>, W
+// independent neighbourhoods at once (the fast kernel). Lanes' operators are fixed-length
+// element loops forced inline, which GCC and Clang turn into SIMD instructions; the square
+// root goes through Eigen's packet sqrt, which vectorises whatever -fmath-errno says. Control
+// flow becomes masks (lane_greater / lane_select) so every lane runs the same instructions.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <type_traits>
+
+#include <Eigen/Core>
+
+#if defined(__GNUC__) || defined(__clang__)
+#define SMG_LANE_INLINE inline __attribute__((always_inline))
+#else
+#define SMG_LANE_INLINE inline
+#endif
+
+namespace smg::detail {
+
+#if defined(__GNUC__) || defined(__clang__)
+#define SMG_HAVE_VECTOR_EXTENSIONS 1
+#else
+#define SMG_HAVE_VECTOR_EXTENSIONS 0
+#endif
+
+namespace lanes_impl {
+template <class S>
+struct SameSizeInt;
+template <>
+struct SameSizeInt<float> {
+  using type = std::int32_t;
+};
+template <>
+struct SameSizeInt<double> {
+  using type = std::int64_t;
+};
+}  // namespace lanes_impl
+
+template <class S, int W>
+struct Lanes {
+#if SMG_HAVE_VECTOR_EXTENSIONS
+  // A native SIMD value (GCC/Clang vector extension): operators are single instructions.
+  typedef S Vec __attribute__((vector_size(W * sizeof(S))));
+  using Int = typename lanes_impl::SameSizeInt<S>::type;
+  typedef Int IVec __attribute__((vector_size(W * sizeof(S))));
+#else
+  struct Vec {
+    S e[W];
+    S& operator[](int l) { return e[l]; }
+    const S& operator[](int l) const { return e[l]; }
+  };
+#endif
+  Vec v;
+
+  Lanes() = default;
+  static SMG_LANE_INLINE Lanes constant(S s) {
+    Lanes r;
+    for (int l = 0; l < W; ++l) r.v[l] = s;
+    return r;
+  }
+  SMG_LANE_INLINE S& operator[](int l) { return reinterpret_cast<S*>(&v)[l]; }
+  SMG_LANE_INLINE const S& operator[](int l) const { return reinterpret_cast<const S*>(&v)[l]; }
+
+#if SMG_HAVE_VECTOR_EXTENSIONS
+#define SMG_LANES_BINARY(op)                                                    \
+  friend SMG_LANE_INLINE Lanes operator op(const Lanes& a, const Lanes& b) {    \
+    Lanes r;                                                                    \
+    r.v = a.v op b.v;                                                           \
+    return r;                                                                   \
+  }                                                                             \
+  friend SMG_LANE_INLINE Lanes operator op(const Lanes& a, S b) {               \
+    Lanes r;                                                                    \
+    r.v = a.v op b;                                                             \
+    return r;                                                                   \
+  }                                                                             \
+  friend SMG_LANE_INLINE Lanes operator op(S a, const Lanes& b) {               \
+    Lanes r;                                                                    \
+    r.v = a op b.v;                                                             \
+    return r;                                                                   \
+  }                                                                             \
+  SMG_LANE_INLINE Lanes& operator op##=(const Lanes& b) {                       \
+    v = v op b.v;                                                               \
+    return *this;                                                               \
+  }
+#else
+#define SMG_LANES_BINARY(op)                                                    \
+  friend SMG_LANE_INLINE Lanes operator op(const Lanes& a, const Lanes& b) {    \
+    Lanes r;                                                                    \
+    for (int l = 0; l < W; ++l) r.v[l] = a.v[l] op b.v[l];                      \
+    return r;                                                                   \
+  }                                                                             \
+  friend SMG_LANE_INLINE Lanes operator op(const Lanes& a, S b) {               \
+    Lanes r;                                                                    \
+    for (int l = 0; l < W; ++l) r.v[l] = a.v[l] op b;                           \
+    return r;                                                                   \
+  }                                                                             \
+  friend SMG_LANE_INLINE Lanes operator op(S a, const Lanes& b) {               \
+    Lanes r;                                                                    \
+    for (int l = 0; l < W; ++l) r.v[l] = a op b.v[l];                           \
+    return r;                                                                   \
+  }                                                                             \
+  SMG_LANE_INLINE Lanes& operator op##=(const Lanes& b) {                       \
+    for (int l = 0; l < W; ++l) v[l] = v[l] op b.v[l];                          \
+    return *this;                                                               \
+  }
+#endif
+  SMG_LANES_BINARY(+)
+  SMG_LANES_BINARY(-)
+  SMG_LANES_BINARY(*)
+  SMG_LANES_BINARY(/)
+#undef SMG_LANES_BINARY
+
+  friend SMG_LANE_INLINE Lanes operator-(const Lanes& a) {
+    Lanes r;
+    for (int l = 0; l < W; ++l) r.v[l] = -a.v[l];
+    return r;
+  }
+};
+
+template <class V>
+struct LaneTraits {
+  static constexpr bool is_lanes = false;
+  using Mask = bool;
+};
+template <class S, int W>
+struct LaneTraits<Lanes<S, W>> {
+  static constexpr bool is_lanes = true;
+#if SMG_HAVE_VECTOR_EXTENSIONS
+  using Mask = typename Lanes<S, W>::IVec;  // all ones / all zeros per lane
+#else
+  struct Mask {
+    bool m[W];
+  };
+#endif
+};
+
+template <class V, class L>
+SMG_LANE_INLINE V lane_constant(L value) {
+  if constexpr (LaneTraits<V>::is_lanes) {
+    return V::constant(value);
+  } else {
+    return V(value);
+  }
+}
+
+template <class V>
+SMG_LANE_INLINE typename LaneTraits<V>::Mask lane_greater(const V& a, const V& b) {
+  if constexpr (LaneTraits<V>::is_lanes) {
+#if SMG_HAVE_VECTOR_EXTENSIONS
+    return a.v > b.v;
+#else
+    typename LaneTraits<V>::Mask r;
+    for (int l = 0; l < int(sizeof(r.m)); ++l) r.m[l] = a.v[l] > b.v[l];
+    return r;
+#endif
+  } else {
+    return bool(a > b);
+  }
+}
+
+// mask ? a : b, lane-wise (bitwise blend, no branch).
+template <class M, class V>
+SMG_LANE_INLINE V lane_select(const M& mask, const V& a, const V& b) {
+  if constexpr (LaneTraits<V>::is_lanes) {
+    V r;
+#if SMG_HAVE_VECTOR_EXTENSIONS
+    using IVec = M;
+    using Vec = decltype(r.v);
+    r.v = (Vec)(((IVec)a.v & mask) | ((IVec)b.v & ~mask));
+#else
+    for (int l = 0; l < int(sizeof(mask.m)); ++l) r.v[l] = mask.m[l] ? a.v[l] : b.v[l];
+#endif
+    return r;
+  } else {
+    return mask ? a : b;
+  }
+}
+
+template <class V>
+SMG_LANE_INLINE V lane_sqrt(const V& a) {
+  if constexpr (LaneTraits<V>::is_lanes) {
+    using SS = std::remove_const_t<std::remove_reference_t<decltype(a[0])>>;
+    constexpr int W = int(sizeof(a.v) / sizeof(SS));
+    V r;
+    Eigen::Map<Eigen::Array<SS, W, 1>, Eigen::Unaligned> out(&r[0]);
+    out = Eigen::Map<const Eigen::Array<SS, W, 1>, Eigen::Unaligned>(&a[0]).sqrt();
+    return r;
+  } else {
+    using std::sqrt;
+    return sqrt(a);
+  }
+}
+
+}  // namespace smg::detail

@@ -1,0 +1,157 @@
+// smg/energy/options.hpp — parameters of the confidence, C-ARAP, LRM and plain ARAP equations
+// (DESIGN.md "Confidence", "C-ARAP", "LRM", "Plain ARAP"; docs/math/energy.md), with their
+// validation. Defaults are the paper's (section 4.1) and INTEROP.md's flag defaults.
+//
+// Parameters are plain doubles whatever the Scalar of the computation: they are converted once
+// per call. Every energy is a sum over terms "as in the paper"; Normalization::mean divides the
+// energy (and its gradient) by the number of terms instead (documented per energy).
+#pragma once
+
+#include <cmath>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "smg/core/status.hpp"
+
+namespace smg {
+
+// Per-frame node confidence c_{t,i} = v_{t,i} (c^m)^λm (c^r)^λr, equations (E3)-(E6).
+struct ConfidenceOptions {
+  double kappa_m = 2.5;   // κm: soft threshold of the motion factor (dimensionless)
+  double kappa_r = 2.5;   // κr: soft threshold of the rigidity factor (dimensionless)
+  double lambda_m = 1.0;  // λm: exponent of the motion factor
+  double lambda_r = 1.0;  // λr: exponent of the rigidity factor
+  double eps = 1e-4;      // ε: a length per frame, keeps the normalisers s^v, s^ℓ away from 0
+};
+
+// One temporal gap δ (frames) of C-ARAP / ARAP and its weight γ_δ.
+struct Gap {
+  int delta = 1;
+  double weight = 1.0;
+};
+inline std::vector<Gap> default_gaps() { return {{1, 1.0}, {2, 1.0}, {4, 1.0}}; }
+
+// How the terms of an energy are combined.
+enum class Normalization {
+  sum,   // Σ over all terms, as in the paper (default)
+  mean,  // the sum divided by the number of terms (each energy documents its count)
+};
+
+// C-ARAP, equation (E8). Weights w̃_ij^t = w_ij (α + (1 − α) c_{t,j}) (E7).
+struct CarapOptions {
+  double alpha = 0.6;     // α in [0, 1]: lower bound of the confidence factor
+  double lambda_c = 1.0;  // λc: vector-consistency term
+  double lambda_l = 1.0;  // λl: length-preservation term
+  std::vector<Gap> gaps = default_gaps();
+  Normalization normalization = Normalization::sum;
+  double weight = 1.0;    // overall factor on the energy and its gradient
+};
+
+// Plain ARAP (ablations): C-ARAP with every confidence 1 and α = 1, i.e. w̃_ij^t = w_ij.
+struct ArapOptions {
+  double lambda_c = 1.0;
+  double lambda_l = 1.0;
+  std::vector<Gap> gaps = default_gaps();
+  Normalization normalization = Normalization::sum;
+  double weight = 1.0;
+};
+
+// LRM, equations (E11)-(E16).
+struct LrmOptions {
+  double alpha = 0.6;          // α of the edge weights (E7), normalised per neighbourhood
+  double huber_delta = 0.01;   // δ_H: a velocity (length per frame)
+  bool detach_omega = false;   // hold ω constant in the gradient (for comparison)
+  Normalization normalization = Normalization::sum;
+  double weight = 1.0;         // overall factor on the energy and its gradient
+};
+
+namespace detail {
+inline bool finite_in(double v, double lo, double hi) {
+  return std::isfinite(v) && v >= lo && v <= hi;
+}
+inline Status check_nonneg(const char* what, const char* name, double v) {
+  if (std::isfinite(v) && v >= 0) return Status::ok();
+  std::ostringstream s;
+  s << what << "." << name << " must be finite and >= 0, got " << v;
+  return Status::error(s.str());
+}
+inline Status check_positive(const char* what, const char* name, double v) {
+  if (std::isfinite(v) && v > 0) return Status::ok();
+  std::ostringstream s;
+  s << what << "." << name << " must be finite and > 0, got " << v;
+  return Status::error(s.str());
+}
+inline Status check_alpha(const char* what, double v) {
+  if (finite_in(v, 0.0, 1.0)) return Status::ok();
+  std::ostringstream s;
+  s << what << ".alpha must be in [0, 1], got " << v;
+  return Status::error(s.str());
+}
+inline Status check_gaps(const char* what, const std::vector<Gap>& gaps) {
+  for (std::size_t k = 0; k < gaps.size(); ++k) {
+    if (gaps[k].delta < 1) {
+      std::ostringstream s;
+      s << what << ".gaps[" << k << "].delta must be >= 1, got " << gaps[k].delta;
+      return Status::error(s.str());
+    }
+    if (!(std::isfinite(gaps[k].weight) && gaps[k].weight >= 0)) {
+      std::ostringstream s;
+      s << what << ".gaps[" << k << "].weight must be finite and >= 0, got " << gaps[k].weight;
+      return Status::error(s.str());
+    }
+  }
+  return Status::ok();
+}
+}  // namespace detail
+
+inline Status validate_options(const ConfidenceOptions& o) {
+  for (Status s : {detail::check_positive("ConfidenceOptions", "kappa_m", o.kappa_m),
+                   detail::check_positive("ConfidenceOptions", "kappa_r", o.kappa_r),
+                   detail::check_nonneg("ConfidenceOptions", "lambda_m", o.lambda_m),
+                   detail::check_nonneg("ConfidenceOptions", "lambda_r", o.lambda_r),
+                   detail::check_positive("ConfidenceOptions", "eps", o.eps)})
+    if (!s) return s;
+  return Status::ok();
+}
+
+inline Status validate_options(const CarapOptions& o) {
+  for (Status s : {detail::check_alpha("CarapOptions", o.alpha),
+                   detail::check_nonneg("CarapOptions", "lambda_c", o.lambda_c),
+                   detail::check_nonneg("CarapOptions", "lambda_l", o.lambda_l),
+                   detail::check_gaps("CarapOptions", o.gaps),
+                   detail::check_nonneg("CarapOptions", "weight", o.weight)})
+    if (!s) return s;
+  return Status::ok();
+}
+
+inline Status validate_options(const ArapOptions& o) {
+  for (Status s : {detail::check_nonneg("ArapOptions", "lambda_c", o.lambda_c),
+                   detail::check_nonneg("ArapOptions", "lambda_l", o.lambda_l),
+                   detail::check_gaps("ArapOptions", o.gaps),
+                   detail::check_nonneg("ArapOptions", "weight", o.weight)})
+    if (!s) return s;
+  return Status::ok();
+}
+
+inline Status validate_options(const LrmOptions& o) {
+  for (Status s : {detail::check_alpha("LrmOptions", o.alpha),
+                   detail::check_positive("LrmOptions", "huber_delta", o.huber_delta),
+                   detail::check_nonneg("LrmOptions", "weight", o.weight)})
+    if (!s) return s;
+  return Status::ok();
+}
+
+// Plain ARAP is C-ARAP with α = 1 and no confidences (the caller passes none).
+inline CarapOptions carap_options_for_arap(const ArapOptions& o) {
+  CarapOptions c;
+  c.alpha = 1.0;
+  c.lambda_c = o.lambda_c;
+  c.lambda_l = o.lambda_l;
+  c.gaps = o.gaps;
+  c.normalization = o.normalization;
+  c.weight = o.weight;
+  return c;
+}
+
+}  // namespace smg

@@ -1,0 +1,58 @@
+// smg/energy/workspace.hpp — reusable scratch memory for the energies.
+//
+// A trainer calls the energies every iteration; passing the same EnergyWorkspace each time makes
+// the calls allocation-free after the first (buffers only grow). Passing nullptr is fine too: the
+// call then uses a temporary workspace. One workspace serves one call at a time (not shared
+// between threads); the energies parallelise internally.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "smg/core/types.hpp"
+
+namespace smg {
+
+template <class S>
+class EnergyWorkspace {
+ public:
+  // At least n scalars of the named buffer, contents unspecified.
+  S* edge_change(std::size_t n) { return grow(edge_change_, n); }  // confidence: e_i^t [T][N]
+  S* spill(std::size_t n) { return grow(spill_, n); }              // C-ARAP: frames past a block
+  S* scratch(std::size_t n) { return grow(scratch_, n); }          // per-chunk SoA scratch
+  S* velocity_grad(std::size_t n) { return grow(velocity_grad_, n); }  // LRM: dL/du [T][N][3]
+  S* velocity(std::size_t n) { return grow(velocity_, n); }            // LRM: u [T][N][3]
+
+  // Bytes currently held.
+  std::size_t bytes() const {
+    return sizeof(S) *
+           (edge_change_.size() + spill_.size() + scratch_.size() + velocity_grad_.size() +
+            velocity_.size());
+  }
+  // Returns the memory.
+  void release() { *this = EnergyWorkspace(); }
+
+ private:
+  static S* grow(std::vector<S>& v, std::size_t n) {
+    if (v.size() < n) v.resize(n);
+    return v.data();
+  }
+  std::vector<S> edge_change_, spill_, scratch_, velocity_grad_, velocity_;
+};
+
+namespace detail {
+// The caller's workspace, or a local one for this call.
+template <class S>
+class WorkspaceRef {
+ public:
+  explicit WorkspaceRef(EnergyWorkspace<S>* ws) : ws_(ws ? ws : &local_) {}
+  EnergyWorkspace<S>& operator*() { return *ws_; }
+  EnergyWorkspace<S>* operator->() { return ws_; }
+
+ private:
+  EnergyWorkspace<S> local_;
+  EnergyWorkspace<S>* ws_;
+};
+}  // namespace detail
+
+}  // namespace smg

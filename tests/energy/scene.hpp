@@ -1,0 +1,185 @@
+// tests/energy/scene.hpp — small owned test scenes for the energy tests and benchmarks: node
+// trajectories, rotations, visibility and a K-neighbour graph, with views onto them.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <numeric>
+#include <vector>
+
+#include "smg/core/so3.hpp"
+#include "smg/core/views.hpp"
+#include "smg/graph/neighbors.hpp"
+#include "support/random.hpp"
+
+namespace smg::test {
+
+template <class S>
+struct Scene {
+  Index T = 0, N = 0, K = 0;
+  std::vector<S> x;             // [T][N][3]
+  std::vector<S> q;             // [T][N][4] (w, x, y, z)
+  std::vector<std::uint8_t> v;  // [T][N]
+  std::vector<S> c;             // [T][N] confidences (filled by the caller when needed)
+  std::vector<std::int32_t> idx;  // [N][K]
+  std::vector<S> w;               // [N][K]
+
+  PositionsView<const S> positions() const { return {x.data(), T, N}; }
+  QuaternionsView<const S> rotations() const { return {q.data(), T, N}; }
+  VisibilityView<const std::uint8_t> visibility() const { return {v.data(), T, N}; }
+  FrameScalarsView<const S> confidence() const { return {c.data(), T, N}; }
+  NeighborsView<S> graph() const { return {idx.data(), w.data(), N, K}; }
+
+  Vector3<S> pos(Index t, Index i) const { return Eigen::Map<const Vector3<S>>(&x[(t * N + i) * 3]); }
+  void set_pos(Index t, Index i, const Vector3<S>& p) {
+    Eigen::Map<Vector3<S>> m(&x[(t * N + i) * 3]);
+    m = p;
+  }
+  Quaternion<S> rot(Index t, Index i) const {
+    const S* p = &q[(t * N + i) * 4];
+    return Quaternion<S>(p[0], p[1], p[2], p[3]);
+  }
+  void set_rot(Index t, Index i, const Quaternion<S>& r) {
+    S* p = &q[(t * N + i) * 4];
+    p[0] = r.w();
+    p[1] = r.x();
+    p[2] = r.y();
+    p[3] = r.z();
+  }
+
+  template <class U>
+  Scene<U> cast() const {
+    Scene<U> o;
+    o.T = T;
+    o.N = N;
+    o.K = K;
+    o.x.assign(x.begin(), x.end());
+    o.q.assign(q.begin(), q.end());
+    o.v = v;
+    o.c.assign(c.begin(), c.end());
+    o.idx = idx;
+    o.w.assign(w.begin(), w.end());
+    return o;
+  }
+};
+
+// K nearest neighbours of each node by frame-0 distance (brute force; tests and benches only —
+// the library's graph builder lives in smg/graph), weights 1/degree, -1 padding.
+template <class S>
+void knn_graph(Scene<S>& s, Index K) {
+  s.K = K;
+  s.idx.assign(static_cast<std::size_t>(s.N * K), -1);
+  s.w.assign(static_cast<std::size_t>(s.N * K), S(0));
+  std::vector<std::pair<double, Index>> d(static_cast<std::size_t>(s.N));
+  for (Index i = 0; i < s.N; ++i) {
+    Index n = 0;
+    for (Index j = 0; j < s.N; ++j) {
+      if (j == i) continue;
+      d[static_cast<std::size_t>(n++)] = {(s.pos(0, j) - s.pos(0, i)).squaredNorm(), j};
+    }
+    const Index kk = std::min(K, n);
+    std::partial_sort(d.begin(), d.begin() + kk, d.begin() + n);
+    for (Index k = 0; k < kk; ++k) {
+      s.idx[static_cast<std::size_t>(i * K + k)] = static_cast<std::int32_t>(d[k].second);
+      s.w[static_cast<std::size_t>(i * K + k)] = S(1) / S(kk);
+    }
+  }
+}
+
+// Random neighbours (distinct, no self edges), degrees between min_deg and K, random positive
+// weights; exercises padding and non-normalised rows.
+template <class S>
+void random_graph(Scene<S>& s, Index K, Index min_deg, Rng& rng) {
+  s.K = K;
+  s.idx.assign(static_cast<std::size_t>(s.N * K), -1);
+  s.w.assign(static_cast<std::size_t>(s.N * K), S(0));
+  std::vector<Index> perm(static_cast<std::size_t>(s.N));
+  for (Index i = 0; i < s.N; ++i) {
+    std::iota(perm.begin(), perm.end(), Index(0));
+    std::shuffle(perm.begin(), perm.end(), rng.engine);
+    const Index deg = std::min<Index>(s.N - 1, rng.integer(static_cast<int>(min_deg), static_cast<int>(K)));
+    Index k = 0;
+    for (Index j : perm) {
+      if (k == deg) break;
+      if (j == i) continue;
+      s.idx[static_cast<std::size_t>(i * K + k)] = static_cast<std::int32_t>(j);
+      s.w[static_cast<std::size_t>(i * K + k)] = S(rng.uniform(0.2, 1.0));
+      ++k;
+    }
+  }
+}
+
+// Random smooth trajectories: each node starts at a random point and moves along a random
+// low-frequency path; rotations drift smoothly; visibility mostly 1; confidences random in
+// [0, 1].
+inline Scene<double> random_scene(Index T, Index N, Index K, Rng& rng, bool knn = false) {
+  Scene<double> s;
+  s.T = T;
+  s.N = N;
+  s.x.resize(static_cast<std::size_t>(T * N * 3));
+  s.q.resize(static_cast<std::size_t>(T * N * 4));
+  s.v.resize(static_cast<std::size_t>(T * N));
+  s.c.resize(static_cast<std::size_t>(T * N));
+  for (Index i = 0; i < N; ++i) {
+    const Vector3<double> p0 = rng.vec3(1.0), vel = rng.vec3(0.05), acc = rng.vec3(0.01);
+    const Quaternion<double> r0 = rng.quaternion();
+    const Vector3<double> spin = rng.vec3(0.1);
+    for (Index t = 0; t < T; ++t) {
+      const double tt = static_cast<double>(t);
+      s.set_pos(t, i, p0 + tt * vel + 0.5 * tt * tt * acc + rng.vec3(0.02));
+      s.set_rot(t, i, r0 * so3::exp(Vector3<double>(tt * spin + rng.vec3(0.05))));
+      s.v[static_cast<std::size_t>(t * N + i)] = rng.uniform(0, 1) < 0.9 ? 1 : 0;
+      s.c[static_cast<std::size_t>(t * N + i)] = rng.uniform(0, 1);
+    }
+  }
+  if (knn)
+    knn_graph(s, K);
+  else
+    random_graph(s, K, 1, rng);
+  return s;
+}
+
+// A rigidly moving point cloud: x_i^t = Q_t p_i + t v, R_i^t = Q_t R_i with Q_t = Exp(t θ a),
+// i.e. a constant angular velocity θ a (radians per frame, world frame) and velocity v. All
+// visible; confidences 1; K-nearest-neighbour graph.
+inline Scene<double> rigid_scene(Index T, Index N, Index K, double theta, const Vector3<double>& v,
+                                 Rng& rng, Vector3<double> axis = Vector3<double>(0.3, -0.5, 0.8)) {
+  axis.normalize();
+  Scene<double> s;
+  s.T = T;
+  s.N = N;
+  s.x.resize(static_cast<std::size_t>(T * N * 3));
+  s.q.resize(static_cast<std::size_t>(T * N * 4));
+  s.v.assign(static_cast<std::size_t>(T * N), 1);
+  s.c.assign(static_cast<std::size_t>(T * N), 1.0);
+  std::vector<Vector3<double>> p(static_cast<std::size_t>(N));
+  std::vector<Quaternion<double>> r(static_cast<std::size_t>(N));
+  for (Index i = 0; i < N; ++i) {
+    p[static_cast<std::size_t>(i)] = rng.vec3(1.0);
+    r[static_cast<std::size_t>(i)] = rng.quaternion();
+  }
+  for (Index t = 0; t < T; ++t) {
+    const Quaternion<double> Q = so3::exp(Vector3<double>(double(t) * theta * axis));
+    for (Index i = 0; i < N; ++i) {
+      s.set_pos(t, i, Q * p[static_cast<std::size_t>(i)] + double(t) * v);
+      s.set_rot(t, i, Q * r[static_cast<std::size_t>(i)]);
+    }
+  }
+  knn_graph(s, K);
+  return s;
+}
+
+// The same sequence seen after a global rigid transform x -> Q x + c, R -> Q R.
+inline Scene<double> transformed(const Scene<double>& s, const Quaternion<double>& Q,
+                                 const Vector3<double>& c) {
+  Scene<double> o = s;
+  for (Index t = 0; t < s.T; ++t)
+    for (Index i = 0; i < s.N; ++i) {
+      o.set_pos(t, i, Q * s.pos(t, i) + c);
+      o.set_rot(t, i, Q * s.rot(t, i));
+    }
+  return o;
+}
+
+}  // namespace smg::test

@@ -1,0 +1,211 @@
+// Tests of `smg_cli energies` (INTEROP.md): outputs and summary match direct library calls,
+// --float writes float32, optional inputs default as documented, graph flags are accepted, and
+// errors give one line, exit code 2 and no output.
+#include <doctest/doctest.h>
+
+#include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <sys/wait.h>
+
+#include "energy/scene.hpp"
+#include "npy.hpp"
+#include "smg/energy.hpp"
+#include "support/random.hpp"
+
+#ifdef SMG_CLI_PATH
+
+namespace fs = std::filesystem;
+using smg::Index;
+using smg::test::Scene;
+
+namespace {
+
+struct Run {
+  int code;
+  std::string out, err;
+};
+std::string slurp(const fs::path& p) {
+  std::ifstream f(p);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+Run run_cli(const std::string& args) {
+  const fs::path dir = fs::temp_directory_path() / "smg_test_cli_energies_io";
+  fs::create_directories(dir);
+  const std::string cmd = std::string(SMG_CLI_PATH) + " " + args + " >" + (dir / "out").string() +
+                          " 2>" + (dir / "err").string();
+  const int status = std::system(cmd.c_str());
+  return {WEXITSTATUS(status), slurp(dir / "out"), slurp(dir / "err")};
+}
+double json_number(const std::string& line, const std::string& key) {
+  const auto p = line.find("\"" + key + "\":");
+  REQUIRE(p != std::string::npos);
+  return std::stod(line.substr(p + key.size() + 3));
+}
+void write_case(const fs::path& dir, const Scene<double>& s, bool quats, bool vis) {
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  npy::write((dir / "positions.npy").string(), s.x, {s.T, s.N, 3});
+  if (quats) npy::write((dir / "quats.npy").string(), s.q, {s.T, s.N, 4});
+  if (vis) npy::write((dir / "visibility.npy").string(), s.v, {s.T, s.N});
+  npy::write((dir / "graph_indices.npy").string(), s.idx, {s.N, s.K});
+  npy::write((dir / "graph_weights.npy").string(), s.w, {s.N, s.K});
+}
+std::vector<double> load(const fs::path& p, npy::DType want, const std::vector<std::int64_t>& shape) {
+  const npy::Array a = npy::read(p.string());
+  CHECK(a.dtype == want);
+  CHECK(a.shape == shape);
+  return a.as<double>();
+}
+double max_diff(const std::vector<double>& a, const std::vector<double>& b) {
+  double d = 0;
+  for (std::size_t k = 0; k < a.size(); ++k) d = std::max(d, std::abs(a[k] - b[k]));
+  return d;
+}
+double max_abs(const std::vector<double>& a) {
+  double d = 0;
+  for (double v : a) d = std::max(d, std::abs(v));
+  return d;
+}
+
+}  // namespace
+
+TEST_CASE("smg_cli energies: outputs and summary match the library") {
+  smg::test::Rng rng(901);
+  const Scene<double> s = smg::test::random_scene(7, 25, 5, rng, true);
+  const fs::path c = fs::temp_directory_path() / "smg_test_energies_case";
+  const fs::path o = fs::temp_directory_path() / "smg_test_energies_out";
+  write_case(c, s, true, true);
+  fs::remove_all(o);
+  Run r = run_cli("energies " + c.string() + " " + o.string() +
+                  " --gaps 1,3 --gap-weights 1,0.5 --huber-delta 0.02 --alpha 0.5 --k 8 --tau 0.8");
+  REQUIRE(r.code == 0);
+  CHECK(r.err.empty());
+  CHECK(r.out.rfind("{\"subcommand\":\"energies\",\"N\":25,\"T\":7,\"K\":5,", 0) == 0);
+
+  // The same computation through the library.
+  std::vector<double> conf(s.v.size());
+  smg::node_confidences<double>(s.positions(), s.visibility(), s.graph(), {},
+                                {conf.data(), s.T, s.N});
+  smg::CarapOptions co;
+  co.gaps = {{1, 1.0}, {3, 0.5}};
+  co.alpha = 0.5;
+  smg::LrmOptions lo;
+  lo.huber_delta = 0.02;
+  lo.alpha = 0.5;
+  smg::ArapOptions ao;
+  ao.gaps = co.gaps;
+  const smg::FrameScalarsView<const double> cv(conf.data(), s.T, s.N);
+  std::vector<double> gxc(s.x.size()), grc(s.x.size()), gxl(s.x.size()), gxa(s.x.size()),
+      gra(s.x.size());
+  const double ec = smg::carap<double>(s.positions(), s.rotations(), cv, s.graph(), co,
+                                       {gxc.data(), s.T, s.N}, {grc.data(), s.T, s.N});
+  const double el = smg::lrm<double>(s.positions(), cv, s.graph(), lo, {gxl.data(), s.T, s.N});
+  const double ea = smg::arap<double>(s.positions(), s.rotations(), s.graph(), ao,
+                                      {gxa.data(), s.T, s.N}, {gra.data(), s.T, s.N});
+  CHECK(json_number(r.out, "carap") == doctest::Approx(ec).epsilon(1e-9));
+  CHECK(json_number(r.out, "lrm") == doctest::Approx(el).epsilon(1e-9));
+  CHECK(json_number(r.out, "arap") == doctest::Approx(ea).epsilon(1e-9));
+  CHECK(json_number(r.out, "seconds") >= 0);
+  const std::vector<std::int64_t> tn = {s.T, s.N}, tn3 = {s.T, s.N, 3};
+  CHECK(max_diff(load(o / "confidence.npy", npy::DType::f64, tn), conf) == 0.0);
+  CHECK(max_diff(load(o / "grad_positions_carap.npy", npy::DType::f64, tn3), gxc) == 0.0);
+  CHECK(max_diff(load(o / "grad_rotations_carap.npy", npy::DType::f64, tn3), grc) == 0.0);
+  CHECK(max_diff(load(o / "grad_positions_lrm.npy", npy::DType::f64, tn3), gxl) == 0.0);
+  CHECK(max_diff(load(o / "grad_positions_arap.npy", npy::DType::f64, tn3), gxa) == 0.0);
+  CHECK(max_diff(load(o / "grad_rotations_arap.npy", npy::DType::f64, tn3), gra) == 0.0);
+
+  // --float: float32 files, values close to double; --threads does not change them.
+  const fs::path of = fs::temp_directory_path() / "smg_test_energies_out_f";
+  fs::remove_all(of);
+  r = run_cli("energies " + c.string() + " " + of.string() +
+              " --gaps 1,3 --gap-weights 1,0.5 --huber-delta 0.02 --alpha 0.5 --float --threads 2");
+  REQUIRE(r.code == 0);
+  CHECK(r.out.find("\"precision\":\"float32\"") != std::string::npos);
+  const auto f = load(of / "grad_positions_carap.npy", npy::DType::f32, tn3);
+  CHECK(max_diff(f, gxc) <= 1e-4 * max_abs(gxc));
+  CHECK(json_number(r.out, "lrm") == doctest::Approx(el).epsilon(1e-4));
+  fs::remove_all(o);
+  fs::remove_all(of);
+  fs::remove_all(c);
+}
+
+TEST_CASE("smg_cli energies: optional quats and visibility; --detach-omega and --normalize") {
+  smg::test::Rng rng(902);
+  Scene<double> s = smg::test::random_scene(5, 12, 4, rng, true);
+  const fs::path c = fs::temp_directory_path() / "smg_test_energies_case2";
+  const fs::path o = fs::temp_directory_path() / "smg_test_energies_out2";
+  write_case(c, s, false, false);
+  fs::remove_all(o);
+  Run r = run_cli("energies " + c.string() + " " + o.string() + " --detach-omega --normalize");
+  REQUIRE(r.code == 0);
+  // Identity rotations and all-visible nodes.
+  for (Index k = 0; k < s.T * s.N; ++k) {
+    s.q[4 * k] = 1;
+    s.q[4 * k + 1] = s.q[4 * k + 2] = s.q[4 * k + 3] = 0;
+    s.v[k] = 1;
+  }
+  std::vector<double> conf(s.v.size());
+  smg::node_confidences<double>(s.positions(), {}, s.graph(), {}, {conf.data(), s.T, s.N});
+  smg::LrmOptions lo;
+  lo.detach_omega = true;
+  lo.normalization = smg::Normalization::mean;
+  smg::CarapOptions co;
+  co.normalization = smg::Normalization::mean;
+  const smg::FrameScalarsView<const double> cv(conf.data(), s.T, s.N);
+  CHECK(json_number(r.out, "lrm") ==
+        doctest::Approx(smg::lrm<double>(s.positions(), cv, s.graph(), lo)).epsilon(1e-9));
+  CHECK(json_number(r.out, "carap") ==
+        doctest::Approx(smg::carap<double>(s.positions(), s.rotations(), cv, s.graph(), co))
+            .epsilon(1e-9));
+  fs::remove_all(o);
+  fs::remove_all(c);
+}
+
+TEST_CASE("smg_cli energies: errors are one line, exit code 2, nothing written") {
+  smg::test::Rng rng(903);
+  Scene<double> s = smg::test::random_scene(4, 6, 3, rng, true);
+  const fs::path c = fs::temp_directory_path() / "smg_test_energies_case3";
+  const fs::path o = fs::temp_directory_path() / "smg_test_energies_out3";
+  write_case(c, s, true, true);
+  fs::remove_all(o);
+  Run r = run_cli("energies " + c.string() + " " + o.string() + " --gaps 1,2 --gap-weights 1");
+  CHECK(r.code == 2);
+  CHECK(r.err == "smg_cli energies: error: --gap-weights needs one weight per gap (2), got 1\n");
+  r = run_cli("energies " + c.string() + " " + o.string() + " --alpha 1.5");
+  CHECK(r.code == 2);
+  CHECK(r.err == "smg_cli energies: error: --alpha must be in [0, 1]\n");
+  r = run_cli("energies " + c.string() + " " + o.string() + " --huber-delta 0");
+  CHECK(r.err == "smg_cli energies: error: --huber-delta must be > 0\n");
+  CHECK(!fs::exists(o));
+  // A zero quaternion.
+  s.q[0] = s.q[1] = s.q[2] = s.q[3] = 0;
+  write_case(c, s, true, true);
+  r = run_cli("energies " + c.string() + " " + o.string());
+  CHECK(r.code == 2);
+  CHECK(r.err == "smg_cli energies: error: quats.npy: element [t=0][i=0] is the zero quaternion\n");
+  CHECK(r.out.empty());
+  // No graph files: a clear message (the graph builder arrives with the graph module).
+  s.q[0] = 1;
+  write_case(c, s, true, true);
+  fs::remove(c / "graph_indices.npy");
+  r = run_cli("energies " + c.string() + " " + o.string());
+  CHECK(r.code == 2);
+  CHECK(r.err.find("smg_cli energies: error: ") == 0);
+  CHECK(r.err.find("graph") != std::string::npos);
+  CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+  CHECK(!fs::exists(o));
+  // Help lists the energy and graph flags.
+  r = run_cli("energies --help");
+  CHECK(r.code == 0);
+  for (const char* flag : {"--alpha", "--kappa-m", "--gaps", "--gap-weights", "--huber-delta",
+                           "--detach-omega", "--normalize", "--k", "--tau", "--isolated"})
+    CHECK(r.out.find(flag) != std::string::npos);
+  fs::remove_all(c);
+}
+
+#endif
