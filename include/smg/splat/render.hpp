@@ -289,7 +289,8 @@ void render_backward(const GaussianParams<S>& params, const Camera<S>& camera,
           const Vector3<S> mean = params.means.row(g);
           Vector3<S> v_dir = Vector3<S>::Zero();
           if (params.sh_degree < 0) {
-            if (grads.colors.data()) grads.colors.row(g) = v_col;
+            if (grads.colors.data())
+              for (Index k = 0; k < nc; ++k) grads.colors(g, k) = v_col(k);
           } else if (grads.colors.data() || grads.means.data()) {
             S* vc = grads.colors.data() ? grads.colors.ptr(g) : nullptr;
             if (!vc) {
