@@ -110,16 +110,18 @@ void project_all(const GaussianParams<S>& params, const Camera<S>& cam,
           rec[kConC] = pg.conic(2);
           rec[kOpa] = o;
           rec[kDepth] = pg.depth;
-          // sigma > ln(255 o) implies alpha < 1/255; the margin covers exp's rounding. The
-          // extents of {sigma <= cut} are sqrt(2 cut (Q⁻¹)_yy), computed from the stored conic
-          // in long double so that they bound what the compositing loop evaluates.
-          const S cut = std::log(o / kAlphaMin<S>) + S(1e-3);
-          rec[kCut] = cut;
+          // sigma > cut = ln(255 o) + 1e-3 implies alpha < 1/255 with room for exp's rounding.
+          // The ellipse {sigma <= cut}: half height sqrt(2 cut (Q⁻¹)_yy) and, per row, the
+          // x-extent of rasterize.hpp's lane_groups; computed from the stored conic in long
+          // double so that rounding cannot shrink it (it bounds what compositing evaluates).
+          const long double cut = std::log(static_cast<long double>(o) / kAlphaMin<S>) + 1e-3L;
           const long double qa = pg.conic(0), qb = pg.conic(1), qc = pg.conic(2);
           const long double qdet = qa * qc - qb * qb;
-          const long double k2 = 2.0L * static_cast<long double>(cut) / qdet;
-          rec[kExtY] = static_cast<S>(std::sqrt(std::max(0.0L, k2 * qa)) * 1.001L);
-          rec[kExtX] = static_cast<S>(std::sqrt(std::max(0.0L, k2 * qc)) * 1.001L);
+          rec[kExtY] = static_cast<S>(std::sqrt(std::max(0.0L, 2.0L * cut * qa / qdet)) * 1.001L);
+          rec[kBoA] = static_cast<S>(qb / qa);
+          rec[kInvA] = static_cast<S>(1.0L / qa);
+          rec[kTwoACut] = static_cast<S>(2.0L * qa * cut * 1.001L);
+          rec[kDetQ] = static_cast<S>(qdet);
           S* col = rec + kRecordFields;
           if (params.sh_degree < 0) {
             for (Index k = 0; k < nc; ++k) col[k] = params.colors(g, k);
