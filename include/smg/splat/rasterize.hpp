@@ -301,8 +301,9 @@ void forward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index 
       for (int gq = g0; gq < g1; ++gq) {
         const int o4 = row + gq * kGroup;
         // all four pixels done (or outside the image): nothing to composite
-        if (!((T[o4] > S(0)) | (T[o4 + 1] > S(0)) | (T[o4 + 2] > S(0)) | (T[o4 + 3] > S(0))))
-          continue;
+        bool live = false;
+        for (int l = 0; l < kGroup; ++l) live |= T[o4 + l] > S(0);
+        if (!live) continue;
         forward_group<S, C>(px + gq * kGroup, mx, a, cdy2, bdy, o, z, col, alpha_max, irel, T + o4,
                             Tdone + o4, last + o4, accz + o4, wbuf + o4, acc + o4, WW);
       }
@@ -403,7 +404,11 @@ inline void backward_group(const S* __restrict px, S mx, S dy, S a, S cdy2, S bd
 // Sum of the 4 lanes of a group accumulator, in a fixed order.
 template <class S>
 inline S group_sum(const S* v) {
-  return (v[0] + v[1]) + (v[2] + v[3]);
+  S t[kGroup];
+  for (int l = 0; l < kGroup; ++l) t[l] = v[l];
+  for (int h = kGroup / 2; h >= 1; h /= 2)
+    for (int l = 0; l < h; ++l) t[l] += t[l + h];
+  return t[0];
 }
 
 // Backward of one tile. grad_image [H][W][C], grad_alpha / grad_depth [H][W] may be null.
@@ -477,7 +482,9 @@ void backward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index
   S group_last[W * kGroupsPerRow];
   for (int q = 0; q < W * kGroupsPerRow; ++q) {
     const S* lq = last + q * kGroup;
-    group_last[q] = std::max(std::max(lq[0], lq[1]), std::max(lq[2], lq[3]));
+    S m = lq[0];
+    for (int l = 1; l < kGroup; ++l) m = std::max(m, lq[l]);
+    group_last[q] = m;
   }
   const S alpha_max = cx.alpha_max;
   const int nfields = kGradFields + nc;

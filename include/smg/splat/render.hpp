@@ -114,7 +114,7 @@ void project_all(const GaussianParams<S>& params, const Camera<S>& cam,
           // The ellipse {sigma <= cut}: half height sqrt(2 cut (Q⁻¹)_yy) and, per row, the
           // x-extent of rasterize.hpp's lane_groups; computed from the stored conic in long
           // double so that rounding cannot shrink it (it bounds what compositing evaluates).
-          const long double cut = std::log(static_cast<long double>(o) / kAlphaMin<S>) + 1e-3L;
+          const long double cut = std::log(static_cast<double>(o) / double(kAlphaMin<S>)) + 1e-3;
           const long double qa = pg.conic(0), qb = pg.conic(1), qc = pg.conic(2);
           const long double qdet = qa * qc - qb * qb;
           rec[kExtY] = static_cast<S>(std::sqrt(std::max(0.0L, 2.0L * cut * qa / qdet)) * 1.001L);
@@ -224,7 +224,7 @@ void render_forward(const GaussianParams<S>& params, const Camera<S>& camera,
     if (ws.cull[g] == 0) ws.order.push_back(static_cast<std::int32_t>(g));
   ws.n_visible = static_cast<Index>(ws.order.size());
   detail::sort_by_depth(ws);
-  detail::build_tile_lists(ws);
+  detail::build_tile_lists(ws, parallel);
   switch (settings.tile_size) {
     case 8: detail::rasterize_forward_all<C, 8>(settings, ws, images, parallel); break;
     case 32: detail::rasterize_forward_all<C, 32>(settings, ws, images, parallel); break;

@@ -16,6 +16,7 @@
 #include <cstring>
 #include <vector>
 
+#include "smg/core/parallel.hpp"
 #include "smg/splat/workspace.hpp"
 
 namespace smg::splat::detail {
@@ -81,35 +82,69 @@ void sort_by_depth(RenderWorkspace<S>& ws) {
 }
 
 // Builds tile_offsets, tile_gauss, tile_src and isect_offset from rect and the sorted order.
+// Parallel over fixed chunks of the sorted order (per-chunk tile counts, then each chunk
+// writes at its own cursors), so the lists are the same for any thread count.
 template <class S>
-void build_tile_lists(RenderWorkspace<S>& ws) {
+void build_tile_lists(RenderWorkspace<S>& ws, ParallelOptions par) {
   const Index tiles = Index(ws.tiles_x) * ws.tiles_y;
-  ws.tile_offsets.assign(static_cast<std::size_t>(tiles + 1), 0);
-  ws.tile_cursor.resize(static_cast<std::size_t>(tiles));
+  const Index n = static_cast<Index>(ws.order.size());
+  const Index grain = std::max<Index>(4096, (n + 63) / 64);
+  const Index chunks = parallel_chunk_count(n, grain);
+  const auto T = static_cast<std::size_t>(tiles);
+  ws.tile_offsets.assign(T + 1, 0);
+  ws.tile_cursor.assign(static_cast<std::size_t>(chunks) * T, 0);  // per-chunk counts, then cursors
   std::int64_t total = 0;
-  for (const std::int32_t g : ws.order) {
+  for (Index k = 0; k < n; ++k) {  // rows of each Gaussian, in depth order
+    const std::int32_t g = ws.order[static_cast<std::size_t>(k)];
     const std::int32_t* r = ws.rect.data() + 4 * Index(g);
     ws.isect_offset[static_cast<std::size_t>(g)] = total;
-    for (int ty = r[1]; ty < r[3]; ++ty)
-      for (int tx = r[0]; tx < r[2]; ++tx) ++ws.tile_offsets[static_cast<std::size_t>(ty * ws.tiles_x + tx + 1)];
     total += std::int64_t(r[2] - r[0]) * (r[3] - r[1]);
   }
   ws.n_isect = total;
-  for (Index t = 0; t < tiles; ++t)
-    ws.tile_offsets[static_cast<std::size_t>(t + 1)] += ws.tile_offsets[static_cast<std::size_t>(t)];
-  std::copy(ws.tile_offsets.begin(), ws.tile_offsets.end() - 1, ws.tile_cursor.begin());
+  ParallelOptions p = par;
+  p.grain = grain;
+  parallel_for_chunks(
+      n,
+      [&](Index chunk, Index begin, Index end) {
+        std::int64_t* count = ws.tile_cursor.data() + chunk * tiles;
+        for (Index k = begin; k < end; ++k) {
+          const std::int32_t* r = ws.rect.data() + 4 * Index(ws.order[static_cast<std::size_t>(k)]);
+          for (int ty = r[1]; ty < r[3]; ++ty)
+            for (int tx = r[0]; tx < r[2]; ++tx) ++count[ty * ws.tiles_x + tx];
+        }
+      },
+      p);
+  // Tile t's list: chunk 0's entries, then chunk 1's, ... (depth order).
+  std::int64_t start = 0;
+  for (std::size_t t = 0; t < T; ++t) {
+    ws.tile_offsets[t] = start;
+    for (Index c = 0; c < chunks; ++c) {
+      std::int64_t& cnt = ws.tile_cursor[static_cast<std::size_t>(c) * T + t];
+      const std::int64_t here = cnt;
+      cnt = start;
+      start += here;
+    }
+  }
+  ws.tile_offsets[T] = start;
   ws.tile_gauss.resize(static_cast<std::size_t>(total));
   ws.tile_src.resize(static_cast<std::size_t>(total));
-  for (const std::int32_t g : ws.order) {
-    const std::int32_t* r = ws.rect.data() + 4 * Index(g);
-    std::int64_t e = ws.isect_offset[static_cast<std::size_t>(g)];
-    for (int ty = r[1]; ty < r[3]; ++ty)
-      for (int tx = r[0]; tx < r[2]; ++tx) {
-        const std::size_t pos = static_cast<std::size_t>(ws.tile_cursor[static_cast<std::size_t>(ty * ws.tiles_x + tx)]++);
-        ws.tile_gauss[pos] = g;
-        ws.tile_src[pos] = e++;
-      }
-  }
+  parallel_for_chunks(
+      n,
+      [&](Index chunk, Index begin, Index end) {
+        std::int64_t* cursor = ws.tile_cursor.data() + chunk * tiles;
+        for (Index k = begin; k < end; ++k) {
+          const std::int32_t g = ws.order[static_cast<std::size_t>(k)];
+          const std::int32_t* r = ws.rect.data() + 4 * Index(g);
+          std::int64_t e = ws.isect_offset[static_cast<std::size_t>(g)];
+          for (int ty = r[1]; ty < r[3]; ++ty)
+            for (int tx = r[0]; tx < r[2]; ++tx) {
+              const auto pos = static_cast<std::size_t>(cursor[ty * ws.tiles_x + tx]++);
+              ws.tile_gauss[pos] = g;
+              ws.tile_src[pos] = e++;
+            }
+        }
+      },
+      p);
 }
 
 }  // namespace smg::splat::detail

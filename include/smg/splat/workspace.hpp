@@ -40,7 +40,7 @@ struct RenderWorkspace {
   std::vector<std::int32_t> order_tmp;
   std::vector<std::uint64_t> keys, keys_tmp;
   std::vector<std::int64_t> tile_offsets;  // [tiles + 1]
-  std::vector<std::int64_t> tile_cursor;   // [tiles]
+  std::vector<std::int64_t> tile_cursor;   // [chunks][tiles] counts, then write cursors
   std::vector<std::int32_t> tile_gauss;    // [n_isect] Gaussian of each tile-list entry
   std::vector<std::int64_t> tile_src;      // [n_isect] its row in depth-order generation
   std::vector<S> final_T;                  // [H][W] transmittance after the last Gaussian
