@@ -8,7 +8,8 @@
 // [0, 1], background grey. The 3D scene is the same at every resolution. Backward: random
 // dL/dimage and dL/ddepth (the example trainer's RGB + expected-depth loss).
 //
-// Time column: wall time of one call (ms). Counters: visible (Gaussians drawn),
+// Time column: wall time of one call (ms). Counters: cpu_ms (process CPU time per call, all
+// threads), visible (Gaussians drawn),
 // isect_per_visible (tiles per drawn Gaussian), and for the knob runs
 //   err_image    max |pixel - reference| over image, alpha and depth/8, reference = double,
 //                16-px tiles, 3 sigma (the pinned configuration);
@@ -17,6 +18,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <ctime>
 #include <map>
 #include <random>
 #include <tuple>
@@ -147,7 +149,11 @@ struct Run {
   }
 };
 
-void common_counters(benchmark::State& state, Index visible, Index isect) {
+// cpu_ms: process CPU time per call (all threads), which other processes' load on a shared
+// machine inflates much less than the wall time.
+void common_counters(benchmark::State& state, Index visible, Index isect, std::clock_t cpu) {
+  state.counters["cpu_ms"] =
+      1e3 * double(cpu) / CLOCKS_PER_SEC / double(std::max<benchmark::IterationCount>(1, state.iterations()));
   state.counters["visible"] = double(visible);
   state.counters["isect_per_visible"] = visible ? double(isect) / double(visible) : 0.0;
 }
@@ -163,11 +169,12 @@ void BM_splat(benchmark::State& state) {
     state.SkipWithError(err.c_str());
     return;
   }
+  const std::clock_t c0 = std::clock();
   for (auto _ : state) {
     run.once(s, W, H, {}, kBackward, threads, &err);
     benchmark::DoNotOptimize(run.image.data());
   }
-  common_counters(state, run.ws.n_visible, run.ws.n_isect);
+  common_counters(state, run.ws.n_visible, run.ws.n_isect, std::clock() - c0);
 }
 
 // Reference for the knob runs: double, 16-px tiles, 3 sigma, forward + backward.
@@ -211,11 +218,12 @@ void BM_splat_knobs(benchmark::State& state) {
     num += (g[k] - gr[k]) * (g[k] - gr[k]);
     den += gr[k] * gr[k];
   }
+  const std::clock_t c0 = std::clock();
   for (auto _ : state) {
     run.once(s, W, H, set, true, threads, &err);
     benchmark::DoNotOptimize(run.image.data());
   }
-  common_counters(state, run.ws.n_visible, run.ws.n_isect);
+  common_counters(state, run.ws.n_visible, run.ws.n_isect, std::clock() - c0);
   state.counters["err_image"] = err_image;
   state.counters["err_grad"] = std::sqrt(num / den);
 }
