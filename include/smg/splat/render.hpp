@@ -261,6 +261,9 @@ void render_backward(const GaussianParams<S>& params, const Camera<S>& camera,
         std::vector<S> coef_scratch;  // SH coefficient gradients nobody asked for
         Eigen::Matrix<S, C, 1> v_col(nc);  // no allocation for a fixed C
         for (Index g = begin; g < end; ++g) {
+          // rows are in depth order: fetch a later Gaussian's rows ahead of use
+          if (g + 8 < end && ws.cull[g + 8] == 0)
+            detail::prefetch(ws.isect_grad.data() + ws.isect_offset[g + 8] * gstride);
           if (ws.cull[g] != 0) {
             if (grads.means.data()) grads.means.row(g).setZero();
             if (grads.quats.data()) grads.quats.row(g).setZero();
