@@ -154,7 +154,7 @@ SMG_LANE_INLINE typename LaneTraits<V>::Mask lane_greater(const V& a, const V& b
 #if SMG_HAVE_VECTOR_EXTENSIONS
     return a.v > b.v;
 #else
-    typename LaneTraits<V>::Mask r;
+    typename LaneTraits<V>::Mask r{};
     for (int l = 0; l < int(sizeof(r.m)); ++l) r.m[l] = a.v[l] > b.v[l];
     return r;
 #endif

@@ -85,8 +85,8 @@ namespace detail {
 template <class V>
 struct Ldlt3 {
   V d0, d1, d2, l10, l20, l21;
-  Ldlt3(const V& m00, const V& m01, const V& m02, const V& m11, const V& m12, const V& m22) {
-    d0 = m00;
+  Ldlt3(const V& m00, const V& m01, const V& m02, const V& m11, const V& m12, const V& m22)
+      : d0(m00) {
     l10 = m01 / d0;
     l20 = m02 / d0;
     d1 = m11 - l10 * l10 * d0;
