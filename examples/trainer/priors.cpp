@@ -205,7 +205,8 @@ void sample_queries(const Scene& scene, const std::vector<RenderOutput>& train, 
     const int pix = static_cast<int>(e % (static_cast<std::int64_t>(W) * H));
     const Camera& cam = scene.train_cameras[sz(t)];
     Hit hit;
-    intersect_scene(scene, t, cam.ray(Eigen::Vector2d(pix % W + 0.5, pix / W + 0.5)), 0.0,
+    const int row = pix / W;  // integer division intended: the pixel's row
+    intersect_scene(scene, t, cam.ray(Eigen::Vector2d(pix % W + 0.5, row + 0.5)), 0.0,
                     std::numeric_limits<double>::infinity(), &hit);
     tr->body.push_back(hit.body);
     for (int c = 0; c < 3; ++c) tr->local.push_back(hit.local(c));

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <utility>
 
 #include "smg/core/quaternion.hpp"
 #include "trainer/random.hpp"
@@ -324,9 +325,9 @@ Scene make_scene(const SceneConfig& config) {
     b.foreground = foreground;
     b.moves = motion != Motion::fixed;
     b.motion = motion;
-    b.rest = rest;
-    b.shape = shape;
-    b.material = material;
+    b.rest = std::move(rest);
+    b.shape = std::move(shape);
+    b.material = std::move(material);
     s.bodies.push_back(b);
   };
 

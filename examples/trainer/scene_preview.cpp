@@ -74,6 +74,7 @@ Image labelled(Image im, const std::string& text) {
 std::vector<int> shown_frames(int T, int n) {
   std::vector<int> out;
   n = std::max(1, std::min(n, T));
+  out.reserve(static_cast<std::size_t>(n));
   for (int k = 0; k < n; ++k) out.push_back(n == 1 ? 0 : static_cast<int>(std::lround(k * (T - 1.0) / (n - 1))));
   return out;
 }
@@ -166,6 +167,7 @@ int main(int argc, char** argv) {
     };
     auto sheet = [&](int kind) {
       std::vector<Image> cells;
+      cells.reserve(frames.size());
       for (int t : frames) cells.push_back(labelled(panel(kind, t), "t=" + std::to_string(t)));
       return trainer::grid(cells, columns);
     };

@@ -4,6 +4,7 @@
 #include "smg/core/dual_quaternion.hpp"
 #include "smg/core/parallel.hpp"
 #include "smg/core/quaternion.hpp"
+#include "smg/core/quaternion_manifold.hpp"
 #include "smg/core/scalar.hpp"
 #include "smg/core/so3.hpp"
 #include "smg/core/status.hpp"

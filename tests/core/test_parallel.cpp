@@ -136,6 +136,7 @@ TEST_CASE("the helper-thread pool: many short loops, changing thread counts, con
   const double reference = sum(1);
   std::vector<double> results(4, 0.0);
   std::vector<std::thread> callers;
+  callers.reserve(4);
   for (int c = 0; c < 4; ++c)
     callers.emplace_back([&, c] {
       for (int rep = 0; rep < 50; ++rep) results[static_cast<std::size_t>(c)] = sum(2 + c);

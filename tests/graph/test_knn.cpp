@@ -153,7 +153,8 @@ TEST_CASE("knn: exact ties are broken by index, like brute force") {
       const Index c = i % 64;
       tr.at(t, i, 0) = static_cast<double>(c % 4);
       tr.at(t, i, 1) = static_cast<double>((c / 4) % 4);
-      tr.at(t, i, 2) = static_cast<double>(c / 16);
+      const Index layer = c / 16;  // integer division intended: 4x4x4 lattice coordinates
+      tr.at(t, i, 2) = static_cast<double>(layer);
     }
   for (int k : {1, 7, 16}) {
     KnnOptions o;

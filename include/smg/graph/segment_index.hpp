@@ -310,7 +310,7 @@ struct ItemList {
       const Box<S>& b = tree.items[p];
       for (int a = 0; a < 3; ++a) {
         c[static_cast<std::size_t>(a)][q] = b.lo[a];
-        c[static_cast<std::size_t>(3 + a)][q] = b.hi[a];
+        c[3 + static_cast<std::size_t>(a)][q] = b.hi[a];
       }
       id[q] = tree.ids[p];
     }
