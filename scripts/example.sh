@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
-# scripts/example.sh [ARGS...] — build and run the example (README's first command).
-# Only the library's own dependencies are needed (no doctest, no Google Benchmark).
-# Until the scene trainer lands, this runs the core tour.
+# scripts/example.sh [TRAINER_FLAGS...] — the README's first command: builds the example scene
+# trainer and runs it (docs/trainer.md). With no flags: the default run (the full SMG variant,
+# seed 0, 32 frames at 160x120; about 4 minutes on 2 cores), pictures and metrics.json in
+# trainer_out/. `scripts/example.sh --quick` is the small run CI uses; `--help` lists the flags.
+# Only the library's own dependencies and Debian's libstb-dev (PNG output) are needed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh cmake make g++ libeigen3-dev libstb-dev
 build=${SMG_BUILD_DIR:-build/example}
 cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_BENCH=OFF \
       -DSMG_BUILD_EXAMPLES=ON >/dev/null
-cmake --build "$build" -j"$(nproc)" --target core_tour
-exec "$build/examples/core_tour" "$@"
+cmake --build "$build" -j"$(nproc)" --target smg_trainer
+exec "$build/examples/smg_trainer" "$@"

@@ -1,0 +1,247 @@
+// examples/trainer/nodes.cpp — node selection, graph, rotation initialisation and stage 1.
+#include "trainer/nodes.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include <Eigen/SVD>
+
+#include "trainer/adam.hpp"
+
+namespace trainer {
+
+namespace {
+
+std::size_t sz(long long v) { return static_cast<std::size_t>(v); }
+
+// Throws with the library's message when a precondition fails (a bug in the trainer, not a
+// user error: the inputs are all produced here).
+void check(const smg::Status& s, const char* where) {
+  if (!s) throw std::logic_error(std::string(where) + ": " + s.message());
+}
+
+}  // namespace
+
+void build_graph(Nodes& n, const NodeOptions& o, bool semantic, smg::ParallelOptions parallel) {
+  const int N = n.count, K = o.k;
+  NodeGraph& g = n.graph;
+  g.nodes = N;
+  g.k = K;
+  g.indices.assign(sz(N) * K, -1);
+  g.weights.assign(sz(N) * K, 0.0);
+  g.distances.assign(sz(N) * K, 0.0);
+  smg::GraphOptions go;
+  go.knn.k = K;
+  go.knn.parallel = parallel;
+  go.gate = semantic;
+  go.tau = o.tau;
+  smg::FeaturesView<const double> f(n.descriptors.data(), N, n.feature_dim);
+  smg::TableView<std::int32_t, Eigen::Dynamic> idx(g.indices.data(), N, K);
+  smg::TableView<double, Eigen::Dynamic> w(g.weights.data(), N, K), d(g.distances.data(), N, K);
+  check(smg::validate_semantic_graph<double>(n.positions_view(), n.visibility_view(), semantic ? f : smg::FeaturesView<const double>{},
+                                             go, idx, w, d),
+        "build_semantic_graph");
+  g.stats = smg::build_semantic_graph<double>(n.positions_view(), n.visibility_view(),
+                                              semantic ? f : smg::FeaturesView<const double>{}, go, idx, w, d);
+}
+
+Nodes make_nodes(const LiftedTracks& l, const NodeOptions& o, bool semantic, smg::ParallelOptions parallel) {
+  const int T = l.frames, M = l.count, C = l.feature_dim;
+  // Adaptive selection over the lifted trajectories.
+  std::vector<std::int32_t> selected(sz(M), -1), assignment(sz(M), -1);
+  std::vector<double> error(sz(M), 0.0);
+  smg::NodeSelectionOptions so;
+  so.unit = o.unit;
+  so.min_visible = o.min_visible;
+  so.parallel = parallel;
+  smg::TableView<std::int32_t, 1> sel(selected.data(), M), asg(assignment.data(), M);
+  smg::TableView<double, 1> err(error.data(), M);
+  check(smg::validate_node_selection<double>(l.positions_view(), l.visibility_view(), so, sel, asg, err),
+        "select_nodes");
+  Nodes n;
+  n.selection = smg::select_nodes<double>(l.positions_view(), l.visibility_view(), so, sel, asg, err);
+  const int N = static_cast<int>(n.selection.selected);
+  if (N == 0) throw std::runtime_error("make_nodes: no node selected (no lifted object track)");
+  // Keep the nodes in track order (deterministic, and groups nodes of one track batch).
+  for (int k = 0; k < N; ++k) n.track.push_back(selected[sz(k)]);
+  std::sort(n.track.begin(), n.track.end());
+
+  n.frames = T;
+  n.count = N;
+  n.feature_dim = C;
+  n.unit = o.unit;
+  n.positions.assign(sz(T) * N * 3, 0.0);
+  n.rotations.assign(sz(T) * N * 4, 0.0);
+  n.visible.assign(sz(T) * N, 0);
+  n.observed.assign(sz(T) * N * 3, 0.0);
+  n.truth.assign(sz(T) * N * 3, 0.0);
+  std::vector<double> samples(sz(T) * N * C, 0.0);
+  for (int i = 0; i < N; ++i) {
+    const int j = n.track[sz(i)];
+    n.body.push_back(l.body[sz(j)]);
+    for (int t = 0; t < T; ++t) {
+      const std::size_t s = sz(t) * l.count + j, d = sz(t) * N + i;
+      for (int c = 0; c < 3; ++c) {
+        n.positions[d * 3 + c] = l.positions[s * 3 + c];
+        n.truth[d * 3 + c] = l.positions_true[s * 3 + c];
+        if (l.visible[s]) n.observed[d * 3 + c] = l.positions[s * 3 + c];
+      }
+      n.rotations[d * 4] = 1.0;
+      n.visible[d] = l.visible[s];
+      for (int c = 0; c < C; ++c) samples[d * C + c] = l.feature_samples[s * C + c];
+    }
+  }
+  // Descriptors (G7)-(G8).
+  n.descriptors.assign(sz(N) * C, 0.0);
+  smg::DescriptorOptions dopt;
+  dopt.rho = o.descriptor_rho;
+  dopt.parallel = parallel;
+  smg::FeatureSamplesView<const double> sv(samples.data(), T, N, C);
+  smg::FeaturesView<double> dv(n.descriptors.data(), N, C);
+  check(smg::validate_semantic_descriptors<double>(sv, n.visibility_view(), dopt, dv), "semantic_descriptors");
+  smg::semantic_descriptors<double>(sv, n.visibility_view(), dopt, dv);
+  build_graph(n, o, semantic, parallel);
+  return n;
+}
+
+void init_rotations(Nodes& n) {
+  const int T = n.frames, N = n.count, K = n.graph.k;
+  const auto x = [&](int t, int i) { return Eigen::Map<const Eigen::Vector3d>(n.positions.data() + (sz(t) * N + i) * 3); };
+  for (int i = 0; i < N; ++i) {
+    for (int t = 0; t < T; ++t) {
+      Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+      int used = 0;
+      for (int k = 0; k < K; ++k) {
+        const int j = n.graph.indices[sz(i) * K + k];
+        if (j < 0) break;
+        const double w = n.graph.weights[sz(i) * K + k];
+        H += w * (x(0, j) - x(0, i)) * (x(t, j) - x(t, i)).transpose();
+        ++used;
+      }
+      Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+      if (t > 0 && used >= 2) {
+        const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
+        const Eigen::Vector3d s = svd.singularValues();
+        if (s(1) > 1e-9 * std::max(1e-30, s(0))) {
+          Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+          D(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
+          q = Eigen::Quaterniond(Eigen::Matrix3d(svd.matrixV() * D * svd.matrixU().transpose()));
+          q.normalize();
+        }
+      }
+      smg::to_wxyz(q, n.rotations.data() + (sz(t) * N + i) * 4);
+    }
+  }
+}
+
+NodeObjective::NodeObjective(const VariantSpec& variant, const NodeLossOptions& options, smg::ParallelOptions parallel)
+    : variant_(variant), options_(options), parallel_(parallel) {}
+
+bool NodeObjective::uses_confidence() const {
+  return variant_.rigidity == Rigidity::carap || variant_.lrm;
+}
+
+void NodeObjective::update_confidences(const Nodes& n) {
+  if (!uses_confidence()) return;
+  confidence_.assign(sz(n.frames) * n.count, 0.0);
+  smg::FrameScalarsView<double> c(confidence_.data(), n.frames, n.count);
+  check(smg::validate_confidence<double>(n.positions_view(), n.visibility_view(), n.graph.view(), options_.confidence, c),
+        "node_confidences");
+  smg::node_confidences<double>(n.positions_view(), n.visibility_view(), n.graph.view(), options_.confidence, c, {}, {},
+                                &ws_, parallel_);
+}
+
+NodeLossTerms NodeObjective::evaluate(const Nodes& n, double scale, double* gp, double* gr) {
+  const int T = n.frames, N = n.count;
+  NodeLossTerms out;
+  if (scale == 0) {  // nothing to add: report the unscaled terms (the energies run with weight = scale)
+    gp = nullptr;
+    gr = nullptr;
+    scale = 1.0;
+  }
+  const double per_node_frame = 1.0 / (static_cast<double>(T) * N);
+  // Data term: Huber on the distance to the lifted observation, where observed.
+  {
+    const double d = options_.data_huber, w = options_.data_weight * per_node_frame;
+    double e = 0;
+    for (std::size_t s = 0; s < n.visible.size(); ++s) {
+      if (!n.visible[s]) continue;
+      const Eigen::Vector3d r = Eigen::Map<const Eigen::Vector3d>(n.positions.data() + 3 * s) -
+                                Eigen::Map<const Eigen::Vector3d>(n.observed.data() + 3 * s);
+      const double len = r.norm();
+      e += len <= d ? 0.5 * len * len : d * (len - 0.5 * d);
+      if (gp) {
+        const Eigen::Vector3d g = (len <= d ? r : (d / len) * r) * (scale * w);
+        for (int c = 0; c < 3; ++c) gp[3 * s + c] += g(c);
+      }
+    }
+    out.data = w * e;
+  }
+  if (variant_.rigidity == Rigidity::none && !variant_.lrm) return out;
+  // Energies add their gradient into the buffers; the scale goes through options.weight.
+  smg::PositionsView<double> gpv(gp, gp ? T : 0, gp ? N : 0);
+  smg::TangentsView<double> grv(gr, gr ? T : 0, gr ? N : 0);
+  const bool conf = uses_confidence();
+  if (conf && confidence_.size() != sz(T) * N) update_confidences(n);
+  smg::FrameScalarsView<const double> cview(conf ? confidence_.data() : nullptr, conf ? T : 0, conf ? N : 0);
+  if (variant_.rigidity != Rigidity::none) {
+    double frames_gaps = 0;
+    for (const smg::Gap& g : options_.gaps) frames_gaps += g.weight * std::max(0, T - g.delta);
+    smg::CarapOptions co;
+    co.gaps = options_.gaps;
+    co.alpha = variant_.rigidity == Rigidity::carap ? options_.alpha : 1.0;
+    const double w = frames_gaps > 0 ? options_.rigidity_weight / (N * frames_gaps) : 0.0;
+    co.weight = w * scale;
+    const auto c = variant_.rigidity == Rigidity::carap ? cview : smg::FrameScalarsView<const double>{};
+    check(smg::validate_carap<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv, grv), "carap");
+    const double e = smg::carap<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv, grv, &ws_,
+                                        parallel_);
+    out.rigidity = scale != 0 ? e / scale : 0.0;
+  }
+  if (variant_.lrm) {
+    smg::LrmOptions lo;
+    lo.alpha = options_.alpha;
+    lo.huber_delta = options_.lrm_huber;
+    lo.weight = options_.lrm_weight * per_node_frame * scale;
+    check(smg::validate_lrm<double>(n.positions_view(), cview, n.graph.view(), lo, gpv), "lrm");
+    const double e = smg::lrm<double>(n.positions_view(), cview, n.graph.view(), lo, gpv, &ws_, parallel_);
+    out.lrm = scale != 0 ? e / scale : 0.0;
+  }
+  return out;
+}
+
+Stage1Result fit_nodes(Nodes& n, NodeObjective& obj, const Stage1Options& o, const Progress& progress) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int T = n.frames, N = n.count;
+  Stage1Result r;
+  obj.update_confidences(n);
+  r.initial = obj.evaluate(n);
+  Adam<double> adam_x(sz(T) * N * 3, o.lr_position), adam_q(sz(T) * N * 3, o.lr_rotation);
+  std::vector<double> gx(sz(T) * N * 3), gq(sz(T) * N * 3);
+  const bool rotations_matter = obj.variant().rigidity != Rigidity::none;
+  NodeLossTerms last = r.initial;
+  for (int it = 0; it < o.iterations; ++it) {
+    if (o.confidence_every > 0 && it > 0 && it % o.confidence_every == 0) obj.update_confidences(n);
+    std::fill(gx.begin(), gx.end(), 0.0);
+    std::fill(gq.begin(), gq.end(), 0.0);
+    last = obj.evaluate(n, 1.0, gx.data(), gq.data());
+    const double p = o.iterations > 1 ? static_cast<double>(it) / (o.iterations - 1) : 1.0;
+    adam_x.set_lr(log_lerp(o.lr_position, o.lr_position_final, p));
+    adam_q.set_lr(log_lerp(o.lr_rotation, o.lr_rotation_final, p));
+    adam_x.step(n.positions.data(), gx.data());
+    if (rotations_matter) adam_q.step_rotations(n.rotations.data(), gq.data());
+    if (o.log_every > 0 && (it % o.log_every == 0 || it + 1 == o.iterations))
+      progress.line("stage1", format("it %4d/%d  loss %.4e  (data %.3e  rigidity %.3e  lrm %.3e)", it + 1,
+                                     o.iterations, last.total(), last.data, last.rigidity, last.lrm));
+  }
+  obj.update_confidences(n);
+  r.final = obj.evaluate(n);
+  r.iterations = o.iterations;
+  r.seconds = seconds_since(t0);
+  return r;
+}
+
+}  // namespace trainer

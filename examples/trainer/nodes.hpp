@@ -1,0 +1,157 @@
+// examples/trainer/nodes.hpp — the motion graph's nodes: selection, graph, and stage 1 (fitting
+// the node trajectories to the lifted tracks under the variant's regularisers).
+//
+// Stage 0 (make_nodes):
+//   * adaptive node selection (smg::select_nodes) over the lifted object tracks: every track
+//     lies within `unit` (trajectory distance) of a node, nodes are more than `unit` apart;
+//   * a node is one lifted track: its trajectory starts at that track's lifted positions (with
+//     the lifting's interpolation where the track was not observed), its observations are the
+//     track's lifted samples, its ground truth is the track's true 3D motion;
+//   * the graph: trajectory KNN (k = 16, the paper's aggregation) on the node trajectories,
+//     gated by the node descriptors (smg::semantic_descriptors of the track's feature samples,
+//     tau = 0.75) for the semantic variants, ungated (MoSca's topology) otherwise; uniform
+//     topology weights; a node left without a gated edge keeps its nearest neighbour;
+//   * rotations: identity at frame 0, then per frame the weighted Kabsch rotation that best
+//     maps the node's frame-0 neighbour offsets onto its frame-t offsets (init_rotations).
+//
+// Stage 1 (fit_nodes): Adam on positions and on rotations (right-tangent steps) minimising
+//   E = w_data * (1/(T N)) Σ_{t,i observed} ρ_H(|x_i^t − y_i^t|)                (data)
+//     + w_rig  * rigidity / (N Σ_δ (T − δ))      plain ARAP or C-ARAP (E9)         (per variant)
+//     + w_lrm  * LRM / (T N)                     (E14)                             (per variant)
+// Each term is normalised to "per node and frame" so that the weights do not depend on N, T or
+// the graph's degree. Confidences (E6) are recomputed from the current positions every few
+// iterations and held constant in between (stop-gradient, as the library defines them).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "smg/core/parallel.hpp"
+#include "smg/energy.hpp"
+#include "smg/graph.hpp"
+#include "trainer/priors.hpp"
+#include "trainer/progress.hpp"
+#include "trainer/variant.hpp"
+
+namespace trainer {
+
+struct NodeOptions {
+  double unit = 0.04;          // node selection unit (metres, trajectory distance)
+  int min_visible = 3;         // a track needs this many lifted frames to become a node
+  int k = 16;                  // graph neighbours (the paper's top-16)
+  double tau = 0.75;           // semantic gate (the paper's Dycheck value)
+  double descriptor_rho = 0.5; // fraction of consistent feature samples kept per descriptor
+};
+
+// A graph over the nodes in smg's NeighborsView layout.
+struct NodeGraph {
+  int nodes = 0, k = 0;
+  std::vector<std::int32_t> indices;  // [N][k], -1 padded
+  std::vector<double> weights;        // [N][k]
+  std::vector<double> distances;      // [N][k] trajectory distances
+  smg::GraphStats stats;
+  smg::NeighborsView<double> view() const { return {indices.data(), weights.data(), nodes, k}; }
+};
+
+struct Nodes {
+  int frames = 0, count = 0, feature_dim = 0;
+  double unit = 0;                    // the selection unit
+  std::vector<int> track;             // [N] index into LiftedTracks
+  std::vector<double> positions;      // [T][N][3] current estimate
+  std::vector<double> rotations;      // [T][N][4] (w, x, y, z), unit
+  std::vector<std::uint8_t> visible;  // [T][N] observed (lifted) samples
+  std::vector<double> observed;       // [T][N][3] lifted observations (valid where visible)
+  std::vector<double> truth;          // [T][N][3] ground truth (evaluation only)
+  std::vector<int> body;              // [N] ground-truth body (diagnostics only)
+  std::vector<double> descriptors;    // [N][C]
+  NodeGraph graph;                    // the variant's graph
+  smg::NodeSelectionStats<double> selection;
+
+  smg::PositionsView<const double> positions_view() const { return {positions.data(), frames, count}; }
+  smg::QuaternionsView<const double> rotations_view() const { return {rotations.data(), frames, count}; }
+  smg::VisibilityView<const std::uint8_t> visibility_view() const { return {visible.data(), frames, count}; }
+  smg::PositionsView<const double> truth_view() const { return {truth.data(), frames, count}; }
+};
+
+// Stage 0: selects nodes among the lifted tracks and builds the graph (semantic = gated).
+// Throws std::runtime_error if no node can be selected.
+Nodes make_nodes(const LiftedTracks& lifted, const NodeOptions& options, bool semantic,
+                 smg::ParallelOptions parallel = {});
+
+// Builds `nodes.graph` from the current trajectories (replaces it).
+void build_graph(Nodes& nodes, const NodeOptions& options, bool semantic, smg::ParallelOptions parallel = {});
+
+// Rotations: identity at frame 0; at frame t the rotation R minimising
+// Σ_j w_ij |R (x_j^0 − x_i^0) − (x_j^t − x_i^t)|² over the graph neighbours (weighted Kabsch);
+// identity where the neighbourhood is degenerate (fewer than two neighbours or rank < 2).
+void init_rotations(Nodes& nodes);
+
+struct NodeLossOptions {
+  double data_weight = 1.0;
+  double data_huber = 0.02;        // metres: lifted depth noise is ~3 cm at 1.5 m
+  // Regulariser weights, tuned once on seed 0 (quick scene, full variant) for the lowest
+  // stage-1 node EPE and used unchanged by every variant and seed: at 1.0 the rigidity term
+  // wins against the Huber data term and shrinks the node cloud (ARAP's energy falls as s^2
+  // under a uniform scaling s of every frame, the data term's Huber tail only as s).
+  double rigidity_weight = 0.1;    // plain ARAP or C-ARAP, per node and frame
+  double lrm_weight = 0.1;
+  double lrm_huber = 0.01;         // metres per frame (smg::LrmOptions::huber_delta)
+  double alpha = 0.6;              // confidence floor of C-ARAP and LRM (E7)
+  std::vector<smg::Gap> gaps = smg::default_gaps();
+  smg::ConfidenceOptions confidence{};
+};
+
+struct NodeLossTerms {
+  double data = 0, rigidity = 0, lrm = 0;
+  double total() const { return data + rigidity + lrm; }
+};
+
+// Data term + the variant's regularisers over the node trajectories, with exact gradients
+// (positions [T][N][3], rotations in the right tangent [T][N][3]).
+class NodeObjective {
+ public:
+  NodeObjective(const VariantSpec& variant, const NodeLossOptions& options, smg::ParallelOptions parallel = {});
+
+  // Recomputes the confidences c_{t,i} (E6) from the current positions and the observation
+  // visibility; a no-op for variants that do not use them.
+  void update_confidences(const Nodes& nodes);
+  const std::vector<double>& confidences() const { return confidence_; }
+
+  // Energy terms; when the gradient buffers are given, adds scale * gradient to them.
+  NodeLossTerms evaluate(const Nodes& nodes, double scale = 1.0, double* grad_positions = nullptr,
+                         double* grad_rotations = nullptr);
+
+  const VariantSpec& variant() const { return variant_; }
+  const NodeLossOptions& options() const { return options_; }
+
+ private:
+  bool uses_confidence() const;
+  VariantSpec variant_;
+  NodeLossOptions options_;
+  smg::ParallelOptions parallel_;
+  std::vector<double> confidence_;  // [T][N]
+  smg::EnergyWorkspace<double> ws_;
+};
+
+struct Stage1Options {
+  int iterations = 500;
+  // Adam's step is bounded by the learning rate, so lr * iterations must exceed the lifting's
+  // depth outliers (tens of cm): 2e-3 left them in place.
+  double lr_position = 2e-2, lr_position_final = 2e-3;  // metres per step, log-decayed
+  double lr_rotation = 1e-2, lr_rotation_final = 1e-3;  // radians per step
+  int confidence_every = 20;
+  int log_every = 100;
+};
+
+struct Stage1Result {
+  NodeLossTerms initial, final;
+  int iterations = 0;
+  double seconds = 0;
+};
+
+// Stage 1: Adam on node positions and rotations.
+Stage1Result fit_nodes(Nodes& nodes, NodeObjective& objective, const Stage1Options& options,
+                       const Progress& progress);
+
+}  // namespace trainer

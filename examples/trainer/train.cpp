@@ -1,0 +1,212 @@
+// smg_trainer — reconstructs the example dynamic scene end to end with SMG and evaluates it on
+// held-out views (docs/trainer.md).
+//
+//   smg_trainer [--variant full] [--seed 0] [--out trainer_out] [--quick] [--threads 0] ...
+//
+// Progress lines go to stderr; the last line on stdout is one JSON object with the metrics,
+// also written to OUT/metrics.json, next to the pictures (pictures.hpp). Bad flags or an
+// output folder that cannot be written: one line on stderr and exit code 2, before any work.
+// A failure during training: one line on stderr and exit code 1.
+#include <cstdio>
+#include <exception>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "cli_args.hpp"
+#include "json_line.hpp"
+#include "trainer/pictures.hpp"
+#include "trainer/pipeline.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<cli::FlagSpec> flags() {
+  std::string variants;
+  for (const auto& v : trainer::variant_names()) variants += (variants.empty() ? "" : " | ") + v;
+  return {{"variant", "full", "ablation rung: " + variants},
+          {"seed", "0", "scene, prior and training seed"},
+          {"out", "trainer_out", "output folder (created if missing): pictures and metrics.json"},
+          {"quick", "", "small, fast run for CI (16 frames at 96x72, few iterations)", true},
+          {"threads", "0", "worker threads, 0 = all hardware threads"},
+          {"frames", "", "number of frames T (default 32, quick 16)"},
+          {"width", "", "image width in pixels (default 160, quick 96)"},
+          {"height", "", "image height in pixels (default 120, quick 72)"},
+          {"tracks", "", "number of 2D tracks (default 1000, quick 500)"},
+          {"stage1-iters", "", "stage-1 (nodes) iterations (default 500)"},
+          {"stage2-iters", "", "stage-2 (Gaussians) iterations (default 1200, quick 300)"},
+          {"unit", "", "node selection unit in metres (default 0.04)"},
+          {"lambda-depth", "", "weight of the expected-depth L1 loss (default 0.1)"},
+          {"w-data", "", "weight of the node data term (default 1)"},
+          {"w-rigidity", "", "weight of the rigidity term, ARAP or C-ARAP (default 0.1)"},
+          {"w-lrm", "", "weight of the LRM term (default 0.1)"},
+          {"no-pictures", "", "skip the PNG output", true},
+          {"quiet", "", "no progress lines", true},
+          {"help", "", "print this help", true}};
+}
+
+long long int_in(const cli::Args& a, const std::string& name, long long lo, long long hi) {
+  const long long v = a.get_int(name);
+  if (v < lo || v > hi)
+    throw cli::UsageError("--" + name + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+                          std::to_string(v));
+  return v;
+}
+
+double double_in(const cli::Args& a, const std::string& name, double lo, double hi) {
+  const double v = a.get_double(name);
+  if (!(v >= lo && v <= hi))
+    throw cli::UsageError("--" + name + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+                          a.get(name));
+  return v;
+}
+
+// Creates `dir` and proves it writable before any work is done.
+void check_writable(const fs::path& dir) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec || !fs::is_directory(dir))
+    throw cli::UsageError("cannot create output folder '" + dir.string() + "'" + (ec ? ": " + ec.message() : ""));
+  const fs::path probe = dir / ".smg_trainer_probe";
+  {
+    std::ofstream f(probe);
+    if (!(f << "ok")) throw cli::UsageError("output folder '" + dir.string() + "' is not writable");
+  }
+  fs::remove(probe, ec);
+}
+
+std::string view_json(const trainer::ViewMetrics& v) {
+  cli::JsonLine j;
+  j.add("psnr", v.psnr)
+      .add("ssim", v.ssim)
+      .add("psnr_masked", v.psnr_masked)
+      .add("ssim_masked", v.ssim_masked)
+      .add("psnr_box", v.psnr_box)
+      .add("psnr_objects", v.psnr_objects);
+  return j.str();
+}
+
+void add_tracks(cli::JsonLine& j, const std::string& suffix, const trainer::TrackMetrics& m) {
+  j.add("epe" + suffix, m.all.epe)
+      .add("delta_5" + suffix, m.all.within_5)
+      .add("delta_10" + suffix, m.all.within_10)
+      .add("epe_box" + suffix, m.box.epe)
+      .add("epe_arm" + suffix, m.arm.epe)
+      .add("epe_ball" + suffix, m.ball.epe)
+      .add("epe_hidden" + suffix, m.hidden.epe)
+      .add("epe_box_hidden" + suffix, m.box_hidden.epe);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  trainer::TrainerConfig cfg;
+  fs::path out;
+  bool pictures = true, quiet = false;
+  try {
+    cli::Args args(flags());
+    args.parse(argc, argv, 1);
+    if (args.get_switch("help")) {
+      std::cout << "usage: smg_trainer [--flags]\nReconstructs the example dynamic scene with SMG and evaluates it on "
+                   "two held-out views (docs/trainer.md).\n\nflags:\n"
+                << args.help();
+      return 0;
+    }
+    if (!args.positionals().empty())
+      throw cli::UsageError("unexpected argument '" + args.positionals()[0] + "' (flags only; see --help)");
+    const bool quick = args.get_switch("quick");
+    cfg = trainer::default_config(quick);
+    if (!trainer::parse_variant(args.get_choice("variant", trainer::variant_names()), &cfg.variant))
+      throw cli::UsageError("unknown variant");
+    cfg.dataset.scene.seed = static_cast<std::uint64_t>(int_in(args, "seed", 0, 2147483647));
+    cfg.threads = static_cast<int>(int_in(args, "threads", 0, 1024));
+    if (args.given("frames")) cfg.dataset.scene.frames = static_cast<int>(int_in(args, "frames", 4, 1000));
+    if (args.given("width")) cfg.dataset.scene.width = static_cast<int>(int_in(args, "width", 32, 4096));
+    if (args.given("height")) cfg.dataset.scene.height = static_cast<int>(int_in(args, "height", 32, 4096));
+    if (args.given("tracks")) cfg.dataset.priors.tracks = static_cast<int>(int_in(args, "tracks", 10, 1000000));
+    if (args.given("stage1-iters")) cfg.stage1.iterations = static_cast<int>(int_in(args, "stage1-iters", 0, 1000000));
+    if (args.given("stage2-iters")) cfg.stage2.iterations = static_cast<int>(int_in(args, "stage2-iters", 0, 1000000));
+    if (args.given("unit")) cfg.nodes.unit = double_in(args, "unit", 0.005, 1.0);
+    if (args.given("w-data")) cfg.node_loss.data_weight = double_in(args, "w-data", 0.0, 1e6);
+    if (args.given("w-rigidity")) cfg.node_loss.rigidity_weight = double_in(args, "w-rigidity", 0.0, 1e6);
+    if (args.given("w-lrm")) cfg.node_loss.lrm_weight = double_in(args, "w-lrm", 0.0, 1e6);
+    if (args.given("lambda-depth")) cfg.stage2.lambda_depth = double_in(args, "lambda-depth", 0.0, 100.0);
+    pictures = !args.get_switch("no-pictures");
+    quiet = args.get_switch("quiet");
+    if (smg::Status st = trainer::validate_scene_config(cfg.dataset.scene); !st) throw cli::UsageError(st.message());
+    if (smg::Status st = trainer::validate_prior_config(cfg.dataset.priors); !st) throw cli::UsageError(st.message());
+    out = args.get("out");
+    check_writable(out);
+  } catch (const std::exception& e) {
+    std::cerr << "smg_trainer: error: " << e.what() << "\n";
+    return 2;
+  }
+
+  try {
+    if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
+    const trainer::Progress progress(stderr, quiet);
+    progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", seed " +
+                               std::to_string(cfg.dataset.scene.seed) + ", output " + out.string());
+    const trainer::TrainerResult r = trainer::run_trainer(cfg, progress);
+    std::vector<std::string> written;
+    if (pictures) written = trainer::write_pictures(out.string(), r);
+    const trainer::Evaluation& e = r.evaluation;
+
+    cli::JsonLine j;
+    j.add("program", "smg_trainer")
+        .add("variant", trainer::to_string(cfg.variant.variant))
+        .add("seed", static_cast<long long>(cfg.dataset.scene.seed))
+        .add("T", r.data.scene.frames())
+        .add("width", r.data.scene.width())
+        .add("height", r.data.scene.height())
+        .add("threads", cfg.threads > 0 ? cfg.threads : smg::num_threads())
+        .add("test_psnr", e.mean.psnr)
+        .add("test_ssim", e.mean.ssim)
+        .add("test_psnr_masked", e.mean.psnr_masked)
+        .add("test_ssim_masked", e.mean.ssim_masked)
+        .add("test_psnr_box", e.mean.psnr_box)
+        .add("test_psnr_objects", e.mean.psnr_objects)
+        .add("train_psnr", e.train_psnr);
+    std::string views = "{";
+    for (const auto& v : e.views) views += (views.size() > 1 ? "," : "") + cli::JsonLine::quote(v.name) + ":" + view_json(v);
+    j.add_raw("views", views + "}");
+    add_tracks(j, "", e.tracks);
+    add_tracks(j, "_stage1", r.tracks_stage1);
+    add_tracks(j, "_lifted", r.tracks_lifted);
+    j.add("extent", r.data.scene.extent)
+        .add("nodes", r.nodes.count)
+        .add("edges", static_cast<long long>(r.nodes.graph.stats.edges))
+        .add("gate_removed_edges", static_cast<long long>(r.nodes.graph.stats.gate_removed_edges))
+        .add("gaussians", r.model.count())
+        .add("gaussians_static", r.model.fixed)
+        .add("gaussians_dynamic", r.model.dynamic())
+        .add("pruned", r.stage2.pruned)
+        .add("stage1_iterations", r.stage1.iterations)
+        .add("stage2_iterations", r.stage2.iterations)
+        .add("seconds_dataset", r.seconds_dataset)
+        .add("seconds_stage0", r.seconds_stage0)
+        .add("seconds_stage1", r.stage1.seconds)
+        .add("seconds_stage2", r.stage2.seconds)
+        .add("seconds_eval", e.seconds)
+        .add("seconds_total", r.seconds_total)
+        .add("out", out.string());
+    const std::string line = j.str();
+    {
+      std::ofstream f(out / "metrics.json");
+      f << line << "\n";
+      if (!f) throw std::runtime_error("cannot write " + (out / "metrics.json").string());
+    }
+    if (!quiet) {
+      progress.line("done", "pictures and metrics.json in " + out.string() + "/");
+      for (const auto& p : written) progress.line("done", "  " + p);
+    }
+    std::cout << line << std::endl;
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "smg_trainer: error: " << e.what() << "\n";
+    return 1;
+  }
+}
