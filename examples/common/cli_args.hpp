@@ -8,6 +8,8 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <sstream>
 #include <stdexcept>
@@ -140,5 +142,20 @@ class Args {
   std::map<std::string, std::string> values_;
   std::vector<std::string> positionals_;
 };
+
+// Creates `dir` (and its parents) and proves it writable by writing and removing a probe file,
+// so a program can refuse before doing any work. Throws UsageError with a one-line message.
+inline void ensure_writable_dir(const std::filesystem::path& dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec || !std::filesystem::is_directory(dir))
+    throw UsageError("cannot create output folder '" + dir.string() + "'" + (ec ? ": " + ec.message() : ""));
+  const std::filesystem::path probe = dir / ".smg_write_probe";
+  {
+    std::ofstream f(probe);
+    if (!(f << "ok")) throw UsageError("output folder '" + dir.string() + "' is not writable");
+  }
+  std::filesystem::remove(probe, ec);
+}
 
 }  // namespace cli

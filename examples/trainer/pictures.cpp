@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "trainer/frames.hpp"
 #include "trainer/image_io.hpp"
 
 namespace trainer {
@@ -13,15 +14,6 @@ namespace {
 
 std::size_t sz(long long v) { return static_cast<std::size_t>(v); }
 
-std::vector<int> spread(int T, int n) {
-  std::vector<int> f;
-  n = std::max(1, std::min(n, T));
-  for (int k = 0; k < n; ++k) {
-    const int t = n == 1 ? 0 : static_cast<int>(std::lround(k * (T - 1.0) / (n - 1)));
-    if (f.empty() || f.back() != t) f.push_back(t);
-  }
-  return f;
-}
 
 Image labelled(Image im, const std::string& text) {
   draw_text(im, 2, 2, text, Eigen::Vector3f(1, 1, 1));
@@ -63,7 +55,7 @@ std::vector<std::string> write_pictures(const std::string& dir, const TrainerRes
   namespace fs = std::filesystem;
   const Scene& scene = r.data.scene;
   const int T = scene.frames(), V = static_cast<int>(scene.test_cameras.size());
-  const std::vector<int> frames = spread(T, shown);
+  const std::vector<int> frames = spread_frames(T, shown);
   std::vector<std::string> written;
   auto save = [&](const std::string& name, const Image& im) {
     const std::string path = (fs::path(dir) / name).string();
@@ -83,7 +75,7 @@ std::vector<std::string> write_pictures(const std::string& dir, const TrainerRes
   }
   // Contact sheet over time.
   {
-    const std::vector<int> cols = spread(T, 8);
+    const std::vector<int> cols = spread_frames(T, 8);
     std::vector<Image> rows;
     auto row = [&](const std::string& label, auto get) {
       std::vector<Image> cells;
@@ -105,7 +97,7 @@ std::vector<std::string> write_pictures(const std::string& dir, const TrainerRes
     std::vector<Image> rows;
     for (int v = 0; v < V; ++v) {
       std::vector<Image> cells;
-      for (int t : spread(T, 4))
+      for (int t : spread_frames(T, 4))
         cells.push_back(labelled(upscale(node_overlay(r, scene.test_cameras[sz(v)], r.data.test[sz(v)][sz(t)].rgb, t), 2),
                                  scene.test_views[sz(v)].name + " nodes t=" + std::to_string(t)));
       rows.push_back(hstack(cells));

@@ -5,6 +5,8 @@
 #include <chrono>
 #include <cmath>
 
+#include "trainer/frames.hpp"
+
 namespace trainer {
 
 TrainerConfig default_config(bool quick) {
@@ -27,17 +29,8 @@ TrainerConfig default_config(bool quick) {
 
 void resolve_frames(TrainerConfig& c) {
   const int T = c.dataset.scene.frames;
-  auto spread = [T](int n) {
-    std::vector<int> f;
-    n = std::max(1, std::min(n, T));
-    for (int k = 0; k < n; ++k) {
-      const int t = n == 1 ? 0 : static_cast<int>(std::lround(k * (T - 1.0) / (n - 1)));
-      if (f.empty() || f.back() != t) f.push_back(t);
-    }
-    return f;
-  };
-  if (c.init.static_frames.empty()) c.init.static_frames = spread(4);
-  if (c.init.dynamic_frames.empty()) c.init.dynamic_frames = spread(8);
+  if (c.init.static_frames.empty()) c.init.static_frames = spread_frames(T, 4);
+  if (c.init.dynamic_frames.empty()) c.init.dynamic_frames = spread_frames(T, 8);
 }
 
 TrainerResult run_trainer(const TrainerConfig& config_in, const Progress& progress) {

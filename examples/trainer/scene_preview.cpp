@@ -20,6 +20,7 @@
 #include "cli_args.hpp"
 #include "json_line.hpp"
 #include "trainer/dataset.hpp"
+#include "trainer/frames.hpp"
 #include "trainer/image_io.hpp"
 
 namespace {
@@ -52,32 +53,12 @@ int to_int(const cli::Args& a, const std::string& name, long long lo, long long 
   return static_cast<int>(v);
 }
 
-// Creates `dir` and proves it writable before any work is done.
-void check_writable(const fs::path& dir) {
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec || !fs::is_directory(dir))
-    throw cli::UsageError("cannot create output folder '" + dir.string() + "'" + (ec ? ": " + ec.message() : ""));
-  const fs::path probe = dir / ".scene_preview_probe";
-  {
-    std::ofstream f(probe);
-    if (!(f << "ok")) throw cli::UsageError("output folder '" + dir.string() + "' is not writable");
-  }
-  fs::remove(probe, ec);
-}
 
 Image labelled(Image im, const std::string& text) {
   trainer::draw_text(im, 3, 3, text, Eigen::Vector3f(1, 1, 1));
   return im;
 }
 
-std::vector<int> shown_frames(int T, int n) {
-  std::vector<int> out;
-  n = std::max(1, std::min(n, T));
-  out.reserve(static_cast<std::size_t>(n));
-  for (int k = 0; k < n; ++k) out.push_back(n == 1 ? 0 : static_cast<int>(std::lround(k * (T - 1.0) / (n - 1))));
-  return out;
-}
 
 }  // namespace
 
@@ -110,7 +91,7 @@ int main(int argc, char** argv) {
     if (smg::Status st = trainer::validate_scene_config(cfg.scene); !st) throw cli::UsageError(st.message());
     if (smg::Status st = trainer::validate_prior_config(cfg.priors); !st) throw cli::UsageError(st.message());
     const fs::path out = args.get("out");
-    check_writable(out);
+    cli::ensure_writable_dir(out);
 
     const auto t0 = std::chrono::steady_clock::now();
     const trainer::Dataset d = trainer::make_dataset(cfg, smg::ParallelOptions{threads, 0});
@@ -119,7 +100,7 @@ int main(int argc, char** argv) {
 
     // Pictures.
     const int T = d.scene.frames(), W = d.scene.width(), H = d.scene.height(), C = d.priors.feature_dim;
-    const std::vector<int> frames = shown_frames(T, show);
+    const std::vector<int> frames = trainer::spread_frames(T, show);
     const int columns = std::min<int>(static_cast<int>(frames.size()), 4);
     const auto fp = trainer::fit_feature_projection(d.priors.features.data(), d.priors.features.size() / C, C);
     double zmin = 1e30, zmax = 0;
@@ -183,7 +164,7 @@ int main(int argc, char** argv) {
       std::vector<Image> rows;
       for (int kind : {kTrain, kTracks, kDepth, kFeatures, kTest0, kTest1}) {
         std::vector<Image> row;
-        for (int t : shown_frames(T, std::min(6, show)))
+        for (int t : trainer::spread_frames(T, std::min(6, show)))
           row.push_back(labelled(panel(kind, t), (row.empty() ? panel_names[kind] + "  " : std::string()) + "t=" +
                                                      std::to_string(t)));
         rows.push_back(trainer::hstack(row));

@@ -64,19 +64,6 @@ double double_in(const cli::Args& a, const std::string& name, double lo, double 
   return v;
 }
 
-// Creates `dir` and proves it writable before any work is done.
-void check_writable(const fs::path& dir) {
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec || !fs::is_directory(dir))
-    throw cli::UsageError("cannot create output folder '" + dir.string() + "'" + (ec ? ": " + ec.message() : ""));
-  const fs::path probe = dir / ".smg_trainer_probe";
-  {
-    std::ofstream f(probe);
-    if (!(f << "ok")) throw cli::UsageError("output folder '" + dir.string() + "' is not writable");
-  }
-  fs::remove(probe, ec);
-}
 
 std::string view_json(const trainer::ViewMetrics& v) {
   cli::JsonLine j;
@@ -139,7 +126,7 @@ int main(int argc, char** argv) {
     if (smg::Status st = trainer::validate_scene_config(cfg.dataset.scene); !st) throw cli::UsageError(st.message());
     if (smg::Status st = trainer::validate_prior_config(cfg.dataset.priors); !st) throw cli::UsageError(st.message());
     out = args.get("out");
-    check_writable(out);
+    cli::ensure_writable_dir(out);
   } catch (const std::exception& e) {
     std::cerr << "smg_trainer: error: " << e.what() << "\n";
     return 2;

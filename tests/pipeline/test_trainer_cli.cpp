@@ -11,28 +11,18 @@
 
 #include <sys/wait.h>
 
+#include "support/run_program.hpp"
+
 namespace fs = std::filesystem;
 
 #ifdef SMG_TRAINER_PATH
 namespace {
-struct Run {
-  int code;
-  std::string out, err;
-};
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
+using Run = smg::test::ProgramRun;
+using smg::test::slurp;
 Run run(const std::string& args) {
-  const fs::path dir = fs::temp_directory_path() / "smg_test_pipeline_trainer_io";
-  fs::create_directories(dir);
-  const std::string cmd = std::string(SMG_TRAINER_PATH) + " " + args + " >" + (dir / "out").string() + " 2>" +
-                          (dir / "err").string();
-  const int status = std::system(cmd.c_str());
-  REQUIRE(WIFEXITED(status));
-  return {WEXITSTATUS(status), slurp(dir / "out"), slurp(dir / "err")};
+  return smg::test::run_program(SMG_TRAINER_PATH, args, "smg_test_pipeline_trainer_io");
 }
-int lines(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
+int lines(const std::string& s) { return smg::test::count_lines(s); }
 }  // namespace
 
 TEST_CASE("smg_trainer: usage errors are one line on stderr and exit code 2") {
