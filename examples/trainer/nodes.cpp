@@ -124,7 +124,7 @@ void init_rotations(Nodes& n) {
       Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
       if (t > 0 && used >= 2) {
         const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-        const Eigen::Vector3d s = svd.singularValues();
+        const Eigen::Vector3d& s = svd.singularValues();
         if (s(1) > 1e-9 * std::max(1e-30, s(0))) {
           Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
           D(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;

@@ -79,6 +79,7 @@ std::vector<std::string> write_pictures(const std::string& dir, const TrainerRes
     std::vector<Image> rows;
     auto row = [&](const std::string& label, auto get) {
       std::vector<Image> cells;
+      cells.reserve(cols.size());
       for (int t : cols)
         cells.push_back(labelled(get(t), (cells.empty() ? label + " " : std::string()) + "t=" + std::to_string(t)));
       rows.push_back(hstack(cells));

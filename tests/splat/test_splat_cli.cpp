@@ -50,7 +50,7 @@ void write_case(const fs::path& dir, const test::SplatScene<double>& s, const Ca
   npy::write((dir / "colors.npy").string(), s.colors, {G, std::int64_t(s.C)});
   std::vector<double> V(16), K = {cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1};
   for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) V[std::size_t(4 * r + c)] = cam.viewmat(r, c);
+    for (int c = 0; c < 4; ++c) V[4 * std::size_t(r) + std::size_t(c)] = cam.viewmat(r, c);
   npy::write((dir / "viewmat.npy").string(), V, {4, 4});
   npy::write((dir / "K.npy").string(), K, {3, 3});
 }
@@ -134,7 +134,7 @@ TEST_CASE("smg_cli render: errors are one line, exit code 2, nothing written") {
   CHECK(r.code == 2);
   CHECK(r.err == "smg_cli render: error: settings: tile_size must be 8, 16 or 32, got 12\n");
 
-  for (int k = 0; k < 4; ++k) scene.quats[std::size_t(8 + k)] = 0;
+  for (int k = 0; k < 4; ++k) scene.quats[8 + std::size_t(k)] = 0;
   write_case(dir, scene, cam);
   r = cli("render" + args);
   CHECK(r.code == 2);

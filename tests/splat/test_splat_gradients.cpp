@@ -173,7 +173,7 @@ TEST_CASE("render gradients with the 0.99 clamp and early termination active") {
   for (int y = 0; y < cam.height; ++y)
     for (int x = 0; x < cam.width; ++x) {
       const Index tile = Index(y / 16) * ws.tiles_x + x / 16;
-      terminated += ws.last[std::size_t(y * cam.width + x)] < ws.tile_offsets[std::size_t(tile + 1)] - 1;
+      terminated += ws.last[std::size_t(y) * std::size_t(cam.width) + std::size_t(x)] < ws.tile_offsets[std::size_t(tile) + 1] - 1;
     }
   CHECK(terminated > 50);
   const auto w = test::random_weights(rng, cam.height, cam.width, 3);

@@ -81,7 +81,7 @@ TEST_CASE("one Gaussian: projected mean, radius and footprint match the closed f
       }
       if (!binned) alpha = 0;
       drawn += alpha > 0;
-      const std::size_t p = std::size_t(y * cam.width + x);
+      const std::size_t p = std::size_t(y) * std::size_t(cam.width) + std::size_t(x);
       for (int k = 0; k < 2; ++k)
         max_err = std::max(max_err, std::abs(r.image[2 * p + k] - (alpha * color[k] + (1 - alpha) * bg[k])));
       max_err = std::max(max_err, std::abs(r.alpha[p] - alpha));

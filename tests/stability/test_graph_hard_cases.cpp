@@ -158,6 +158,7 @@ TEST_CASE("graph hard cases: huge and tiny feature norms") {
   for (double scale : {1e-310, 1e-200, 1e200, 1e307}) {
     CAPTURE(scale);
     std::vector<double> g;
+    g.reserve(base.size());
     for (double x : base) g.push_back(x * scale);
     std::vector<double> f(static_cast<std::size_t>(N * C));
     smg::semantic_descriptors<double>({g.data(), T, N, C}, {}, {}, {f.data(), N, C});

@@ -19,7 +19,6 @@ namespace fs = std::filesystem;
 #ifdef SMG_SCENE_PREVIEW_PATH
 namespace {
 using Run = smg::test::ProgramRun;
-using smg::test::slurp;
 Run run(const std::string& args) {
   return smg::test::run_program(SMG_SCENE_PREVIEW_PATH, args, "smg_test_scene_preview_io");
 }
