@@ -1,5 +1,6 @@
 // smg/energy/common.hpp — small pieces shared by the energies: the accumulator type of energy
-// sums, the confidence-aware edge weight (E7) and the per-Scalar regulariser factor of LRM.
+// sums, the confidence-aware edge weight (E7), the per-Scalar regulariser factor of LRM and the
+// validation of their optional confidence input.
 #pragma once
 
 #include <type_traits>
@@ -8,6 +9,8 @@
 
 #include "smg/core/scalar.hpp"
 #include "smg/core/types.hpp"
+#include "smg/core/validate.hpp"
+#include "smg/core/views.hpp"
 
 namespace smg {
 
@@ -31,6 +34,22 @@ template <class S>
 inline Literal<S> lrm_mu_factor() {
   using L = Literal<S>;
   return Eigen::NumTraits<L>::epsilon() > L(1e-10) ? L(1e-5) : L(1e-10);
+}
+
+// Validation of the optional confidence input of C-ARAP and LRM: absent (null) is fine;
+// otherwise [T][N] with every element in [0, 1] (NaN fails).
+template <class S>
+inline Status validate_optional_confidence(FrameScalarsView<const S> confidence, Index T, Index N) {
+  if (confidence.data() == nullptr) return Status::ok();
+  if (Status s = detail::check_shape("confidence", confidence.data(), confidence.frames(), confidence.nodes(), -1,
+                                     T, N, -1, "T", "N");
+      !s)
+    return s;
+  for (Index t = 0; t < T; ++t)
+    for (Index i = 0; i < N; ++i)
+      if (!(confidence(t, i) >= S(0) && confidence(t, i) <= S(1)))
+        return Status::error("confidence: element " + detail::at_string(t, i, "t", "i") + " is not in [0, 1]");
+  return Status::ok();
 }
 
 }  // namespace smg

@@ -52,17 +52,7 @@ Status validate_lrm(PositionsView<const S> positions, FrameScalarsView<const S> 
                     PositionsView<S> grad_positions = {}, TangentsView<S> omega = {}) {
   const Index T = positions.frames(), N = positions.nodes();
   if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (confidence.data() != nullptr) {
-    if (Status s = detail::check_shape("confidence", confidence.data(), confidence.frames(),
-                                       confidence.nodes(), -1, T, N, -1, "T", "N");
-        !s)
-      return s;
-    for (Index t = 0; t < T; ++t)
-      for (Index i = 0; i < N; ++i)
-        if (!(confidence(t, i) >= S(0) && confidence(t, i) <= S(1)))
-          return Status::error("confidence: element " + detail::at_string(t, i, "t", "i") +
-                               " is not in [0, 1]");
-  }
+  if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
   if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
   if (Status s = validate_options(options); !s) return s;
   if (grad_positions.data() != nullptr)
