@@ -86,11 +86,11 @@ Params read_params(const Args& a) {
   p.carap.alpha = alpha;
   p.carap.lambda_c = lc;
   p.carap.lambda_l = ll;
-  p.carap.gaps = g;
+  p.carap.gaps = smg::GapList(g.begin(), g.end());
   p.carap.normalization = norm;
   p.arap.lambda_c = lc;
   p.arap.lambda_l = ll;
-  p.arap.gaps = g;
+  p.arap.gaps = smg::GapList(g.begin(), g.end());
   p.arap.normalization = norm;
   p.lrm.alpha = alpha;
   p.lrm.huber_delta = huber;

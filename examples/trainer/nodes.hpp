@@ -98,7 +98,7 @@ struct NodeLossOptions {
   double lrm_weight = 0.1;
   double lrm_huber = 0.01;         // metres per frame (smg::LrmOptions::huber_delta)
   double alpha = 0.6;              // confidence floor of C-ARAP and LRM (E7)
-  std::vector<smg::Gap> gaps = smg::default_gaps();
+  smg::GapList gaps = smg::default_gaps();
   smg::ConfidenceOptions confidence{};
 };
 

@@ -1,6 +1,8 @@
 // smg/core.hpp — everything in smg/core: views, validation, SO(3), dual quaternions, parallel.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include "smg/core/dual_quaternion.hpp"
 #include "smg/core/parallel.hpp"
 #include "smg/core/quaternion.hpp"

@@ -2,6 +2,8 @@
 // exact gradients (energy + gradient into caller buffers) and residual + Jacobian forms.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include "smg/core.hpp"
 #include "smg/core/quaternion_manifold.hpp"
 #include "smg/energy/arap.hpp"

@@ -3,6 +3,8 @@
 // node selection (docs/math/graph.md).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include "smg/core.hpp"
 #include "smg/graph/descriptor.hpp"
 #include "smg/graph/knn.hpp"

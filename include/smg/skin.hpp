@@ -2,6 +2,8 @@
 // dual-quaternion blending (and LBS for comparison) with Jacobians and a batched backward.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include "smg/core.hpp"
 #include "smg/skin/blend.hpp"
 #include "smg/skin/blend_point.hpp"

@@ -5,6 +5,8 @@
 // you use to keep compile times down.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include "smg/core.hpp"
 #include "smg/energy.hpp"
 #include "smg/graph.hpp"

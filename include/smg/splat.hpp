@@ -2,6 +2,8 @@
 // semantics) with its analytic backward.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include "smg/core.hpp"
 #include "smg/splat/camera.hpp"
 #include "smg/splat/gaussians.hpp"

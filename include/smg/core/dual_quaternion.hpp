@@ -7,6 +7,8 @@
 // tangent (R <- R Exp(phi)). Derivations: docs/math/core.md, equations (D1)-(D6).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 
 #include "smg/core/quaternion.hpp"

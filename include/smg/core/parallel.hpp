@@ -1,6 +1,6 @@
 // smg/core/parallel.hpp — deterministic parallel loops on std::thread.
 //
-// Determinism contract (DESIGN.md "Conventions"): work over [0, n) is cut into chunks whose
+// Determinism contract (docs/design.md "Conventions"): work over [0, n) is cut into chunks whose
 // boundaries depend only on n and the grain — never on the thread count — and reductions
 // combine per-chunk partial results in chunk order on the calling thread. Hence the same input
 // gives bit-identical output for 1, 2 or 7 threads. Threads only decide who runs a chunk.
@@ -14,6 +14,8 @@
 // smg thousands of times per second). The calling thread always takes part. If the pool is
 // busy with another caller's loop, the loop starts its own threads for that call.
 #pragma once
+
+#include "smg/core/config.hpp"
 
 #include <algorithm>
 #include <atomic>
@@ -29,15 +31,40 @@
 
 namespace smg {
 
+// A caller's executor (its thread pool): run(context, count, threads, job, job_context) must
+// call job(job_context, c) exactly once for every c in [0, count) — on any threads, in any
+// order, concurrently or not — and return when all calls have returned. `threads` is the
+// thread count smg would use (a hint). smg's jobs never throw (exceptions are caught inside and
+// rethrown on the calling thread after run returns) and never call the executor recursively
+// (nested smg loops run serially). Examples: at::parallel_for(0, count, 1, ...) in a PyTorch
+// extension, an OpenMP loop (openmp_executor() below), a TBB parallel_for.
+// Chunk boundaries are fixed by smg before the executor sees them, so results are bit-identical
+// for any executor and thread count.
+struct Executor {
+  void (*run)(void* context, Index count, int threads, void (*job)(void*, Index),
+              void* job_context) = nullptr;
+  void* context = nullptr;
+  explicit operator bool() const { return run != nullptr; }
+};
+
 struct ParallelOptions {
-  int threads = 0;  // 0: the process default (set_num_threads)
-  Index grain = 0;  // items per chunk; 0: automatic, a function of n only
+  int threads = 0;    // 0: the process default (set_num_threads)
+  Index grain = 0;    // items per chunk; 0: automatic, a function of n only
+  Executor executor;  // empty: the process default (set_executor), else smg's std::thread pool
+
+  // ParallelOptions{threads, grain} keeps working (and warning-free) with the executor member.
+  ParallelOptions(int threads_ = 0, Index grain_ = 0, Executor executor_ = {})  // NOLINT
+      : threads(threads_), grain(grain_), executor(executor_) {}
 };
 
 namespace detail {
 inline std::atomic<int>& default_threads_storage() {
   static std::atomic<int> n{0};
   return n;
+}
+inline Executor& default_executor_storage() {
+  static Executor e;
+  return e;
 }
 inline bool& in_parallel_region() {
   thread_local bool flag = false;
@@ -131,6 +158,26 @@ class ThreadPool {
 // Sets the process-wide default thread count (0 = hardware concurrency).
 inline void set_num_threads(int n) { detail::default_threads_storage() = std::max(0, n); }
 
+// Sets the process-wide default executor used by every parallel loop whose ParallelOptions has
+// none; Executor{} restores smg's own std::thread pool. Set it once, before loops run (it is
+// not synchronised with loops running at the same time).
+inline void set_executor(Executor executor) { detail::default_executor_storage() = executor; }
+inline Executor executor() { return detail::default_executor_storage(); }
+
+#ifdef _OPENMP
+// An executor over OpenMP (compile with -fopenmp): a process whose OpenMP threads are busy or
+// spinning (PyTorch's intra-op pool) then shares them with smg instead of oversubscribing the
+// cores with a second pool.
+inline Executor openmp_executor() {
+  Executor e;
+  e.run = [](void*, Index count, int threads, void (*job)(void*, Index), void* ctx) {
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
+    for (Index c = 0; c < count; ++c) job(ctx, c);
+  };
+  return e;
+}
+#endif
+
 // The thread count a loop with ParallelOptions::threads == 0 will use (>= 1).
 inline int num_threads() {
   const int n = detail::default_threads_storage();
@@ -191,6 +238,33 @@ void parallel_for_chunks(Index n, F&& f, ParallelOptions options = {}) {
       }
     }
   };
+  const Executor ex = options.executor ? options.executor : detail::default_executor_storage();
+  if (ex) {
+    // The caller's pool runs the chunks; the chunking above did not depend on it.
+    struct Job {
+      decltype(run_chunk)* run;
+      std::atomic<bool>* failed;
+      std::exception_ptr* error;
+      std::mutex* error_mutex;
+    };
+    std::atomic<bool> failed{false};
+    Job state{&run_chunk, &failed, &error, &error_mutex};
+    auto job = [](void* ctx, Index c) {
+      auto* st = static_cast<Job*>(ctx);
+      if (st->failed->load()) return;
+      detail::ParallelRegionGuard guard;
+      try {
+        (*st->run)(c);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(*st->error_mutex);
+        if (!*st->error) *st->error = std::current_exception();
+        *st->failed = true;
+      }
+    };
+    ex.run(ex.context, chunks, threads, job, &state);
+    if (error) std::rethrow_exception(error);
+    return;
+  }
   const std::function<void()> job = worker;
   if (!detail::ThreadPool::instance().try_run(threads - 1, job)) {
     // The pool serves another caller's loop: start threads for this call.

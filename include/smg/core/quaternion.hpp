@@ -7,6 +7,8 @@
 // PyTorch optimise). Derivations: docs/math/core.md, section "Quaternions".
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 
 #include "smg/core/scalar.hpp"

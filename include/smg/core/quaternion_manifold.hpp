@@ -17,6 +17,8 @@
 // Functions are templated on the scalar (Ceres Jets work: AutoDiffManifold).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include "smg/core/quaternion.hpp"
 #include "smg/core/so3.hpp"
 

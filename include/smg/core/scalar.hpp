@@ -1,6 +1,8 @@
 // smg/core/scalar.hpp — per-Scalar numeric constants used by the small-angle branches.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <Eigen/Core>
 
 namespace smg {

@@ -8,6 +8,8 @@
 // Derivations: docs/math/core.md, equations (C1)-(C9).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 
 #include "smg/core/quaternion.hpp"

@@ -4,6 +4,8 @@
 // validate_* function that callers run on untrusted input; hot loops never check.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <string>
 #include <utility>
 

@@ -4,6 +4,8 @@
 // AutoDiffScalar for cross-checks). Fixed-size types keep small maths on the stack.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 

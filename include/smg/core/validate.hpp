@@ -6,6 +6,8 @@
 // check. Pass -1 for an expected size that is not constrained.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 #include <sstream>
 #include <string>

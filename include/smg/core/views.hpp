@@ -16,6 +16,8 @@
 // view converts implicitly to its const counterpart. Views are cheap to copy (pass by value).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cstdint>
 #include <type_traits>
 
@@ -63,14 +65,19 @@ class SequenceView {
 
   // Element (t, i): a Map of the Dim-vector, or a reference when Dim == 1.
   decltype(auto) operator()(Index t, Index i) const {
+    SMG_ASSERT(t >= 0 && t < frames_ && i >= 0 && i < nodes_, "SequenceView index out of range");
     if constexpr (Dim == 1) {
       return (data_[t * nodes_ + i]);
     } else {
       return detail::VectorMap<T, Dim>(data_ + (t * nodes_ + i) * dim_, dim_);
     }
   }
-  // Pointer to the first channel of element (t, i).
-  T* ptr(Index t, Index i) const { return data_ + (t * nodes_ + i) * dim_; }
+  // Pointer to the first channel of element (t, i); (frames, 0) gives the end pointer.
+  T* ptr(Index t, Index i) const {
+    SMG_ASSERT(t >= 0 && i >= 0 && i <= nodes_ && t * nodes_ + i <= frames_ * nodes_,
+               "SequenceView::ptr out of range");
+    return data_ + (t * nodes_ + i) * dim_;
+  }
 
  private:
   T* data_ = nullptr;
@@ -102,12 +109,20 @@ class TableView {
   Index size() const { return rows_ * cols_; }
   bool empty() const { return size() == 0; }
 
-  T& operator()(Index r, Index c) const { return data_[r * cols_ + c]; }
+  T& operator()(Index r, Index c) const {
+    SMG_ASSERT(r >= 0 && r < rows_ && c >= 0 && c < cols_, "TableView index out of range");
+    return data_[r * cols_ + c];
+  }
   // Row r as a Map of a column vector.
   detail::VectorMap<T, Cols> row(Index r) const {
+    SMG_ASSERT(r >= 0 && r < rows_, "TableView row out of range");
     return detail::VectorMap<T, Cols>(data_ + r * cols_, cols_);
   }
-  T* ptr(Index r) const { return data_ + r * cols_; }
+  // Pointer to row r; rows() gives the end pointer.
+  T* ptr(Index r) const {
+    SMG_ASSERT(r >= 0 && r <= rows_, "TableView::ptr out of range");
+    return data_ + r * cols_;
+  }
 
  private:
   T* data_ = nullptr;

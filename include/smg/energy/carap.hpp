@@ -1,5 +1,5 @@
 // smg/energy/carap.hpp — confidence-aware as-rigid-as-possible energy (C-ARAP) with its exact
-// gradient (DESIGN.md "C-ARAP"; paper section 3.2; docs/math/energy.md (E7)-(E10)).
+// gradient (docs/design.md "C-ARAP"; paper section 3.2; docs/math/energy.md (E7)-(E10)).
 //
 //   d_ij^t = (R_i^t)ᵀ (x_j^t − x_i^t)                                                   (E8)
 //   w̃_ij^t = w_ij (α + (1 − α) c_{t,j})                                                  (E7)
@@ -20,8 +20,11 @@
 // blocks × max(δ) × N × 6 scalars.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
 #include <mutex>
 #include <type_traits>
 #include <vector>
@@ -29,34 +32,25 @@
 #include <Eigen/Core>
 
 #include "smg/core/parallel.hpp"
+#include "smg/core/rotation_gradient.hpp"
 #include "smg/core/scalar.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
+#include "smg/energy/carap_term.hpp"
 #include "smg/energy/common.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"
 
-#if defined(__GNUC__) || defined(__clang__) || defined(_MSC_VER)
-#define SMG_RESTRICT __restrict
-#else
-#define SMG_RESTRICT
-#endif
-#if defined(__GNUC__) || defined(__clang__)
-#define SMG_PREFETCH(p, rw) __builtin_prefetch((p), (rw))
-#else
-#define SMG_PREFETCH(p, rw) ((void)(p))
-#endif
-
 namespace smg {
 
 // Checks the inputs and outputs of carap(). `confidence` [T][N] may be empty (all 1), and each
 // gradient may be empty (not computed). Confidences must lie in [0, 1].
-template <class S>
+template <class S, class I>
 Status validate_carap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-                      FrameScalarsView<const S> confidence, const NeighborsView<S>& graph,
+                      FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
                       const CarapOptions& options, PositionsView<S> grad_positions = {},
-                      TangentsView<S> grad_rotations = {}) {
+                      detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
   const Index T = positions.frames(), N = positions.nodes();
   if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
   if (Status s = validate_quaternions<S>(rotations, T, N, QuaternionNorm::normalize_on_entry,
@@ -68,14 +62,16 @@ Status validate_carap(PositionsView<const S> positions, QuaternionsView<const S>
   if (Status s = validate_options(options); !s) return s;
   if (grad_positions.data() != nullptr)
     if (Status s = validate_output(grad_positions, T, N, "grad_positions"); !s) return s;
-  if (grad_rotations.data() != nullptr)
-    if (Status s = validate_output(grad_rotations, T, N, "grad_rotations"); !s) return s;
+  if (grad_rotations.is_raw())
+    if (Status s = validate_output(grad_rotations.raw(), T, N, "grad_rotations"); !s) return s;
+  if (grad_rotations.tangent().data() != nullptr)
+    if (Status s = validate_output(grad_rotations.tangent(), T, N, "grad_rotations"); !s) return s;
   return Status::ok();
 }
 
 // Number of valid neighbour entries Σ_i |N(i)| of a graph.
-template <class S>
-inline Index edge_count(const NeighborsView<S>& graph) {
+template <class S, class I>
+inline Index edge_count(const NeighborsView<S, I>& graph) {
   Index n = 0;
   for (Index i = 0; i < graph.nodes(); ++i) n += graph.degree(i);
   return n;
@@ -83,9 +79,9 @@ inline Index edge_count(const NeighborsView<S>& graph) {
 
 // Number of terms of (E9): Σ_δ max(0, T − δ) · Σ_i |N(i)| (every listed gap counts, also one
 // with weight 0). Normalization::mean divides by this; 0 terms give energy 0.
-template <class S>
-inline Index carap_term_count(const NeighborsView<S>& graph, Index frames,
-                              const std::vector<Gap>& gaps) {
+template <class S, class I>
+inline Index carap_term_count(const NeighborsView<S, I>& graph, Index frames,
+                              const GapList& gaps) {
   Index pairs = 0;
   for (const Gap& g : gaps) pairs += std::max<Index>(0, frames - g.delta);
   return pairs * edge_count(graph);
@@ -194,7 +190,6 @@ inline void lengths(Index n, const S* SMG_RESTRICT ex, const S* SMG_RESTRICT ey,
   }
 }
 
-
 // Energy of the pairs (a, a + δ) of one gap (E9), added to eacc[a].
 template <class S>
 inline void pair_energy(Index n, Index d, const S* SMG_RESTRICT mk, const S* SMG_RESTRICT wb,
@@ -205,7 +200,7 @@ inline void pair_energy(Index n, Index d, const S* SMG_RESTRICT mk, const S* SMG
     const S c = mk[a] * wb[a];
     const S ax = dx[a + d] - dx[a], ay = dy[a + d] - dy[a], az = dz[a + d] - dz[a];
     const S dl = len[a + d] - len[a];
-    eacc[a] += c * (lam_c * (ax * ax + ay * ay + az * az) + lam_l * dl * dl);
+    eacc[a] += carap_term_energy(c, ax, ay, az, dl, lam_c, lam_l);
   }
 }
 
@@ -217,17 +212,11 @@ inline void pair_gradient(Index n, Index d, const S* SMG_RESTRICT mk, const S* S
                           const S* SMG_RESTRICT dz, const S* SMG_RESTRICT len, Literal<S> lam_c,
                           Literal<S> lam_l, S* SMG_RESTRICT eacc, S* SMG_RESTRICT px,
                           S* SMG_RESTRICT py, S* SMG_RESTRICT pz, S* SMG_RESTRICT q) {
-  using L = Literal<S>;
   for (Index a = 0; a < n; ++a) {
     const S c = mk[a] * wb[a];
     const S ax = dx[a + d] - dx[a], ay = dy[a + d] - dy[a], az = dz[a + d] - dz[a];
     const S dl = len[a + d] - len[a];
-    eacc[a] += c * (lam_c * (ax * ax + ay * ay + az * az) + lam_l * dl * dl);
-    const S f = L(2) * lam_c * c;
-    px[a] = f * ax;
-    py[a] = f * ay;
-    pz[a] = f * az;
-    q[a] = L(2) * lam_l * c * dl;
+    eacc[a] += carap_term(c, ax, ay, az, dl, lam_c, lam_l, px[a], py[a], pz[a], q[a]);
   }
 }
 
@@ -253,7 +242,6 @@ template <class S>
 inline void gather_pairs_add(Index m, S* SMG_RESTRICT G, const S* SMG_RESTRICT p0, Index d0) {
   for (Index a = 0; a < m; ++a) G[a] += p0[a - d0] - p0[a];
 }
-
 
 // One edge over n frames: F = R G + (H/‖e‖) e (world-frame gradient of x_j) overwrites G;
 // fi += F and ri += G × d (right-tangent gradient of R_i), both [3][n].
@@ -298,29 +286,36 @@ inline Index carap_block_frames(Index frames, Index max_gap) {
 // what it reads, and gives it back: which slot a chunk gets never affects its result, so the
 // output stays bit-identical for any thread count while scratch memory scales with the number
 // of threads, not of blocks.
+// A caller's executor may run more chunks at once than there are slots: acquire() then waits
+// for a slot (a chunk holding one always finishes without waiting, so this cannot deadlock).
 class SlotPool {
  public:
   explicit SlotPool(Index slots) {
     for (Index s = slots; s-- > 0;) free_.push_back(s);
   }
   Index acquire() {
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::unique_lock<std::mutex> lock(mutex_);
+    available_.wait(lock, [this] { return !free_.empty(); });
     const Index s = free_.back();
     free_.pop_back();
     return s;
   }
   void release(Index s) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    free_.push_back(s);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      free_.push_back(s);
+    }
+    available_.notify_one();
   }
 
  private:
   std::mutex mutex_;
+  std::condition_variable available_;
   std::vector<Index> free_;
 };
 
 // One C-ARAP evaluation over the blocks of frames.
-template <class S>
+template <class S, class I>
 struct CarapKernel {
   using L = Literal<S>;
   using Acc = Accumulator<S>;
@@ -328,11 +323,11 @@ struct CarapKernel {
   PositionsView<const S> x;
   QuaternionsView<const S> q;
   FrameScalarsView<const S> conf;  // may be empty: c = 1
-  NeighborsView<S> graph;
+  NeighborsView<S, I> graph;
   PositionsView<S> gx;  // may be empty
   TangentsView<S> gr;   // may be empty
   L alpha, lambda_c, lambda_l;
-  std::vector<Gap> gaps;  // active gaps (1 <= δ < T)
+  GapList gaps;           // active gaps (1 <= δ < T)
   std::vector<L> gamma;   // their weights times the overall scale
   Index T = 0, N = 0, K = 0, B = 0, blocks = 0, G = 0;
   S* spill = nullptr;  // [blocks][G][N][3] positions, then the same for rotations
@@ -463,7 +458,7 @@ struct CarapKernel {
         const S w = wgt[e];
         const S* cj = Xb + j * n4 + 3 * ne;
         for (Index l = 0; l < ne; ++l)
-          Wb[o + l] = l < nown ? w * (alp + (L(1) - alp) * cj[l]) : S(0);
+          Wb[o + l] = l < nown ? confidence_edge_weight(w, alp, cj[l]) : S(0);
       }
       carap_loops::lengths(m, Ex, Ey, Ez, Len, InvLen, Eacc);
 
@@ -555,19 +550,33 @@ struct CarapKernel {
 }  // namespace detail
 
 // C-ARAP energy (E9), returned in Accumulator<S> (double for float). When given, adds the
-// gradient w.r.t. positions to grad_positions [T][N][3] and w.r.t. rotations (right tangent,
-// R <- R Exp(φ)) to grad_rotations [T][N][3] (E10). rotations [T][N][4] (w, x, y, z) are
-// normalised on entry. confidence [T][N] may be empty (all 1). Precondition: validate_carap.
-template <class S>
+// gradient w.r.t. positions to grad_positions [T][N][3] and w.r.t. rotations to grad_rotations
+// (E10): a TangentsView [T][N][3] receives the right-tangent gradient (R <- R Exp(φ)), a
+// QuaternionsView [T][N][4] the gradient for the raw (w, x, y, z) coordinates of `rotations`
+// (Q5). rotations [T][N][4] are normalised on entry. confidence [T][N] may be empty (all 1).
+// Precondition: validate_carap.
+template <class S, class I>
 Accumulator<S> carap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-                     FrameScalarsView<const S> confidence, const NeighborsView<S>& graph,
+                     FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
                      const CarapOptions& options, PositionsView<S> grad_positions = {},
-                     TangentsView<S> grad_rotations = {}, EnergyWorkspace<S>* workspace = nullptr,
-                     ParallelOptions parallel = {}) {
+                     detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {},
+                     EnergyWorkspace<S>* workspace = nullptr, ParallelOptions parallel = {}) {
   using L = Literal<S>;
   using Acc = Accumulator<S>;
   const Index T = positions.frames(), N = positions.nodes();
-  detail::CarapKernel<S> k;
+  // Debug-build checks of the preconditions that would otherwise read or write out of bounds.
+  SMG_ASSERT(rotations.frames() == T && rotations.nodes() == N, "carap: rotations shape");
+  SMG_ASSERT(confidence.data() == nullptr || (confidence.frames() == T && confidence.nodes() == N),
+             "carap: confidence shape");
+  SMG_ASSERT(graph.nodes() == N && graph.weights.rows() == N && graph.weights.cols() == graph.k(),
+             "carap: graph shape");
+  SMG_ASSERT(grad_positions.data() == nullptr ||
+                 (grad_positions.frames() == T && grad_positions.nodes() == N),
+             "carap: grad_positions shape");
+  SMG_ASSERT(grad_rotations.empty() ||
+                 (grad_rotations.frames() == T && grad_rotations.nodes() == N),
+             "carap: grad_rotations shape");
+  detail::CarapKernel<S, I> k;
   k.T = T;
   k.N = N;
   k.K = graph.k();
@@ -589,7 +598,7 @@ Accumulator<S> carap(PositionsView<const S> positions, QuaternionsView<const S> 
   k.conf = confidence;
   k.graph = graph;
   k.gx = grad_positions;
-  k.gr = grad_rotations;
+  k.gr = grad_rotations.tangent();
   k.alpha = L(options.alpha);
   k.lambda_c = L(options.lambda_c);
   k.lambda_l = L(options.lambda_l);
@@ -598,6 +607,12 @@ Accumulator<S> carap(PositionsView<const S> positions, QuaternionsView<const S> 
   const Index requested = parallel.threads > 0 ? parallel.threads : num_threads();
   const Index slots = std::max<Index>(1, std::min<Index>(requested, k.blocks));
   detail::WorkspaceRef<S> ws(workspace);
+  if (grad_rotations.is_raw()) {
+    // The kernel works in the tangent; the raw gradient is converted from it at the end (Q5).
+    S* g = ws->rotation_grad(static_cast<std::size_t>(T * N * 3));
+    std::fill(g, g + T * N * 3, S(0));
+    k.gr = TangentsView<S>(g, T, N);
+  }
   k.scratch_per_slot = k.scratch_size();
   k.scratch = ws->scratch(static_cast<std::size_t>(slots * k.scratch_per_slot));
   if (k.gradient()) k.spill = ws->spill(static_cast<std::size_t>(2 * k.blocks * k.G * N * 3));
@@ -636,15 +651,17 @@ Accumulator<S> carap(PositionsView<const S> positions, QuaternionsView<const S> 
                 S* dst = grad_positions.ptr(s, 0);
                 for (Index c = 0; c < 3 * N; ++c) dst[c] += src[c];
               }
-              if (grad_rotations.data()) {
+              if (k.gr.data()) {
                 const S* src = k.spill_r(b) + (s - t1) * N * 3;
-                S* dst = grad_rotations.ptr(s, 0);
+                S* dst = k.gr.ptr(s, 0);
                 for (Index c = 0; c < 3 * N; ++c) dst[c] += src[c];
               }
             }
         },
         parallel);
   }
+  if (grad_rotations.is_raw())
+    quaternion_gradient_from_tangent<S>(rotations, k.gr, grad_rotations.raw(), parallel);
   return energy;
 }
 

@@ -15,6 +15,8 @@
 // a deterministic order, chunk by chunk in parallel (a GN/LM normal-equation builder).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 #include <vector>
 
@@ -39,8 +41,8 @@ struct CarapResidualBlock {
 };
 
 // Number of residual blocks: carap_term_count(graph, T, options.gaps).
-template <class S>
-inline Index carap_residual_count(const NeighborsView<S>& graph, Index frames,
+template <class S, class I>
+inline Index carap_residual_count(const NeighborsView<S, I>& graph, Index frames,
                                   const CarapOptions& options) {
   return carap_term_count(graph, frames, options.gaps);
 }
@@ -48,8 +50,8 @@ inline Index carap_residual_count(const NeighborsView<S>& graph, Index frames,
 // The factor every term carries: options.weight, divided by the number of terms under
 // Normalization::mean (counting them is O(N K): compute it once and pass it to
 // carap_residual_block when evaluating many blocks).
-template <class S>
-inline double carap_residual_scale(const NeighborsView<S>& graph, Index frames,
+template <class S, class I>
+inline double carap_residual_scale(const NeighborsView<S, I>& graph, Index frames,
                                    const CarapOptions& o) {
   double scale = o.weight;
   if (o.normalization == Normalization::mean) {
@@ -82,11 +84,16 @@ inline EdgeFrame<S> carap_edge_frame(PositionsView<const S> x, QuaternionsView<c
   return f;
 }
 
+// The residual of term (E9) in the form (E17), from the edge at t and at s = t + δ with pair
+// factor k, and its Jacobians when asked.
 template <class S>
-inline void carap_block_from(const EdgeFrame<S>& ft, const EdgeFrame<S>& fs, S sc, S sl,
-                             bool jacobians, CarapResidualBlock<S>& out) {
-  out.r.template head<3>() = sc * (fs.d - ft.d);
-  out.r(3) = sl * (fs.len - ft.len);
+inline void carap_block_from(const EdgeFrame<S>& ft, const EdgeFrame<S>& fs, S k,
+                             Literal<S> lambda_c, Literal<S> lambda_l, bool jacobians,
+                             CarapResidualBlock<S>& out) {
+  const Vector3<S> dd = fs.d - ft.d;
+  S sc, sl;
+  carap_term_residual(k, S(dd(0)), S(dd(1)), S(dd(2)), S(fs.len - ft.len), lambda_c, lambda_l,
+                      out.r.data(), sc, sl);
   if (!jacobians) return;
   const Vector3<S> nt = ft.len > S(0) ? Vector3<S>(ft.e / ft.len) : Vector3<S>::Zero();
   const Vector3<S> ns = fs.len > S(0) ? Vector3<S>(fs.e / fs.len) : Vector3<S>::Zero();
@@ -107,14 +114,13 @@ inline void carap_block_from(const EdgeFrame<S>& ft, const EdgeFrame<S>& fs, S s
 // slot of node i — into `out`, with Jacobians when `jacobians`. Returns false (out untouched)
 // when the address names no term: k is padding, or t + δ >= T. `scale`: the value of
 // carap_residual_scale() (computed here when negative). Precondition: validate_carap.
-template <class S>
+template <class S, class I>
 bool carap_residual_block(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-                          FrameScalarsView<const S> confidence, const NeighborsView<S>& graph,
+                          FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
                           const CarapOptions& options, Index gap, Index t, Index i, Index k,
                           CarapResidualBlock<S>& out, bool jacobians = true,
                           double scale = -1.0) {
   using L = Literal<S>;
-  using std::sqrt;
   const Index T = positions.frames();
   const Index delta = options.gaps[static_cast<std::size_t>(gap)].delta;
   const Index j = graph.indices(i, k);
@@ -132,8 +138,7 @@ bool carap_residual_block(PositionsView<const S> positions, QuaternionsView<cons
   out.k = k;
   const auto ft = detail::carap_edge_frame(positions, rotations, t, i, j);
   const auto fs = detail::carap_edge_frame(positions, rotations, t + delta, i, j);
-  detail::carap_block_from(ft, fs, S(sqrt(kw * L(options.lambda_c))),
-                           S(sqrt(kw * L(options.lambda_l))), jacobians, out);
+  detail::carap_block_from(ft, fs, kw, L(options.lambda_c), L(options.lambda_l), jacobians, out);
   return true;
 }
 
@@ -146,9 +151,9 @@ inline Index carap_residual_chunks(Index frames, Index nodes, std::size_t n_gaps
 // chunk; chunks (contiguous ranges of (gap, t, i)) may run concurrently, so the visitor must
 // only write state owned by its chunk (e.g. per-chunk partial normal equations, combined in
 // chunk order afterwards for a thread-count-independent result). Precondition: validate_carap.
-template <class S, class Visitor>
+template <class S, class I, class Visitor>
 void for_each_carap_residual(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-                             FrameScalarsView<const S> confidence, const NeighborsView<S>& graph,
+                             FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
                              const CarapOptions& options, Visitor&& visit, bool jacobians = true,
                              ParallelOptions parallel = {}) {
   const Index T = positions.frames(), N = positions.nodes();

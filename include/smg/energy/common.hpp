@@ -3,6 +3,8 @@
 // validation of their optional confidence input.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <type_traits>
 
 #include <Eigen/Core>
@@ -20,13 +22,14 @@ template <class S>
 using Accumulator = std::conditional_t<std::is_same_v<S, float>, double, S>;
 
 // w̃_ij^t = w_ij (α + (1 − α) c_{t,j}): the asymmetric, confidence-aware weight of edge i -> j
-// at frame t (the confidence of the *neighbour* j).  (E7)
-template <class S>
-inline S confidence_edge_weight(const S& w_ij, Literal<S> alpha, const S& c_j) {
-  return w_ij * (alpha + (Literal<S>(1) - alpha) * c_j);
+// at frame t (the confidence of the *neighbour* j). The one definition of (E7), called by the
+// C-ARAP and LRM kernels and their residual forms. V: a scalar or a lane type (lanes.hpp).
+template <class V, class L>
+SMG_FORCE_INLINE V confidence_edge_weight(const V& w_ij, L alpha, const V& c_j) {
+  return w_ij * (alpha + (L(1) - alpha) * c_j);
 }
 
-// μ / trace(A) of the LRM 3x3 solve (DESIGN.md pinned: 1e-10 in double, 1e-5 in float): just
+// μ / trace(A) of the LRM 3x3 solve (docs/design.md pinned: 1e-10 in double, 1e-5 in float): just
 // above the rounding level of the solve in each precision, so the regulariser decides a
 // degenerate direction instead of rounding noise, while biasing ordinary neighbourhoods by
 // less than 1e-6 (double).  (E13)

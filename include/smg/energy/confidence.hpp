@@ -1,4 +1,4 @@
-// smg/energy/confidence.hpp — per-frame node confidences c_{t,i} (DESIGN.md "Confidence";
+// smg/energy/confidence.hpp — per-frame node confidences c_{t,i} (docs/design.md "Confidence";
 // paper section 3.2; docs/math/energy.md (E2)-(E6)).
 //
 //   v̄_i = Σ_j ŵ_ij u_j,  r^v = ‖u_i − v̄_i‖,  s^v = Σ_j ŵ_ij ‖u_j − v̄_i‖            (E2)
@@ -8,7 +8,7 @@
 //   c_{t,i} = v_{t,i} · (c^m)^λm · (c^r)^λr                                             (E6)
 //
 // ŵ_ij = w_ij / Σ_k w_ik: the topology weights of row i normalised to sum 1. The graph builder's
-// rows already sum to 1, so this is DESIGN.md's Σ_j w_ij exactly; for a hand-made graph it keeps
+// rows already sum to 1, so this is docs/design.md's Σ_j w_ij exactly; for a hand-made graph it keeps
 // v̄ and ē averages (documented deviation, docs/math/energy.md). A node without neighbours (or
 // whose weights are all 0) has empty sums = 0 (pinned): v̄ = 0, s^v = 0, e_i = ē_i = 0.
 //
@@ -16,6 +16,8 @@
 // (stop-gradient), so no derivative is provided. Compute them once per iteration and pass the
 // [T][N] array to carap()/lrm().
 #pragma once
+
+#include "smg/core/config.hpp"
 
 #include <cmath>
 #include <cstdint>
@@ -35,10 +37,10 @@ namespace smg {
 
 // Checks the inputs and outputs of node_confidences. `visibility` and every output may be empty
 // views (visibility: all visible; outputs: not computed).
-template <class S>
+template <class S, class I>
 Status validate_confidence(PositionsView<const S> positions,
                            VisibilityView<const std::uint8_t> visibility,
-                           const NeighborsView<S>& graph, const ConfidenceOptions& options,
+                           const NeighborsView<S, I>& graph, const ConfidenceOptions& options,
                            FrameScalarsView<S> confidence, FrameScalarsView<S> motion = {},
                            FrameScalarsView<S> rigidity = {}) {
   const Index T = positions.frames(), N = positions.nodes();
@@ -58,8 +60,8 @@ Status validate_confidence(PositionsView<const S> positions,
 
 namespace detail {
 // Σ_k w_ik of row i (the normaliser of ŵ).
-template <class S>
-inline S row_weight(const NeighborsView<S>& g, Index i) {
+template <class S, class I>
+inline S row_weight(const NeighborsView<S, I>& g, Index i) {
   S W(0);
   for (Index k = 0; k < g.k(); ++k) {
     if (g.indices(i, k) < 0) break;
@@ -73,9 +75,9 @@ inline S row_weight(const NeighborsView<S>& g, Index i) {
 // `motion` and c^r (E5) into `rigidity` (each [T][N], in [0, 1]; exponents λ not applied).
 // visibility [T][N] (0/1) may be an empty view: every node visible. Empty output views are not
 // computed. Deterministic for any thread count. Precondition: validate_confidence.
-template <class S>
+template <class S, class I>
 void node_confidences(PositionsView<const S> positions,
-                      VisibilityView<const std::uint8_t> visibility, const NeighborsView<S>& graph,
+                      VisibilityView<const std::uint8_t> visibility, const NeighborsView<S, I>& graph,
                       const ConfidenceOptions& options, FrameScalarsView<S> confidence,
                       FrameScalarsView<S> motion = {}, FrameScalarsView<S> rigidity = {},
                       EnergyWorkspace<S>* workspace = nullptr, ParallelOptions parallel = {}) {
@@ -83,6 +85,16 @@ void node_confidences(PositionsView<const S> positions,
   using std::abs;
   using std::exp;
   const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
+  SMG_ASSERT(visibility.data() == nullptr || (visibility.frames() == T && visibility.nodes() == N),
+             "node_confidences: visibility shape");
+  SMG_ASSERT(graph.nodes() == N && graph.weights.rows() == N && graph.weights.cols() == K,
+             "node_confidences: graph shape");
+  SMG_ASSERT(confidence.data() == nullptr || (confidence.frames() == T && confidence.nodes() == N),
+             "node_confidences: confidence shape");
+  SMG_ASSERT(motion.data() == nullptr || (motion.frames() == T && motion.nodes() == N),
+             "node_confidences: motion shape");
+  SMG_ASSERT(rigidity.data() == nullptr || (rigidity.frames() == T && rigidity.nodes() == N),
+             "node_confidences: rigidity shape");
   if (T == 0 || N == 0) return;
   detail::WorkspaceRef<S> ws(workspace);
   S* const edge_change = ws->edge_change(static_cast<std::size_t>(T * N));

@@ -8,24 +8,26 @@
 // flow becomes masks (lane_greater / lane_select) so every lane runs the same instructions.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 #include <cstdint>
 #include <type_traits>
 
 #include <Eigen/Core>
 
-#if defined(__GNUC__) || defined(__clang__)
-#define SMG_LANE_INLINE inline __attribute__((always_inline))
-#else
-#define SMG_LANE_INLINE inline
+#ifndef SMG_LANE_INLINE
+#define SMG_LANE_INLINE SMG_FORCE_INLINE
 #endif
 
 namespace smg::detail {
 
+#ifndef SMG_HAVE_VECTOR_EXTENSIONS
 #if defined(__GNUC__) || defined(__clang__)
 #define SMG_HAVE_VECTOR_EXTENSIONS 1
 #else
 #define SMG_HAVE_VECTOR_EXTENSIONS 0
+#endif
 #endif
 
 namespace lanes_impl {

@@ -1,6 +1,6 @@
 // smg/energy/lrm.hpp — local rigid motion energy (LRM) with its exact gradient, including the
 // dependence of the local angular velocity ω on the positions through the regularised 3x3 solve
-// (DESIGN.md "LRM"; paper section 3.2; docs/math/energy.md (E11)-(E16)).
+// (docs/design.md "LRM"; paper section 3.2; docs/math/energy.md (E11)-(E16)).
 //
 // Per node i and frame t, over the neighbours j ∈ N(i) with weights ŵ_j = w̃_ij^t / Σ_k w̃_ik^t
 // (E7, normalised; constants for the gradient):
@@ -22,6 +22,8 @@
 // into a workspace array [T][N][3]; a second pass adds the velocity part to the two frames of
 // each difference. Deterministic for any thread count.
 #pragma once
+
+#include "smg/core/config.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -46,9 +48,9 @@ namespace smg {
 
 // Checks the inputs and outputs of lrm(). `confidence` may be empty (all 1); the gradient and
 // omega outputs may be empty (not computed).
-template <class S>
+template <class S, class I>
 Status validate_lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
-                    const NeighborsView<S>& graph, const LrmOptions& options,
+                    const NeighborsView<S, I>& graph, const LrmOptions& options,
                     PositionsView<S> grad_positions = {}, TangentsView<S> omega = {}) {
   const Index T = positions.frames(), N = positions.nodes();
   if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
@@ -63,8 +65,8 @@ Status validate_lrm(PositionsView<const S> positions, FrameScalarsView<const S> 
 }
 
 // Number of terms of (E14): T · Σ_i |N(i)|. Normalization::mean divides by this.
-template <class S>
-inline Index lrm_term_count(const NeighborsView<S>& graph, Index frames) {
+template <class S, class I>
+inline Index lrm_term_count(const NeighborsView<S, I>& graph, Index frames) {
   return frames * edge_count(graph);
 }
 
@@ -235,7 +237,9 @@ V lrm_neighborhood(Index K, const V* x, const V* u, const V* a, const LrmParams<
 }
 
 // Lanes of the fast kernel: one SIMD register of the target (16 bytes with SSE, 32 with AVX),
-// so that no lane value is wider than the ABI's vector registers.
+// so that no lane value is wider than the ABI's vector registers. They follow __AVX__, hence the
+// ISA-specific namespace (smg/core/config.hpp), as has lrm() below, which uses them.
+inline namespace SMG_ISA_NAMESPACE {
 template <class S>
 constexpr int lrm_lanes() {
 #if defined(__AVX__)
@@ -246,6 +250,7 @@ constexpr int lrm_lanes() {
 }
 template <class S>
 using LrmLane = Lanes<S, lrm_lanes<S>()>;
+}  // inline namespace SMG_ISA_NAMESPACE
 
 }  // namespace detail
 
@@ -278,6 +283,8 @@ SMG_LANE_INLINE S& lane_ref(V& v, Index l) {
 }
 }  // namespace detail
 
+inline namespace SMG_ISA_NAMESPACE {
+
 // LRM energy (E14), returned in Accumulator<S> (double for float). When given, adds the
 // gradient w.r.t. positions to grad_positions [T][N][3] (E15-E16) and writes the local angular
 // velocities ω_i^t (radians per frame, world frame) into omega [T][N][3]. confidence [T][N] may
@@ -288,9 +295,9 @@ SMG_LANE_INLINE S& lane_ref(V& v, Index l) {
 // [T/W][N][3][W] so that a neighbour's positions, velocities and confidences over the W frames
 // are single vector loads, and gradients go to the same layout, owned by the frame block; a
 // last pass adds them to the caller's [T][N][3] rows.
-template <class S>
+template <class S, class I>
 Accumulator<S> lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
-                   const NeighborsView<S>& graph, const LrmOptions& options,
+                   const NeighborsView<S, I>& graph, const LrmOptions& options,
                    PositionsView<S> grad_positions = {}, EnergyWorkspace<S>* workspace = nullptr,
                    ParallelOptions parallel = {}, TangentsView<S> omega = {}) {
   using L = Literal<S>;
@@ -299,6 +306,15 @@ Accumulator<S> lrm(PositionsView<const S> positions, FrameScalarsView<const S> c
   using V = std::conditional_t<std::is_floating_point_v<S>, detail::LrmLane<S>, S>;
   constexpr Index W = std::is_floating_point_v<S> ? detail::lrm_lanes<S>() : 1;
   const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
+  SMG_ASSERT(confidence.data() == nullptr || (confidence.frames() == T && confidence.nodes() == N),
+             "lrm: confidence shape");
+  SMG_ASSERT(graph.nodes() == N && graph.weights.rows() == N && graph.weights.cols() == K,
+             "lrm: graph shape");
+  SMG_ASSERT(grad_positions.data() == nullptr ||
+                 (grad_positions.frames() == T && grad_positions.nodes() == N),
+             "lrm: grad_positions shape");
+  SMG_ASSERT(omega.data() == nullptr || (omega.frames() == T && omega.nodes() == N),
+             "lrm: omega shape");
   if (T == 0 || N == 0 || K == 0) return Acc(0);
   double scale = options.weight;
   if (options.normalization == Normalization::mean) {
@@ -381,7 +397,7 @@ Accumulator<S> lrm(PositionsView<const S> positions, FrameScalarsView<const S> c
         }
         Acc e(0);
         for (Index i = 0; i < N; ++i) {
-          const std::int32_t* idx = graph.indices.ptr(i);
+          const I* idx = graph.indices.ptr(i);
           const S* wrow = graph.weights.ptr(i);
           for (Index k = 0; k < K; ++k) {
             const Index j = idx[k] >= 0 ? idx[k] : i;  // padding: own record, weight 0
@@ -392,7 +408,7 @@ Accumulator<S> lrm(PositionsView<const S> positions, FrameScalarsView<const S> c
             V cj;
             detail::lane_load(cj, cblk + j * W);
             const S wk = idx[k] >= 0 ? wrow[k] : S(0);
-            a[k] = (wk * valid) * (alpha + (L(1) - alpha) * cj);
+            a[k] = confidence_edge_weight(V(wk * valid), alpha, cj);
           }
           V ev = detail::lrm_neighborhood<V, S>(K, xs, us, a, p, nb_scratch, gx, gu, om);
           for (Index l = 0; l < nl; ++l) e += Acc(detail::lane_ref<V, S>(ev, l));
@@ -401,7 +417,7 @@ Accumulator<S> lrm(PositionsView<const S> positions, FrameScalarsView<const S> c
               for (int c = 0; c < 3; ++c) omega(t0 + l, i)(c) = detail::lane_ref<V, S>(om[c], l);
           if (!p.gradient) continue;
           for (Index k = 0; k < K; ++k) {
-            const std::int32_t j = idx[k];
+            const Index j = idx[k];
             if (j < 0) break;
             for (int c = 0; c < 3; ++c) {
               V acc;
@@ -451,5 +467,7 @@ Accumulator<S> lrm(PositionsView<const S> positions, FrameScalarsView<const S> c
   }
   return energy;
 }
+
+}  // inline namespace SMG_ISA_NAMESPACE
 
 }  // namespace smg

@@ -23,6 +23,8 @@
 // touches frames t, plus and minus; add_lrm_block_gradient() applies that chain rule.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 #include <vector>
 
@@ -53,8 +55,8 @@ struct LrmResidualBlock {
 
 // options.weight, divided by the number of terms under Normalization::mean (O(N K) to count:
 // compute once and pass to lrm_residual_block when evaluating many blocks).
-template <class S>
-inline double lrm_residual_scale(const NeighborsView<S>& graph, Index frames,
+template <class S, class I>
+inline double lrm_residual_scale(const NeighborsView<S, I>& graph, Index frames,
                                  const LrmOptions& o) {
   double scale = o.weight;
   if (o.normalization == Normalization::mean) {
@@ -67,9 +69,9 @@ inline double lrm_residual_scale(const NeighborsView<S>& graph, Index frames,
 // Evaluates the block of node i at frame t. Returns false (and an empty block, energy 0) when
 // the node has no neighbour with positive weight. `scale`: lrm_residual_scale() (computed when
 // negative). Precondition: validate_lrm.
-template <class S>
+template <class S, class I>
 bool lrm_residual_block(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
-                        const NeighborsView<S>& graph, const LrmOptions& options, Index t, Index i,
+                        const NeighborsView<S, I>& graph, const LrmOptions& options, Index t, Index i,
                         LrmResidualBlock<S>& out, bool jacobians = true, double scale = -1.0) {
   using L = Literal<S>;
   using std::sqrt;
@@ -219,9 +221,9 @@ inline Index lrm_residual_chunks(Index frames, Index nodes) {
 // Calls visit(block, chunk) for every node with a neighbour, at every frame, in the order
 // (t, i) within each chunk; chunks may run concurrently (the visitor writes only per-chunk
 // state). Precondition: validate_lrm.
-template <class S, class Visitor>
+template <class S, class I, class Visitor>
 void for_each_lrm_residual(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
-                           const NeighborsView<S>& graph, const LrmOptions& options,
+                           const NeighborsView<S, I>& graph, const LrmOptions& options,
                            Visitor&& visit, bool jacobians = true, ParallelOptions parallel = {}) {
   const Index T = positions.frames(), N = positions.nodes();
   const double scale = lrm_residual_scale(graph, T, options);

@@ -1,16 +1,19 @@
 // smg/energy/options.hpp — parameters of the confidence, C-ARAP, LRM and plain ARAP equations
-// (DESIGN.md "Confidence", "C-ARAP", "LRM", "Plain ARAP"; docs/math/energy.md), with their
-// validation. Defaults are the paper's (section 4.1) and INTEROP.md's flag defaults.
+// (docs/design.md "Confidence", "C-ARAP", "LRM", "Plain ARAP"; docs/math/energy.md), with their
+// validation. Defaults are the paper's (section 4.1) and docs/interop.md's flag defaults.
 //
 // Parameters are plain doubles whatever the Scalar of the computation: they are converted once
 // per call. Every energy is a sum over terms "as in the paper"; Normalization::mean divides the
 // energy (and its gradient) by the number of terms instead (documented per energy).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
+#include <cstddef>
+#include <initializer_list>
 #include <sstream>
 #include <string>
-#include <vector>
 
 #include "smg/core/status.hpp"
 
@@ -30,7 +33,52 @@ struct Gap {
   int delta = 1;
   double weight = 1.0;
 };
-inline std::vector<Gap> default_gaps() { return {{1, 1.0}, {2, 1.0}, {4, 1.0}}; }
+
+// The gaps of C-ARAP / ARAP: a short list with a fixed capacity, so that the option structs are
+// plain values (no heap memory) that a GPU kernel can take by value. Behaves like a small
+// std::vector<Gap> (initializer list, push_back, size, iteration). Appending beyond kCapacity
+// keeps the first kCapacity gaps and marks the list as overflowed, which validate_options
+// reports.
+class GapList {
+ public:
+  static constexpr std::size_t kCapacity = 8;
+
+  GapList() = default;
+  GapList(std::initializer_list<Gap> gaps) {
+    for (const Gap& g : gaps) push_back(g);
+  }
+  template <class It>
+  GapList(It first, It last) {
+    for (; first != last; ++first) push_back(*first);
+  }
+
+  void push_back(const Gap& g) {
+    if (count_ < kCapacity)
+      items_[count_++] = g;
+    else
+      overflowed_ = true;
+  }
+  void clear() {
+    count_ = 0;
+    overflowed_ = false;
+  }
+  std::size_t size() const { return count_; }
+  bool empty() const { return count_ == 0; }
+  bool overflowed() const { return overflowed_; }
+  const Gap& operator[](std::size_t k) const { return items_[k]; }
+  Gap& operator[](std::size_t k) { return items_[k]; }
+  const Gap* begin() const { return items_; }
+  const Gap* end() const { return items_ + count_; }
+  Gap* begin() { return items_; }
+  Gap* end() { return items_ + count_; }
+
+ private:
+  Gap items_[kCapacity] = {};
+  std::size_t count_ = 0;
+  bool overflowed_ = false;
+};
+
+inline GapList default_gaps() { return {{1, 1.0}, {2, 1.0}, {4, 1.0}}; }
 
 // How the terms of an energy are combined.
 enum class Normalization {
@@ -38,12 +86,12 @@ enum class Normalization {
   mean,  // the sum divided by the number of terms (each energy documents its count)
 };
 
-// C-ARAP, equation (E8). Weights w̃_ij^t = w_ij (α + (1 − α) c_{t,j}) (E7).
+// C-ARAP, equation (E9). Weights w̃_ij^t = w_ij (α + (1 − α) c_{t,j}) (E7).
 struct CarapOptions {
   double alpha = 0.6;     // α in [0, 1]: lower bound of the confidence factor
   double lambda_c = 1.0;  // λc: vector-consistency term
   double lambda_l = 1.0;  // λl: length-preservation term
-  std::vector<Gap> gaps = default_gaps();
+  GapList gaps = default_gaps();
   Normalization normalization = Normalization::sum;
   double weight = 1.0;    // overall factor on the energy and its gradient
 };
@@ -52,7 +100,7 @@ struct CarapOptions {
 struct ArapOptions {
   double lambda_c = 1.0;
   double lambda_l = 1.0;
-  std::vector<Gap> gaps = default_gaps();
+  GapList gaps = default_gaps();
   Normalization normalization = Normalization::sum;
   double weight = 1.0;
 };
@@ -88,7 +136,12 @@ inline Status check_alpha(const char* what, double v) {
   s << what << ".alpha must be in [0, 1], got " << v;
   return Status::error(s.str());
 }
-inline Status check_gaps(const char* what, const std::vector<Gap>& gaps) {
+inline Status check_gaps(const char* what, const GapList& gaps) {
+  if (gaps.overflowed()) {
+    std::ostringstream s;
+    s << what << ".gaps: more than " << GapList::kCapacity << " gaps";
+    return Status::error(s.str());
+  }
   for (std::size_t k = 0; k < gaps.size(); ++k) {
     if (gaps[k].delta < 1) {
       std::ostringstream s;

@@ -1,4 +1,4 @@
-// smg/energy/velocity.hpp — node velocities by frame differences (DESIGN.md "Velocity" and the
+// smg/energy/velocity.hpp — node velocities by frame differences (docs/design.md "Velocity" and the
 // pinned "Time" rule; docs/math/energy.md (E1)).
 //
 //   u_i^t = x_i^{t+1} − x_i^t      for t < T − 1   (forward difference)
@@ -8,6 +8,8 @@
 // The same rule gives the per-frame edge-length change of the confidence (E4). Velocities are in
 // world units per frame.
 #pragma once
+
+#include "smg/core/config.hpp"
 
 #include "smg/core/parallel.hpp"
 #include "smg/core/views.hpp"
@@ -40,6 +42,7 @@ inline Vector3<S> velocity(PositionsView<const S> x, Index t, Index i) {
 template <class S>
 void velocities(PositionsView<const S> x, PositionsView<S> u, ParallelOptions parallel = {}) {
   const Index T = x.frames(), N = x.nodes();
+  SMG_ASSERT(u.frames() == T && u.nodes() == N, "velocities: u shape");
   parallel_for(
       T * N,
       [&](Index begin, Index end) {

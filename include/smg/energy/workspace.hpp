@@ -6,6 +6,8 @@
 // between threads); the energies parallelise internally.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cstddef>
 #include <vector>
 
@@ -22,12 +24,13 @@ class EnergyWorkspace {
   S* scratch(std::size_t n) { return grow(scratch_, n); }          // per-chunk SoA scratch
   S* velocity_grad(std::size_t n) { return grow(velocity_grad_, n); }  // LRM: dL/du [T][N][3]
   S* velocity(std::size_t n) { return grow(velocity_, n); }            // LRM: u [T][N][3]
+  S* rotation_grad(std::size_t n) { return grow(rotation_grad_, n); }  // C-ARAP: tangent before raw
 
   // Bytes currently held.
   std::size_t bytes() const {
     return sizeof(S) *
            (edge_change_.size() + spill_.size() + scratch_.size() + velocity_grad_.size() +
-            velocity_.size());
+            velocity_.size() + rotation_grad_.size());
   }
   // Returns the memory.
   void release() { *this = EnergyWorkspace(); }
@@ -37,7 +40,7 @@ class EnergyWorkspace {
     if (v.size() < n) v.resize(n);
     return v.data();
   }
-  std::vector<S> edge_change_, spill_, scratch_, velocity_grad_, velocity_;
+  std::vector<S> edge_change_, spill_, scratch_, velocity_grad_, velocity_, rotation_grad_;
 };
 
 namespace detail {

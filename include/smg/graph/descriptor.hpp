@@ -14,6 +14,8 @@
 // configurations of three or more samples) are ordered by their rounding.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>

@@ -13,6 +13,8 @@
 // visibility bitsets and the segment trees), never O(N^2).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>

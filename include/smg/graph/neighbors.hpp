@@ -1,28 +1,37 @@
 // smg/graph/neighbors.hpp — the view every graph consumer takes: K neighbours per node.
 //
-// Layout (INTEROP.md graph_indices.npy / graph_weights.npy):
-//   indices [N][K] int32, neighbour node ids, -1 = none; valid entries first, then -1 padding
+// Layout (docs/interop.md graph_indices.npy / graph_weights.npy):
+//   indices [N][K] int32 or int64 (I), neighbour node ids, -1 = none; valid entries first, then
+//           -1 padding. int64 is what PyTorch produces by default: it is read in place, no copy.
 //   weights [N][K] Scalar, topology weights w_ij >= 0 matching indices (0 on padding)
-// Row i lists the out-edges i -> j of node i (N(i) in DESIGN.md). Rows need not be symmetric.
+// Row i lists the out-edges i -> j of node i (N(i) in docs/design.md). Rows need not be
+// symmetric.
 #pragma once
+
+#include "smg/core/config.hpp"
 
 #include <cmath>
 #include <cstdint>
 #include <sstream>
 #include <string>
+#include <type_traits>
 
 #include "smg/core/status.hpp"
 #include "smg/core/views.hpp"
 
 namespace smg {
 
-template <class S>
+// S: the weight scalar; I: the index type, std::int32_t (default) or std::int64_t.
+template <class S, class I = std::int32_t>
 struct NeighborsView {
-  TableView<const std::int32_t, Eigen::Dynamic> indices;  // [N][K]
-  TableView<const S, Eigen::Dynamic> weights;             // [N][K]
+  static_assert(std::is_same_v<I, std::int32_t> || std::is_same_v<I, std::int64_t>,
+                "graph indices are std::int32_t or std::int64_t");
+  using IndexType = I;
+  TableView<const I, Eigen::Dynamic> indices;  // [N][K]
+  TableView<const S, Eigen::Dynamic> weights;  // [N][K]
 
   NeighborsView() = default;
-  NeighborsView(const std::int32_t* idx, const S* w, Index nodes, Index k)
+  NeighborsView(const I* idx, const S* w, Index nodes, Index k)
       : indices(idx, nodes, k), weights(w, nodes, k) {}
 
   Index nodes() const { return indices.rows(); }
@@ -37,8 +46,8 @@ struct NeighborsView {
 
 // Checks a neighbour table against N nodes: shapes, indices in [0, N) or -1, no self edges,
 // padding only at the end of a row (with weight 0), weights finite and >= 0.
-template <class S>
-Status validate_neighbors(const NeighborsView<S>& g, Index nodes,
+template <class S, class I>
+Status validate_neighbors(const NeighborsView<S, I>& g, Index nodes,
                           const std::string& name = "graph") {
   auto fail = [&](Index i, Index k, const std::string& what) {
     std::ostringstream s;
@@ -58,7 +67,7 @@ Status validate_neighbors(const NeighborsView<S>& g, Index nodes,
   for (Index i = 0; i < nodes; ++i) {
     bool padding = false;
     for (Index k = 0; k < g.k(); ++k) {
-      const std::int32_t j = g.indices(i, k);
+      const I j = g.indices(i, k);
       const S w = g.weights(i, k);
       if (!std::isfinite(w) || w < S(0)) return fail(i, k, "has a weight that is negative or not finite");
       if (j == -1) {

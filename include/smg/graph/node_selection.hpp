@@ -18,6 +18,8 @@
 // greedy pass itself is sequential (its choices depend on every earlier one). Memory O(N*T).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>

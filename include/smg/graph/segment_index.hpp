@@ -14,6 +14,8 @@
 // Implementation detail of smg/graph (namespace smg::detail); not a stable API.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>

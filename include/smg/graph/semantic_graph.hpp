@@ -14,6 +14,8 @@
 // Weights are constants for gradients (DESIGN.md "Conventions").
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>

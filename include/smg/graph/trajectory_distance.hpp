@@ -16,6 +16,8 @@
 // node is visible in every frame.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>

@@ -15,10 +15,13 @@
 // and in the workspace (resized only when the sizes or the driver table change).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cstdint>
 #include <vector>
 
 #include "smg/core/parallel.hpp"
+#include "smg/core/rotation_gradient.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/skin/blend_point.hpp"
 #include "smg/skin/skin_views.hpp"
@@ -91,6 +94,18 @@ template <class S>
 void skin_blend(const SkinNodes<S>& nodes, const SkinPoints<S>& points, SkinIndexView t_query,
                 const SkinBlendOutputs<S>& out, const SkinOptions& options = {}) {
   const Index Q = t_query.rows(), Dmax = points.width();
+  SMG_ASSERT(nodes.quaternions.frames() == nodes.frames() &&
+                 nodes.quaternions.nodes() == nodes.nodes(),
+             "skin_blend: node quaternions shape");
+  SMG_ASSERT(points.weights.rows() == points.count() && points.weights.cols() == Dmax &&
+                 points.t_ref.rows() == points.count() && points.positions.rows() == points.count(),
+             "skin_blend: points shape");
+  SMG_ASSERT(out.positions.data() == nullptr ||
+                 (out.positions.frames() == Q && out.positions.nodes() == points.count()),
+             "skin_blend: output positions shape");
+  SMG_ASSERT(out.quaternions.data() == nullptr ||
+                 (out.quaternions.frames() == Q && out.quaternions.nodes() == points.count()),
+             "skin_blend: output quaternions shape");
   const SkinMethod method = options.method;
   parallel_for(
       points.count(),
@@ -155,6 +170,7 @@ template <class S>
 struct SkinBlendGradients {
   PositionsView<S> node_positions;        // [T][N][3]
   TangentsView<S> node_rotations;         // [T][N][3], right tangent of the normalised node quats
+  QuaternionsView<S> node_quaternions;    // [T][N][4], raw: w.r.t. the given node 4-vectors (Q5)
   TableView<S, 3> points;                 // [P][3] reference positions
   TableView<S, 3> point_rotations;        // [P][3], right tangent of the normalised point quats
   TableView<S, 4> point_quaternions;      // [P][4], raw: w.r.t. the given (unnormalised) 4-vector
@@ -182,6 +198,9 @@ Status validate_skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<
     if (Status s = validate_output(grads.node_positions, T, N, "grad_node_positions"); !s) return s;
   if (grads.node_rotations.data())
     if (Status s = validate_output(grads.node_rotations, T, N, "grad_node_rotations"); !s) return s;
+  if (grads.node_quaternions.data())
+    if (Status s = validate_output(grads.node_quaternions, T, N, "grad_node_quaternions"); !s)
+      return s;
   if (grads.points.data())
     if (Status s = detail::check_output_table<S, 3>(grads.points, P, 3, "grad_points"); !s) return s;
   if (grads.point_rotations.data())
@@ -214,8 +233,25 @@ void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
                          const SkinBlendGradients<S>& grads, SkinWorkspace<S>& ws,
                          const SkinOptions& options = {}) {
   const Index Q = t_query.rows(), P = points.count(), Dmax = points.width(), N = nodes.nodes();
+  const Index T = nodes.frames();
+  SMG_ASSERT(nodes.quaternions.frames() == T && nodes.quaternions.nodes() == N,
+             "skin_blend_backward: node quaternions shape");
+  SMG_ASSERT(points.weights.rows() == P && points.weights.cols() == Dmax &&
+                 points.t_ref.rows() == P && points.positions.rows() == P,
+             "skin_blend_backward: points shape");
+  SMG_ASSERT(grads.node_positions.data() == nullptr ||
+                 (grads.node_positions.frames() == T && grads.node_positions.nodes() == N),
+             "skin_blend_backward: grad node_positions shape");
+  SMG_ASSERT(grads.node_rotations.data() == nullptr ||
+                 (grads.node_rotations.frames() == T && grads.node_rotations.nodes() == N),
+             "skin_blend_backward: grad node_rotations shape");
+  SMG_ASSERT(grads.node_quaternions.data() == nullptr ||
+                 (grads.node_quaternions.frames() == T && grads.node_quaternions.nodes() == N),
+             "skin_blend_backward: grad node_quaternions shape");
+  (void)T;
   const SkinMethod method = options.method;
-  const bool to_nodes = grads.node_positions.data() || grads.node_rotations.data();
+  const bool to_nodes = grads.node_positions.data() || grads.node_rotations.data() ||
+                        grads.node_quaternions.data();
   constexpr Index kStride = 9;  // per edge: dL/dx_t (3), dL/dx_ref (3), dL/dφ_t (3) = −dL/dφ_ref
   if (to_nodes) {
     ws.incidence.update(points.drivers, N);
@@ -234,16 +270,16 @@ void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
             const Index D = detail::skin_load_ref(nodes, points, p, true, d.data());
             detail::skin_load_query(nodes, points, p, t, D, d.data());
             const Vector3<S> x = points.positions.row(p);
-            S qnorm;
-            const Quaternion<S> qp = detail::skin_point_quaternion(points.quaternions, p, &qnorm);
+            const Quaternion<S> qp = detail::skin_point_quaternion(points.quaternions, p);
             detail::skin_blend_forward(method, d.data(), D, x, qp, st);
             Vector3<S> gp = Vector3<S>::Zero(), gr = Vector3<S>::Zero();
             if (grad_out.positions.data()) gp = grad_out.positions(q, p);
             if (grad_out.rotations.data()) gr = grad_out.rotations(q, p);
             if (grad_out.quaternions.data()) {
-              // (S17): raw 4-vector -> right tangent of the unit q': ½ vec(conj(q') ⊗ g).
-              const Quaternion<S> g = from_wxyz(grad_out.quaternions.ptr(q, p));
-              gr += Literal<S>(0.5) * (st.rotation.conjugate() * g).vec();
+              // (S17): raw 4-vector -> right tangent of the unit q' (Q3).
+              const Vector4<S> qo = to_wxyz(st.rotation);
+              add_tangent_gradient_from_quaternion(qo.data(), grad_out.quaternions.ptr(q, p),
+                                                   gr.data());
             }
             Vector3<S> g_p, g_phi_p;
             detail::skin_blend_backward(
@@ -261,16 +297,10 @@ void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
                 g_p, g_phi_p);
             if (grads.points.data()) grads.points.row(p) += g_p;
             if (grads.point_rotations.data()) grads.point_rotations.row(p) += g_phi_p;
-            if (grads.point_quaternions.data() && points.quaternions.rows() != 0) {
-              // (S17): right tangent of q̂ = q/|q| -> raw q: (2/|q|) q̂ ⊗ (0, g).
-              const Quaternion<S> g =
-                  qp * detail::skin_pure(Vector3<S>((Literal<S>(2) / qnorm) * g_phi_p));
-              S* o = grads.point_quaternions.ptr(p);
-              o[0] += g.w();
-              o[1] += g.x();
-              o[2] += g.y();
-              o[3] += g.z();
-            }
+            if (grads.point_quaternions.data() && points.quaternions.rows() != 0)
+              // (S17): right tangent of q̂ = q/|q| -> raw q (Q5).
+              add_quaternion_gradient_from_tangent(points.quaternions.ptr(p), g_phi_p.data(),
+                                                   grads.point_quaternions.ptr(p));
           }
         },
         options.parallel);
@@ -290,10 +320,19 @@ void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
                 grads.node_positions(tr, n) += Eigen::Map<const Vector3<S>>(g + 3);
               if (grads.node_rotations.data())
                 grads.node_rotations(tr, n) -= Eigen::Map<const Vector3<S>>(g + 6);
+              if (grads.node_quaternions.data()) {
+                const Vector3<S> minus_phi = -Eigen::Map<const Vector3<S>>(g + 6);
+                add_quaternion_gradient_from_tangent(nodes.quaternions.ptr(tr, n),
+                                                     minus_phi.data(),
+                                                     grads.node_quaternions.ptr(tr, n));
+              }
             }
             if (inc.offsets[n + 1] == inc.offsets[n]) continue;
             if (grads.node_positions.data()) grads.node_positions(t, n) += gx_t;
             if (grads.node_rotations.data()) grads.node_rotations(t, n) += gphi_t;
+            if (grads.node_quaternions.data())
+              add_quaternion_gradient_from_tangent(nodes.quaternions.ptr(t, n), gphi_t.data(),
+                                                   grads.node_quaternions.ptr(t, n));
           }
         },
         options.parallel);

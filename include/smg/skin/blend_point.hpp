@@ -19,6 +19,8 @@
 // everywhere except on the measure-zero set where a sign or the pivot changes).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 
 #include "smg/core/quaternion.hpp"
@@ -91,7 +93,7 @@ inline bool skin_is_canonical(const Quaternion<S>& q) {
   return q.z() >= zero;
 }
 
-// Largest weight, first on ties (DESIGN.md "Pinned details: DQB").  (S8)
+// Largest weight, first on ties (docs/design.md "Pinned details: DQB").  (S8)
 template <class S>
 inline Index skin_pivot(const SkinDriver<S>* d, Index D) {
   Index pivot = 0;

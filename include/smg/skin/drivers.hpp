@@ -2,6 +2,8 @@
 // graph neighbours (DESIGN.md "Pinned details: DQB").  (S1)
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cstdint>
 
 #include "smg/graph/neighbors.hpp"
@@ -10,15 +12,15 @@
 namespace smg {
 
 // Columns of the driver table for a graph with K neighbours per node: the anchor + K.
-template <class S>
-inline Index skin_driver_width(const NeighborsView<S>& graph) {
+template <class S, class I>
+inline Index skin_driver_width(const NeighborsView<S, I>& graph) {
   return graph.k() + 1;
 }
 
 // Checks skin_drivers' arguments: the graph against N nodes (validate_neighbors), anchor [P] in
 // [0, N), out [P][K + 1].
-template <class S>
-Status validate_skin_drivers(const NeighborsView<S>& graph, SkinIndexView anchor, Index nodes,
+template <class S, class I>
+Status validate_skin_drivers(const NeighborsView<S, I>& graph, SkinIndexView anchor, Index nodes,
                              TableView<std::int32_t, Eigen::Dynamic> out) {
   if (Status s = validate_neighbors(graph, nodes); !s) return s;
   if (Status s = detail::check_index_array(anchor, anchor.rows(), nodes, "anchor", "N"); !s)
@@ -30,8 +32,8 @@ Status validate_skin_drivers(const NeighborsView<S>& graph, SkinIndexView anchor
 
 // out[p] = (anchor[p], the valid neighbours of anchor[p] in graph order, −1 padding):
 // D = K + 1 columns. A node without neighbours drives its points alone.  (S1)
-template <class S>
-void skin_drivers(const NeighborsView<S>& graph, SkinIndexView anchor,
+template <class S, class I>
+void skin_drivers(const NeighborsView<S, I>& graph, SkinIndexView anchor,
                   TableView<std::int32_t, Eigen::Dynamic> out, ParallelOptions options = {}) {
   const Index K = graph.k();
   parallel_for(
@@ -43,9 +45,9 @@ void skin_drivers(const NeighborsView<S>& graph, SkinIndexView anchor,
           row[0] = a;
           Index c = 1;
           for (Index k = 0; k < K; ++k) {
-            const std::int32_t j = graph.indices(a, k);
+            const Index j = graph.indices(a, k);
             if (j < 0) break;
-            row[c++] = j;
+            row[c++] = static_cast<std::int32_t>(j);
           }
           for (; c <= K; ++c) row[c] = -1;
         }

@@ -13,6 +13,8 @@
 //   outputs             [Q][P][3] positions, [Q][P][4] quaternions
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>

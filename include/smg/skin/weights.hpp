@@ -12,6 +12,8 @@
 // skinning_weights_backward. Skipping it is the stop-gradient default.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cstdint>
 #include <vector>
 

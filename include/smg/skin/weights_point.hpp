@@ -11,6 +11,8 @@
 // their derivatives are 0. Derivations: docs/math/skin.md.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 #include <limits>
 

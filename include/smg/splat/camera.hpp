@@ -6,6 +6,8 @@
 // docs/math/splat.md (S1)-(S2).
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 #include <sstream>
 

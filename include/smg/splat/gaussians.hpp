@@ -12,6 +12,8 @@
 // Images: colour [H][W][C], alpha [H][W], expected depth [H][W].
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 #include <sstream>
 #include <string>

@@ -9,6 +9,8 @@
 // intermediate struct, so the backward differentiates exactly what the forward computed.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 #include <limits>
 

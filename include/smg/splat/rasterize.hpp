@@ -16,6 +16,8 @@
 // reduction over tiles (render.hpp) is deterministic. Internal to render.hpp.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -26,6 +28,8 @@
 #include "smg/splat/workspace.hpp"
 
 namespace smg::splat::detail {
+// The lane groups below follow __AVX__: an ISA-specific namespace (smg/core/config.hpp).
+inline namespace SMG_ISA_NAMESPACE {
 
 // Fields of a projected record (RenderWorkspace::proj), followed by the C colour values.
 // kExtY: half height of the ellipse {sigma <= cut}; per row dy its x-extent is
@@ -555,4 +559,5 @@ void backward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index
   }
 }
 
+}  // inline namespace SMG_ISA_NAMESPACE
 }  // namespace smg::splat::detail

@@ -14,6 +14,8 @@
 // Inputs are checked by validate_render / validate_render_backward, never here.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <vector>
@@ -30,6 +32,9 @@
 #include "smg/splat/workspace.hpp"
 
 namespace smg::splat {
+// Calls the rasteriser, whose lane groups follow __AVX__: an ISA-specific namespace
+// (smg/core/config.hpp).
+inline namespace SMG_ISA_NAMESPACE {
 
 // Everything render_forward relies on: gaussians (validate_gaussians), camera, settings and
 // the output images. channels = C of the instantiation, or -1 for Eigen::Dynamic.
@@ -326,4 +331,5 @@ void render_backward(const GaussianParams<S>& params, const Camera<S>& camera,
       parallel);
 }
 
+}  // inline namespace SMG_ISA_NAMESPACE
 }  // namespace smg::splat

@@ -7,6 +7,8 @@
 // defaults are the pinned values.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <sstream>
 
 #include "smg/core/status.hpp"

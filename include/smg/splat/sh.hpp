@@ -6,6 +6,8 @@
 // rasterization() does.  Equations (S14)-(S15) in docs/math/splat.md.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cmath>
 
 #include "smg/core/types.hpp"

@@ -10,6 +10,8 @@
 // first row of Gaussian g, whose rows cover its tiles in row-major order. Internal.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>

@@ -9,6 +9,8 @@
 // per-Gaussian results (radii, means2d, depths, cull) and never need to write anything.
 #pragma once
 
+#include "smg/core/config.hpp"
+
 #include <cstdint>
 #include <vector>
 

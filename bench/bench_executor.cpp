@@ -1,0 +1,81 @@
+// The caller's executor (smg/core/parallel.hpp): C-ARAP + LRM with gradients (float, N = 5000,
+// T = 100, K = 16, gaps {1, 2, 4}, 2 threads) called right after an OpenMP parallel region, as
+// in a PyTorch process whose intra-op OpenMP threads have just finished an operator. Rows:
+//   std_pool      smg's own std::thread pool (the default)
+//   openmp        smg::openmp_executor(): smg's chunks run on the same OpenMP threads
+//   alone         no OpenMP region before the call (the reference)
+// Run it with OMP_WAIT_POLICY=active to emulate OpenMP threads that spin between regions (what a
+// PyTorch process at 2 threads shows); with the default policy they spin briefly, then sleep.
+// Counter: ms = wall time of the smg call only (the OpenMP region is not timed).
+#include <benchmark/benchmark.h>
+
+#include <chrono>
+#include <cmath>
+#include <vector>
+
+#include "energy/scene.hpp"
+#include "smg/energy.hpp"
+
+namespace {
+
+using smg::Index;
+
+const smg::test::Scene<float>& scene() {
+  static const smg::test::Scene<float> s = [] {
+    smg::test::Rng rng(7);
+    return smg::test::random_scene(100, 5000, 16, rng, true).cast<float>();
+  }();
+  return s;
+}
+
+// A short OpenMP region on 2 threads (about a millisecond of arithmetic), like a small tensor op.
+float openmp_region(std::vector<float>& buf) {
+  float sum = 0;
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(2) reduction(+ : sum)
+#endif
+  for (Index k = 0; k < Index(buf.size()); ++k) {
+    buf[k] = std::sqrt(buf[k] + 1.0f);
+    sum += buf[k];
+  }
+  return sum;
+}
+
+void BM_after_openmp(benchmark::State& state) {
+  const int mode = static_cast<int>(state.range(0));  // 0 std_pool, 1 openmp, 2 alone
+  const auto& s = scene();
+  const Index T = s.T, N = s.N;
+  std::vector<float> gx(T * N * 3), gr(T * N * 3), buf(1 << 20, 1.0f);
+  smg::EnergyWorkspace<float> ws;
+  smg::ParallelOptions po(2);
+#ifdef _OPENMP
+  if (mode == 1) po.executor = smg::openmp_executor();
+#else
+  if (mode == 1) {
+    state.SkipWithError("built without OpenMP");
+    return;
+  }
+#endif
+  double total_ms = 0;
+  for (auto _ : state) {
+    if (mode != 2) benchmark::DoNotOptimize(openmp_region(buf));
+    const auto t0 = std::chrono::steady_clock::now();
+    double e = smg::carap<float>(s.positions(), s.rotations(), s.confidence(), s.graph(),
+                                 smg::CarapOptions{}, {gx.data(), T, N},
+                                 smg::TangentsView<float>(gr.data(), T, N), &ws, po);
+    e += smg::lrm<float>(s.positions(), s.confidence(), s.graph(), smg::LrmOptions{},
+                         {gx.data(), T, N}, &ws, po);
+    benchmark::DoNotOptimize(e);
+    const double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    state.SetIterationTime(ms / 1e3);
+    total_ms += ms;
+  }
+  state.counters["ms"] = total_ms / static_cast<double>(state.iterations());
+  state.SetLabel(mode == 0 ? "std_pool" : mode == 1 ? "openmp" : "alone");
+}
+BENCHMARK(BM_after_openmp)->Arg(0)->Arg(1)->Arg(2)->UseManualTime()->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();

@@ -1,0 +1,135 @@
+// smg/core/rotation_gradient.hpp — rotation gradients in the right tangent and for raw,
+// unnormalised quaternion coordinates, and the view through which an entry point returns
+// either (docs/math/core.md (Q3), (Q5); docs/conventions.md "Rotation gradients").
+//
+// smg's kernels differentiate with respect to the right tangent φ of the normalised rotation
+// (R(q̂) ← R(q̂) Exp(φ)). A PyTorch trainer that holds raw quaternions q (w, x, y, z) and steps
+// them with Adam wants ∂L/∂q instead. With C(q) = L(q)[:, 1:4], the vector columns of the left
+// product matrix of the raw q (docs/math/core.md (Q1)):
+//
+//   raw from tangent:  g_q = (2 / |q|²) C(q) g_φ                                       (Q5)
+//   tangent from raw:  g_φ = ½ C(q)ᵀ g_q                                               (Q3)
+//
+// g_q is orthogonal to q (a function of q̂ does not change along q); the second map ignores any
+// radial component of g_q, so it is the inverse of the first on that orthogonal complement.
+#pragma once
+
+#include "smg/core/config.hpp"
+
+#include <type_traits>
+
+#include "smg/core/parallel.hpp"
+#include "smg/core/scalar.hpp"
+#include "smg/core/views.hpp"
+
+namespace smg {
+
+// Adds the raw-coordinate gradient of one quaternion to g_q[4], given its right-tangent gradient
+// g_phi[3]; q[4] (w, x, y, z) need not be unit (nonzero).  (Q5)
+template <class S>
+inline void add_quaternion_gradient_from_tangent(const S* q, const S* g_phi, S* g_q) {
+  using L = Literal<S>;
+  const S w = q[0], x = q[1], y = q[2], z = q[3];
+  const S f = L(2) / (w * w + x * x + y * y + z * z);
+  const S a = g_phi[0], b = g_phi[1], c = g_phi[2];
+  g_q[0] += f * (-x * a - y * b - z * c);
+  g_q[1] += f * (w * a - z * b + y * c);
+  g_q[2] += f * (z * a + w * b - x * c);
+  g_q[3] += f * (-y * a + x * b + w * c);
+}
+
+// Adds the right-tangent gradient of one rotation to g_phi[3], given the raw-coordinate gradient
+// g_q[4] of the (possibly unnormalised) quaternion q[4]; the component of g_q along q is
+// ignored.  (Q3)
+template <class S>
+inline void add_tangent_gradient_from_quaternion(const S* q, const S* g_q, S* g_phi) {
+  using L = Literal<S>;
+  const S w = q[0], x = q[1], y = q[2], z = q[3];
+  const S gw = g_q[0], gx = g_q[1], gy = g_q[2], gz = g_q[3];
+  g_phi[0] += L(0.5) * (-x * gw + w * gx + z * gy - y * gz);
+  g_phi[1] += L(0.5) * (-y * gw - z * gx + w * gy + x * gz);
+  g_phi[2] += L(0.5) * (-z * gw + y * gx - x * gy + w * gz);
+}
+
+// Batched (Q5): g_quaternions [T][N][4] += raw gradient of quaternions [T][N][4] given
+// g_tangent [T][N][3]. Shapes must agree (asserted in debug builds). Deterministic.
+template <class S>
+void quaternion_gradient_from_tangent(QuaternionsView<const S> quaternions,
+                                      TangentsView<const S> g_tangent,
+                                      QuaternionsView<S> g_quaternions,
+                                      ParallelOptions parallel = {}) {
+  const Index T = quaternions.frames(), N = quaternions.nodes();
+  SMG_ASSERT(g_tangent.frames() == T && g_tangent.nodes() == N, "g_tangent shape");
+  SMG_ASSERT(g_quaternions.frames() == T && g_quaternions.nodes() == N, "g_quaternions shape");
+  if (T * N == 0) return;
+  const S* q = quaternions.data();
+  const S* g = g_tangent.data();
+  S* out = g_quaternions.data();
+  parallel_for(
+      T * N,
+      [&](Index begin, Index end) {
+        for (Index k = begin; k < end; ++k)
+          add_quaternion_gradient_from_tangent(q + 4 * k, g + 3 * k, out + 4 * k);
+      },
+      parallel);
+}
+
+// Batched (Q3): g_tangent [T][N][3] += right-tangent gradient given the raw gradient
+// g_quaternions [T][N][4] of quaternions [T][N][4]. Deterministic.
+template <class S>
+void tangent_gradient_from_quaternion(QuaternionsView<const S> quaternions,
+                                      QuaternionsView<const S> g_quaternions,
+                                      TangentsView<S> g_tangent, ParallelOptions parallel = {}) {
+  const Index T = quaternions.frames(), N = quaternions.nodes();
+  SMG_ASSERT(g_tangent.frames() == T && g_tangent.nodes() == N, "g_tangent shape");
+  SMG_ASSERT(g_quaternions.frames() == T && g_quaternions.nodes() == N, "g_quaternions shape");
+  if (T * N == 0) return;
+  const S* q = quaternions.data();
+  const S* g = g_quaternions.data();
+  S* out = g_tangent.data();
+  parallel_for(
+      T * N,
+      [&](Index begin, Index end) {
+        for (Index k = begin; k < end; ++k)
+          add_tangent_gradient_from_quaternion(q + 4 * k, g + 4 * k, out + 3 * k);
+      },
+      parallel);
+}
+
+// Where an entry point adds a rotation gradient [T][N][...]: either the right tangent
+// (TangentsView, [T][N][3]) or raw quaternion coordinates (QuaternionsView, [T][N][4]); both
+// convert implicitly, and {} means "not computed". Pass raw when the caller optimises the
+// quaternions it gave smg as free 4-vectors (PyTorch + Adam).
+template <class S>
+class RotationGradientView {
+ public:
+  RotationGradientView() = default;
+  RotationGradientView(TangentsView<S> tangent) : tangent_(tangent) {}  // NOLINT(google-explicit-constructor)
+  RotationGradientView(QuaternionsView<S> raw) : raw_(raw) {}          // NOLINT(google-explicit-constructor)
+  // {data, T, N}: the right tangent [T][N][3], as before raw gradients existed.
+  RotationGradientView(S* tangent, Index frames, Index nodes) : tangent_(tangent, frames, nodes) {}
+
+  bool empty() const { return tangent_.data() == nullptr && raw_.data() == nullptr; }
+  bool is_raw() const { return raw_.data() != nullptr; }
+  TangentsView<S> tangent() const { return tangent_; }
+  QuaternionsView<S> raw() const { return raw_; }
+  Index frames() const { return is_raw() ? raw_.frames() : tangent_.frames(); }
+  Index nodes() const { return is_raw() ? raw_.nodes() : tangent_.nodes(); }
+
+ private:
+  TangentsView<S> tangent_;
+  QuaternionsView<S> raw_;
+};
+
+namespace detail {
+// A parameter type that does not take part in template argument deduction, so that a
+// TangentsView or QuaternionsView converts to RotationGradientView<S> with S deduced elsewhere.
+template <class T>
+struct NonDeduced {
+  using type = T;
+};
+template <class T>
+using NonDeducedT = typename NonDeduced<T>::type;
+}  // namespace detail
+
+}  // namespace smg

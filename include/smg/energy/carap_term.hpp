@@ -1,0 +1,54 @@
+// smg/energy/carap_term.hpp — one term of C-ARAP (E9), written once for every place that
+// evaluates it: the vectorised energy kernel (carap.hpp), the residual form
+// (carap_residuals.hpp) and, later, GPU kernels; its edge weight (E7) is confidence_edge_weight
+// in common.hpp. Plain functions of scalars, forced inline so that the kernel's loops still
+// vectorise around them.
+// (tests/energy/reference_energies.hpp re-derives the same equations independently, by design:
+// a reference must not share code with what it checks.)
+#pragma once
+
+#include "smg/core/config.hpp"
+
+#include <cmath>
+
+#include "smg/core/scalar.hpp"
+
+namespace smg {
+
+// The C-ARAP term of one edge and one pair of frames (t, s = t + δ) given the change of the
+// rotated edge vector Δd = d^s − d^t (E8) and of its length Δℓ = ‖d^s‖ − ‖d^t‖, with the pair
+// factor k = γ_δ · w̃_ij^t (times the energy's overall scale):
+//   E = k (λc ‖Δd‖² + λl Δℓ²)                                                        (E9)
+template <class S, class L>
+SMG_FORCE_INLINE S carap_term_energy(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l) {
+  return k * (lambda_c * (dx * dx + dy * dy + dz * dz) + lambda_l * dl * dl);
+}
+
+// The same term and its partial derivatives (E10): P = ∂E/∂d^s = −∂E/∂d^t = 2 k λc Δd and
+// Q = ∂E/∂‖d^s‖ = −∂E/∂‖d^t‖ = 2 k λl Δℓ. Returns E.
+template <class S, class L>
+SMG_FORCE_INLINE S carap_term(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l, S& px, S& py,
+                              S& pz, S& q) {
+  const S f = L(2) * lambda_c * k;
+  px = f * dx;
+  py = f * dy;
+  pz = f * dz;
+  q = L(2) * lambda_l * k * dl;
+  return carap_term_energy(k, dx, dy, dz, dl, lambda_c, lambda_l);
+}
+
+// The same term as a residual r = [√(k λc) Δd ; √(k λl) Δℓ] with ‖r‖² = E (E17); sc = √(k λc)
+// and sl = √(k λl) are returned for the Jacobians.
+template <class S, class L>
+SMG_FORCE_INLINE void carap_term_residual(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l,
+                                          S* r, S& sc, S& sl) {
+  using std::sqrt;
+  sc = sqrt(k * lambda_c);
+  sl = sqrt(k * lambda_l);
+  r[0] = sc * dx;
+  r[1] = sc * dy;
+  r[2] = sc * dz;
+  r[3] = sl * dl;
+}
+
+}  // namespace smg

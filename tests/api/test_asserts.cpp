@@ -1,0 +1,23 @@
+// SMG_ASSERT (smg/core/config.hpp): with assertions on, a mis-shaped view or an out-of-range
+// access aborts with one line naming the violated condition, instead of writing out of bounds.
+#include <doctest/doctest.h>
+
+#include <string>
+
+#include "support/run_program.hpp"
+
+#ifdef SMG_ASSERT_PROBE_PATH
+TEST_CASE("debug assertions catch mis-shaped views and out-of-range accesses") {
+  for (const char* mode : {"view", "carap", "lrm"}) {
+    CAPTURE(mode);
+    const auto r = smg::test::run_program(SMG_ASSERT_PROBE_PATH, mode, "smg_assert_probe");
+    CHECK(r.code != 0);
+    CHECK(r.code != 3);  // 3: the probe ran past the misuse
+    CHECK(smg::test::count_lines(r.err) == 1);
+    CHECK(r.err.rfind("smg: assertion failed: ", 0) == 0);
+  }
+  const auto ok = smg::test::run_program(SMG_ASSERT_PROBE_PATH, "ok", "smg_assert_probe");
+  CHECK(ok.code == 0);
+  CHECK(ok.err.empty());
+}
+#endif
