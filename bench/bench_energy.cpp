@@ -352,7 +352,7 @@ void BM_lrm_residuals(benchmark::State& state) {
 // ---- Eigen AutoDiffScalar, per term (the fair comparison): each C-ARAP pair term with an
 // 18-entry fixed-size derivative vector (x_i, x_j at both frames, the two right tangents of
 // R_i), each LRM neighbourhood with a derivative vector of 6·|N(i)| <= 96 entries (x_j and u_j
-// of every neighbour, then u chained to x). Same equations, written straight from DESIGN.md in
+// of every neighbour, then u chained to x). Same equations, written straight from docs/design.md in
 // tests/energy/reference_energies.hpp. Double, one thread, on the first kAdFrames frames; the
 // analytic kernel is timed on the same sub-problem for ad_ratio. ----
 constexpr Index kAdFrames = 8;

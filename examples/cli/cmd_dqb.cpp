@@ -1,11 +1,11 @@
 // smg_cli dqb CASE OUT — dual-quaternion blending (or LBS with --lbs) of points driven by the
-// node trajectories of a case (INTEROP.md, `dqb`).
+// node trajectories of a case (docs/interop.md, `dqb`).
 //
 // Reads positions.npy [T,N,3], quats.npy [T,N,4] (optional: identity), the graph
 // (graph_indices.npy/graph_weights.npy, or built from the case with the graph flags),
 // points.npy [P,3], point_quats.npy [P,4] (optional: identity), anchor.npy [P] int,
 // t_ref.npy [P] int, t_query.npy [Q] int, sigma.npy [N]. Each point is driven by its anchor
-// and the anchor's graph neighbours with the distance-aware weights of DESIGN.md; writes
+// and the anchor's graph neighbours with the distance-aware weights of docs/design.md; writes
 // blended_points.npy [Q,P,3] and blended_quats.npy [Q,P,4] (float64, or float32 with --float).
 #include <chrono>
 #include <cstdint>

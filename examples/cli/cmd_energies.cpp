@@ -1,5 +1,5 @@
 // smg_cli energies CASE OUT — node confidences, C-ARAP, LRM and plain ARAP with their gradients
-// (INTEROP.md; DESIGN.md "Confidence", "C-ARAP", "LRM", "Plain ARAP").
+// (docs/interop.md; docs/design.md "Confidence", "C-ARAP", "LRM", "Plain ARAP").
 //
 // Reads positions.npy [T,N,3] (required), quats.npy [T,N,4] (optional: identity),
 // visibility.npy [T,N] (optional: all visible) and the graph (graph_indices.npy +

@@ -1,4 +1,4 @@
-// smg_cli graph CASE OUT — builds the semantic motion graph of a case directory (INTEROP.md):
+// smg_cli graph CASE OUT — builds the semantic motion graph of a case directory (docs/interop.md):
 // exact trajectory KNN, semantic descriptors (from feature_samples.npy, or features.npy as
 // given), the gate, isolated-node policy and topology weights. A case without features gives a
 // purely geometric graph ("gated": false in the summary).

@@ -1,4 +1,4 @@
-// smg_cli render CASE OUT — the reference CPU splatter on a case directory (INTEROP.md).
+// smg_cli render CASE OUT — the reference CPU splatter on a case directory (docs/interop.md).
 //
 // Reads means [G,3], quats [G,4] (w,x,y,z), scales [G,3] (log-scales), opacities [G]
 // (logits), colors [G,C] (or SH coefficients [G,K,C], K = (d+1)², d <= 3), viewmat [4,4]

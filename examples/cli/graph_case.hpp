@@ -11,8 +11,8 @@
 
 namespace cli {
 
-// Flags of the graph equations (DESIGN.md "Trajectory distance", "KNN and gate",
-// "Descriptor"; names and defaults from INTEROP.md), plus --weighting, --no-gate and
+// Flags of the graph equations (docs/design.md "Trajectory distance", "KNN and gate",
+// "Descriptor"; names and defaults from docs/interop.md), plus --weighting, --no-gate and
 // --segment-frames.
 std::vector<FlagSpec> graph_flags();
 

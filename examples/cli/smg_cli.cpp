@@ -1,4 +1,4 @@
-// smg_cli — the npy bridge between smg and NumPy/PyTorch codebases (../shared/INTEROP.md).
+// smg_cli — the npy bridge between smg and NumPy/PyTorch codebases (docs/interop.md).
 //
 //   smg_cli <subcommand> CASE [OUT] [--flags]
 //

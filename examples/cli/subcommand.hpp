@@ -2,7 +2,7 @@
 //
 // A subcommand declares its flags and a run function. The driver parses argv, opens the case
 // directory, calls run, prints the one-line JSON summary and maps every exception to one line
-// on stderr and exit code 2 (INTEROP.md). run stages its outputs in an OutputSet and commits
+// on stderr and exit code 2 (docs/interop.md). run stages its outputs in an OutputSet and commits
 // them only after all computation succeeded, so a failure writes nothing.
 #pragma once
 

@@ -1,6 +1,6 @@
 // examples/common/case_dir.hpp — typed, checked loading of a case directory of .npy files.
 //
-// INTEROP.md: float arrays may be float32 or float64, integer arrays int32 or int64, bool
+// docs/interop.md: float arrays may be float32 or float64, integer arrays int32 or int64, bool
 // arrays uint8 or bool; a missing required file, a wrong shape or dtype, or a NaN/Inf is an
 // error whose message names the file and the problem.
 #pragma once

@@ -2,7 +2,7 @@
 //
 // Every flag a program accepts is declared with its default; an unknown flag, a missing value or
 // a malformed number is a cli::UsageError with a one-line message. Programs turn any error into
-// one line on stderr and exit code 2 (INTEROP.md).
+// one line on stderr and exit code 2 (docs/interop.md).
 #pragma once
 
 #include <cerrno>

@@ -1,6 +1,6 @@
 // examples/common/output_set.hpp — write a set of .npy outputs all-or-nothing.
 //
-// INTEROP.md: on failure nothing is written. Outputs are staged in memory, written to
+// docs/interop.md: on failure nothing is written. Outputs are staged in memory, written to
 // temporary names in the output folder and renamed into place only when every write succeeded;
 // on any failure the temporaries are removed and the error propagates.
 #pragma once

@@ -1,4 +1,4 @@
-// examples/trainer/camera.hpp — pinhole cameras in smg's convention (DESIGN.md "Camera").
+// examples/trainer/camera.hpp — pinhole cameras in smg's convention (docs/design.md "Camera").
 //
 // OpenCV axes: x right, y down, z forward. A camera holds its world-to-camera rigid transform
 // as a 4x4 matrix [R t; 0 1] (x_cam = R x_world + t) and pixel intrinsics fx, fy, cx, cy.

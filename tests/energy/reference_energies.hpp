@@ -1,4 +1,4 @@
-// tests/energy/reference_energies.hpp — straightforward implementations of DESIGN.md's
+// tests/energy/reference_energies.hpp — straightforward implementations of docs/design.md's
 // "Confidence", "C-ARAP" and "LRM" equations, term by term with Eigen fixed-size types, written
 // independently of the library's kernels. They serve as the value reference of the tests and,
 // instantiated with Eigen::AutoDiffScalar, as the per-term automatic-differentiation baseline

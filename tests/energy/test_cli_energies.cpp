@@ -1,4 +1,4 @@
-// Tests of `smg_cli energies` (INTEROP.md): outputs and summary match direct library calls,
+// Tests of `smg_cli energies` (docs/interop.md): outputs and summary match direct library calls,
 // --float writes float32, optional inputs default as documented, graph flags are accepted, and
 // errors give one line, exit code 2 and no output.
 #include <doctest/doctest.h>

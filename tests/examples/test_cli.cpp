@@ -1,4 +1,4 @@
-// Tests of the smg_cli driver (INTEROP.md): JSON summary on stdout, one-line errors on stderr,
+// Tests of the smg_cli driver (docs/interop.md): JSON summary on stdout, one-line errors on stderr,
 // exit code 2, and flag parsing.
 #include <doctest/doctest.h>
 

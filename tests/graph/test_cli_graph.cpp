@@ -1,4 +1,4 @@
-// Tests of `smg_cli graph` (INTEROP.md): outputs equal the library's, the three feature
+// Tests of `smg_cli graph` (docs/interop.md): outputs equal the library's, the three feature
 // sources (feature_samples.npy, features.npy, none -> purely geometric graph), flags,
 // --float, --threads, and one-line errors with exit code 2 and nothing written.
 #include <doctest/doctest.h>

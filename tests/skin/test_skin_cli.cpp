@@ -1,4 +1,4 @@
-// Tests of `smg_cli dqb` (INTEROP.md): outputs against the library called in-process, --lbs,
+// Tests of `smg_cli dqb` (docs/interop.md): outputs against the library called in-process, --lbs,
 // --float against double, thread counts, and one-line errors with exit code 2 and nothing
 // written. Cases carry graph_indices.npy / graph_weights.npy (the graph is not rebuilt).
 #include <doctest/doctest.h>

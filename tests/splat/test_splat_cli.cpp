@@ -1,4 +1,4 @@
-// smg_cli render (INTEROP.md): outputs and their shapes/dtypes, agreement with the library,
+// smg_cli render (docs/interop.md): outputs and their shapes/dtypes, agreement with the library,
 // the backward outputs with grad_image.npy, and one-line errors with exit code 2 and nothing
 // written.
 #include <doctest/doctest.h>

@@ -185,7 +185,7 @@ TEST_CASE("isolated nodes and empty rows: pinned confidence, zero energy terms")
   smg::node_confidences<double>(s.positions(), {}, s.graph(), o, {c.data(), s.T, s.N},
                                 {m.data(), s.T, s.N}, {r.data(), s.T, s.N});
   for (Index t = 0; t < s.T; ++t) {
-    // Empty sums are 0: v̄ = 0, s^v = 0, e = ē = 0 (DESIGN.md pinned).
+    // Empty sums are 0: v̄ = 0, s^v = 0, e = ē = 0 (docs/design.md pinned).
     const double u = smg::velocity(s.positions(), t, 3).norm();
     CHECK(r[t * s.N + 3] == 1.0);
     CHECK(m[t * s.N + 3] == doctest::Approx(std::exp(-std::pow(u / (o.kappa_m * o.eps), 2))));

@@ -1,6 +1,6 @@
 // smg/core/status.hpp — the result of a validation function: ok, or one clear message.
 //
-// Validation is separate from computation (DESIGN.md "Errors"): each entry point has one
+// Validation is separate from computation (docs/design.md "Errors"): each entry point has one
 // validate_* function that callers run on untrusted input; hot loops never check.
 #pragma once
 

@@ -130,7 +130,7 @@ class TableView {
   Index cols_ = 0;
 };
 
-// Named layouts (DESIGN.md "Conventions"). S may be const-qualified (input) or not (output).
+// Named layouts (docs/design.md "Conventions"). S may be const-qualified (input) or not (output).
 template <class S> using PositionsView = SequenceView<S, 3>;    // [T][N][3], world units
 template <class S> using QuaternionsView = SequenceView<S, 4>;  // [T][N][4], (w, x, y, z)
 template <class S> using TangentsView = SequenceView<S, 3>;     // [T][N][3], right tangent

@@ -1,5 +1,5 @@
 // smg/graph/descriptor.hpp — semantic node descriptors by top-rho cosine-consistent averaging
-// of per-frame feature samples (DESIGN.md "Descriptor"; docs/math/graph.md (G7)-(G8)).
+// of per-frame feature samples (docs/design.md "Descriptor"; docs/math/graph.md (G7)-(G8)).
 //
 // For node i with visible frames t_1 < ... < t_n and samples g^t (feature_samples [T][N][C]):
 //   u^t = g^t / |g^t|  (a zero sample stays zero)

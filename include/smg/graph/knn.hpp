@@ -1,4 +1,4 @@
-// smg/graph/knn.hpp — exact trajectory-level k nearest neighbours (DESIGN.md "KNN and gate";
+// smg/graph/knn.hpp — exact trajectory-level k nearest neighbours (docs/design.md "KNN and gate";
 // docs/math/graph.md (G4)-(G6)).
 //
 // For every node i: the k nodes j != i with the smallest trajectory distance D_ij ((G2) or

@@ -1,5 +1,5 @@
 // smg/graph/semantic_graph.hpp — the semantic motion graph: trajectory KNN, semantic gate,
-// isolated-node policy and topology weights (DESIGN.md "KNN and gate"; the paper's eq. (1);
+// isolated-node policy and topology weights (docs/design.md "KNN and gate"; the paper's eq. (1);
 // docs/math/graph.md (G9)-(G12)).
 //
 //   E_ij = 1[j in KNN(i)] * 1[cos(f_i, f_j) >= tau]                                    (G9)
@@ -11,7 +11,7 @@
 // Outputs, [N][K] each (K = options.knn.k), rows sorted by (D_ij, j), -1 padded with weight 0
 // and distance 0: neighbour indices (int32), topology weights and trajectory distances. The
 // indices and weights form a NeighborsView, the input of every graph consumer.
-// Weights are constants for gradients (DESIGN.md "Conventions").
+// Weights are constants for gradients (docs/design.md "Conventions").
 #pragma once
 
 #include "smg/core/config.hpp"

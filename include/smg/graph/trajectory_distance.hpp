@@ -1,5 +1,5 @@
 // smg/graph/trajectory_distance.hpp — the distance between two node trajectories, aggregated
-// over the frames where both are visible (DESIGN.md "Trajectory distance"; docs/math/graph.md
+// over the frames where both are visible (docs/design.md "Trajectory distance"; docs/math/graph.md
 // (G1)-(G3)).
 //
 //   S_ij   = { t : v_{t,i} = v_{t,j} = 1 }                       co-visible frames   (G1)

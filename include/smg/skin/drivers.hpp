@@ -1,5 +1,5 @@
 // smg/skin/drivers.hpp — the driving set of each point: its anchor node and the anchor's
-// graph neighbours (DESIGN.md "Pinned details: DQB").  (S1)
+// graph neighbours (docs/design.md "Pinned details: DQB").  (S1)
 #pragma once
 
 #include "smg/core/config.hpp"

@@ -1,7 +1,7 @@
 // smg/skin/skin_views.hpp — the arrays the batched skinning functions read and write, the
 // per-call options, the reusable workspace, and the shared validation helpers.
 //
-// Layouts (row-major over caller memory, as NumPy/PyTorch; INTEROP.md `dqb`):
+// Layouts (row-major over caller memory, as NumPy/PyTorch; docs/interop.md `dqb`):
 //   node positions      [T][N][3]   PositionsView           world units
 //   node quaternions    [T][N][4]   QuaternionsView         (w, x, y, z), normalised on entry
 //   drivers             [P][D]      int32, node ids, −1 padded (valid entries first; entry 0 is

@@ -5,7 +5,7 @@
 // computed per point by skinning_weights_point (smg/skin/weights_point.hpp, which documents
 // the underflow-safe softmax and the fallback). sigma is per node [N], in length units.
 //
-// Gradient policy (DESIGN.md: weights computed from the state are constants for the gradient
+// Gradient policy (docs/design.md: weights computed from the state are constants for the gradient
 // unless a function says otherwise): skin_blend_backward treats the weights as inputs and can
 // return dL/dw [P][D]; the weights' own dependence on the point positions, the node positions
 // at t_ref and sigma is added only if the caller passes that dL/dw to

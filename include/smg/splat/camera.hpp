@@ -1,9 +1,9 @@
 // smg/splat/camera.hpp — the pinhole camera of the splatter and its validation.
 //
-// Convention (DESIGN.md "Camera"): OpenCV axes (x right, y down, z forward); `viewmat` maps
+// Convention (docs/design.md "Camera"): OpenCV axes (x right, y down, z forward); `viewmat` maps
 // world to camera coordinates, p_c = R p + t with viewmat = [R t; 0 0 0 1]; intrinsics in
 // pixels; the centre of pixel (i, j) (row i, column j) is at (j + 0.5, i + 0.5). Equations:
-// docs/math/splat.md (S1)-(S2).
+// docs/math/splat.md (R1)-(R2).
 #pragma once
 
 #include "smg/core/config.hpp"

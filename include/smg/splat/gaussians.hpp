@@ -63,7 +63,7 @@ template <class S>
 struct RenderImages {
   SequenceView<S, Eigen::Dynamic> image;  // [H][W][C]
   SequenceView<S, 1> alpha;               // [H][W], 1 - final transmittance
-  SequenceView<S, 1> depth;               // [H][W], expected camera-space z (S13)
+  SequenceView<S, 1> depth;               // [H][W], expected camera-space z (R13)
 };
 
 // Gradients of the loss with respect to the rendered images; each optional (null = zero).

@@ -4,8 +4,8 @@
 // gsplat's pinhole projection (fully_fused_projection, persp_proj): world -> camera, 3D
 // covariance R S Sᵀ Rᵀ, local affine approximation J of the perspective map with gsplat's
 // clamp of x/z and y/z to 1.3x the field of view, 2D covariance J Σ_c Jᵀ + eps2d I, its
-// inverse (the conic), and the radius ceil(k sqrt(lambda_max)). Equations (S1)-(S8) in
-// docs/math/splat.md; the backward (S20)-(S26). Both are written once over a shared
+// inverse (the conic), and the radius ceil(k sqrt(lambda_max)). Equations (R1)-(R8) in
+// docs/math/splat.md; the backward (R20)-(R26). Both are written once over a shared
 // intermediate struct, so the backward differentiates exactly what the forward computed.
 #pragma once
 
@@ -24,7 +24,7 @@ namespace smg::splat {
 enum class Cull {
   none = 0,     // visible
   depth,        // camera-space z < near, z > far, or not finite (behind / on the camera plane)
-  singular,     // 2D covariance not positive definite within rounding: det <= 16 eps a c (S6)
+  singular,     // 2D covariance not positive definite within rounding: det <= 16 eps a c (R6)
   outside,      // its radius box does not reach the image
   transparent,  // opacity < 1/255: no pixel can pass the alpha test (decided by the renderer)
 };
@@ -42,14 +42,14 @@ inline const char* cull_name(Cull c) {
 
 template <class S>
 struct ProjectedGaussian {
-  Vector2<S> mean2d = Vector2<S>::Zero();  // pixels, (S3)
-  Vector3<S> conic = Vector3<S>::Zero();   // (a, b, c) = entries of Σ2D⁻¹: (xx, xy, yy), (S6)
-  Vector3<S> cov2d = Vector3<S>::Zero();   // dilated 2D covariance (xx, xy, yy), pixels², (S5)
+  Vector2<S> mean2d = Vector2<S>::Zero();  // pixels, (R3)
+  Vector3<S> conic = Vector3<S>::Zero();   // (a, b, c) = entries of Σ2D⁻¹: (xx, xy, yy), (R6)
+  Vector3<S> cov2d = Vector3<S>::Zero();   // dilated 2D covariance (xx, xy, yy), pixels², (R5)
   S depth = S(0);                          // camera-space z
-  S radius = S(0);                         // pixels, ceil(k sqrt(lambda_max)), (S7)
+  S radius = S(0);                         // pixels, ceil(k sqrt(lambda_max)), (R7)
 };
 
-// Unit quaternion (w, x, y, z) -> rotation matrix, the polynomial form gsplat uses. (S2)
+// Unit quaternion (w, x, y, z) -> rotation matrix, the polynomial form gsplat uses. (R2)
 template <class S>
 inline Matrix3<S> rotmat_from_unit_wxyz(const Vector4<S>& q) {
   const S w = q(0), x = q(1), y = q(2), z = q(3);
@@ -60,7 +60,7 @@ inline Matrix3<S> rotmat_from_unit_wxyz(const Vector4<S>& q) {
   return R;
 }
 
-// dL/dq of L(rotmat_from_unit_wxyz(q)) given v_R = dL/dR (the polynomial's gradient). (S24)
+// dL/dq of L(rotmat_from_unit_wxyz(q)) given v_R = dL/dR (the polynomial's gradient). (R24)
 template <class S>
 inline Vector4<S> rotmat_from_unit_wxyz_vjp(const Vector4<S>& q, const Matrix3<S>& v) {
   const S w = q(0), x = q(1), y = q(2), z = q(3);
@@ -86,7 +86,7 @@ struct ProjectionState {
   Vector3<S> scale;     // exp(log_scale)
   Matrix3<S> Sigma_c;   // camera-space covariance W Σ Wᵀ
   Vector3<S> p_c;       // camera-space mean
-  S j00, j02, j11, j12; // nonzero entries of J (S4)
+  S j00, j02, j11, j12; // nonzero entries of J (R4)
   S u, v;               // x/z, y/z after gsplat's field-of-view clamp
   bool u_free, v_free;  // the clamp is inactive (gradient flows through x/z, y/z)
   S a, b, c;            // dilated 2D covariance
@@ -117,7 +117,7 @@ inline Cull projection_state(const Camera<S>& cam, const Vector3<S>& mean, const
   st->qhat = quat / st->qnorm;
   st->Rq = rotmat_from_unit_wxyz(st->qhat);
   st->scale = log_scale.array().exp().matrix();
-  // Σ_c = (W R diag(s)) (W R diag(s))ᵀ  (S2)
+  // Σ_c = (W R diag(s)) (W R diag(s))ᵀ  (R2)
   const Matrix3<S> A = (W * st->Rq) * st->scale.asDiagonal();
   st->Sigma_c.noalias() = A * A.transpose();
 
@@ -134,7 +134,7 @@ inline Cull projection_state(const Camera<S>& cam, const Vector3<S>& mean, const
   st->j02 = -cam.fx * st->u * rz;
   st->j12 = -cam.fy * st->v * rz;
 
-  // Σ2D = J Σ_c Jᵀ + eps2d I with J = [j00 0 j02; 0 j11 j12]  (S5)
+  // Σ2D = J Σ_c Jᵀ + eps2d I with J = [j00 0 j02; 0 j11 j12]  (R5)
   const Matrix3<S>& P = st->Sigma_c;
   const S j00 = st->j00, j02 = st->j02, j11 = st->j11, j12 = st->j12;
   st->a = j00 * j00 * P(0, 0) + S(2) * j00 * j02 * P(0, 2) + j02 * j02 * P(2, 2) + eps2d;
@@ -148,7 +148,7 @@ inline Cull projection_state(const Camera<S>& cam, const Vector3<S>& mean, const
 
 // Projects one Gaussian (mean [3], quaternion (w,x,y,z) of any nonzero norm, log-scales [3])
 // with the camera. Returns Cull::none and fills *out when visible; otherwise the reason
-// (out is then unspecified). radius_sigmas: k in (S7), 3 for gsplat.  (S1)-(S8)
+// (out is then unspecified). radius_sigmas: k in (R7), 3 for gsplat.  (R1)-(R8)
 template <class S>
 inline Cull project_gaussian(const Camera<S>& cam, const Vector3<S>& mean, const Vector4<S>& quat,
                              const Vector3<S>& log_scale, S eps2d, S radius_sigmas,
@@ -157,7 +157,7 @@ inline Cull project_gaussian(const Camera<S>& cam, const Vector3<S>& mean, const
   if (Cull c = detail::projection_state(cam, mean, quat, log_scale, eps2d, &st); c != Cull::none)
     return c;
   // Near-singular: the determinant is below the rounding error of its own computation (also
-  // rejects NaN/Inf from overflowing scales).  (S6)
+  // rejects NaN/Inf from overflowing scales).  (R6)
   const S eps = std::numeric_limits<S>::epsilon();
   if (!(st.det > S(16) * eps * st.a * st.c) || !std::isfinite(st.det)) return Cull::singular;
 
@@ -166,13 +166,13 @@ inline Cull project_gaussian(const Camera<S>& cam, const Vector3<S>& mean, const
   out->cov2d = Vector3<S>(st.a, st.b, st.c);
   const S half_trace = S(0.5) * (st.a + st.c);
   const S lambda_max =
-      half_trace + std::sqrt(std::max(half_trace * half_trace - st.det, S(0.01)));  // (S7)
+      half_trace + std::sqrt(std::max(half_trace * half_trace - st.det, S(0.01)));  // (R7)
   out->radius = std::ceil(radius_sigmas * std::sqrt(lambda_max));
   const S rz = S(1) / st.p_c.z();
   out->mean2d = Vector2<S>(cam.fx * st.p_c.x() * rz + cam.cx, cam.fy * st.p_c.y() * rz + cam.cy);
   out->depth = st.p_c.z();
   const S r = out->radius;
-  // (S8): the radius box must overlap the image.
+  // (R8): the radius box must overlap the image.
   if (!(out->mean2d.x() + r > S(0) && out->mean2d.x() - r < S(cam.width) &&
         out->mean2d.y() + r > S(0) && out->mean2d.y() - r < S(cam.height)))
     return Cull::outside;
@@ -182,7 +182,7 @@ inline Cull project_gaussian(const Camera<S>& cam, const Vector3<S>& mean, const
 // Gradients of one visible Gaussian's projection. Inputs: the forward's arguments and its
 // conic, v_mean2d = dL/d mean2d, v_conic = dL/d (a, b, c) of the conic, v_depth = dL/dz.
 // Outputs (each optional, overwritten): v_mean [3], v_quat raw 4-vector (through q/|q|),
-// v_quat_tangent right-tangent 3-vector (d/dφ at q̂ ⊗ Exp(φ)), v_log_scale [3].  (S20)-(S26)
+// v_quat_tangent right-tangent 3-vector (d/dφ at q̂ ⊗ Exp(φ)), v_log_scale [3].  (R20)-(R26)
 // Must only be called for a Gaussian that project_gaussian reported visible.
 template <class S>
 inline void project_gaussian_vjp(const Camera<S>& cam, const Vector3<S>& mean,
@@ -196,19 +196,19 @@ inline void project_gaussian_vjp(const Camera<S>& cam, const Vector3<S>& mean,
   const S x = st.p_c.x(), y = st.p_c.y(), z = st.p_c.z();
   const S rz = S(1) / z, rz2 = rz * rz, rz3 = rz2 * rz;
 
-  // Conic = Σ2D⁻¹: dL/dΣ2D = -Q V Q with V the symmetric gradient w.r.t. Q.  (S21)
+  // Conic = Σ2D⁻¹: dL/dΣ2D = -Q V Q with V the symmetric gradient w.r.t. Q.  (R21)
   Matrix2<S> Q, V;
   Q << conic(0), conic(1), conic(1), conic(2);
   V << v_conic(0), S(0.5) * v_conic(1), S(0.5) * v_conic(1), v_conic(2);
   const Matrix2<S> G = -(Q * V * Q);
 
-  // Σ2D = J Σ_c Jᵀ: dL/dΣ_c = Jᵀ G J, dL/dJ = 2 G J Σ_c.  (S22)
+  // Σ2D = J Σ_c Jᵀ: dL/dΣ_c = Jᵀ G J, dL/dJ = 2 G J Σ_c.  (R22)
   Eigen::Matrix<S, 2, 3> J;
   J << st.j00, S(0), st.j02, S(0), st.j11, st.j12;
   const Matrix3<S> v_Sigma_c = J.transpose() * G * J;
   const Eigen::Matrix<S, 2, 3> v_J = S(2) * G * J * st.Sigma_c;
 
-  // Through J's dependence on the camera-space mean and the projected mean.  (S23)
+  // Through J's dependence on the camera-space mean and the projected mean.  (R23)
   Vector3<S> v_pc(cam.fx * rz * v_mean2d(0), cam.fy * rz * v_mean2d(1),
                   -(cam.fx * x * v_mean2d(0) + cam.fy * y * v_mean2d(1)) * rz2 + v_depth);
   v_pc.z() += -cam.fx * rz2 * v_J(0, 0) - cam.fy * rz2 * v_J(1, 1);
@@ -229,16 +229,16 @@ inline void project_gaussian_vjp(const Camera<S>& cam, const Vector3<S>& mean,
   if (v_mean) *v_mean = W.transpose() * v_pc;
   if (!v_quat && !v_quat_tangent && !v_log_scale) return;
 
-  // Σ_c = W M Mᵀ Wᵀ, M = R diag(s): dL/dM = 2 Wᵀ (dL/dΣ_c) W M.  (S24)
+  // Σ_c = W M Mᵀ Wᵀ, M = R diag(s): dL/dM = 2 Wᵀ (dL/dΣ_c) W M.  (R24)
   const Matrix3<S> v_Sigma = W.transpose() * v_Sigma_c * W;
   const Matrix3<S> M = st.Rq * st.scale.asDiagonal();
   const Matrix3<S> v_M = S(2) * v_Sigma * M;
-  if (v_log_scale) {  // (S25): dL/dlog s_j = s_j Σ_i v_M(i,j) R(i,j)
+  if (v_log_scale) {  // (R25): dL/dlog s_j = s_j Σ_i v_M(i,j) R(i,j)
     for (int j = 0; j < 3; ++j) (*v_log_scale)(j) = st.scale(j) * v_M.col(j).dot(st.Rq.col(j));
   }
   const Matrix3<S> v_R = v_M * st.scale.asDiagonal();
   const Vector4<S> v_qhat = rotmat_from_unit_wxyz_vjp(st.qhat, v_R);
-  if (v_quat)  // (S26): through q̂ = q/|q|
+  if (v_quat)  // (R26): through q̂ = q/|q|
     *v_quat = (v_qhat - st.qhat * st.qhat.dot(v_qhat)) / st.qnorm;
   if (v_quat_tangent) {
     const Quaternion<S> qh(st.qhat(0), st.qhat(1), st.qhat(2), st.qhat(3));

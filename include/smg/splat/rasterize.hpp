@@ -1,18 +1,18 @@
 // smg/splat/rasterize.hpp — per-tile front-to-back compositing and its analytic backward.
 //
 // One tile of W x W pixels composites its depth-sorted Gaussian list:
-//   sigma = ½ (a dx² + c dy²) + b dx dy,  dx = mean_x - px, dy = mean_y - py        (S9)
-//   alpha = min(alpha_max, o exp(-sigma)); skip when sigma < 0 or alpha < 1/255        (S10)
-//   if T (1 - alpha) <= 1e-4 the pixel is done and this Gaussian is NOT composited     (S11)
-//   C += alpha T c,  D += alpha T z,  T *= 1 - alpha                                   (S12)
+//   sigma = ½ (a dx² + c dy²) + b dx dy,  dx = mean_x - px, dy = mean_y - py        (R9)
+//   alpha = min(alpha_max, o exp(-sigma)); skip when sigma < 0 or alpha < 1/255        (R10)
+//   if T (1 - alpha) <= 1e-4 the pixel is done and this Gaussian is NOT composited     (R11)
+//   C += alpha T c,  D += alpha T z,  T *= 1 - alpha                                   (R12)
 // The loops run Gaussian-outer, pixel-inner with the pixel state in structure-of-arrays
 // form. A Gaussian visits, row by row, only the groups of 4 (8 with AVX) pixels that meet its
 // ellipse {sigma <= ln(255 o) + 1e-3}, outside of which alpha < 1/255 for certain; the set
-// visited is a superset of the pixels that pass (S10), so the result is that of testing
+// visited is a superset of the pixels that pass (R10), so the result is that of testing
 // every pixel of the tile, as gsplat does. Every per-pixel decision is a branch-free select
 // so that the lane loops vectorise. The backward walks the same lists front to back,
 // recomputing T as the forward did, and obtains the "behind" sums from the stored totals
-// (S16)-(S19). Per-(Gaussian, tile) partial gradients are written to their own row, so the
+// (R16)-(R19). Per-(Gaussian, tile) partial gradients are written to their own row, so the
 // reduction over tiles (render.hpp) is deterministic. Internal to render.hpp.
 #pragma once
 
@@ -91,7 +91,7 @@ inline S clamp_magnitude(S x, typename Bits<S>::U lim_bits) {
   return x;
 }
 
-// exp(-x) for the alpha of (S10), vectorisable (a libm call is not): |x| clamped to 87
+// exp(-x) for the alpha of (R10), vectorisable (a libm call is not): |x| clamped to 87
 // (float) / 700 (double), Cody-Waite reduction x = n ln2 + r with n rounded by the 1.5·2^p
 // trick, a polynomial for e^r on |r| <= ln2/2 (Cephes' expf coefficients in float, Taylor
 // through r^13 in double), 2^n assembled from n's bits. Relative error <= 1.4 ulp (float),
@@ -149,7 +149,7 @@ inline double exp_neg(double x) {
   return p * scale;
 }
 
-// sigma of (S9) with the per-row terms c dy², b dy hoisted; forward and backward call this one
+// sigma of (R9) with the per-row terms c dy², b dy hoisted; forward and backward call this one
 // function so that they make the same skip decisions.
 template <class S>
 inline S pixel_sigma(S a, S cdy2, S bdy, S dx) {
@@ -238,11 +238,11 @@ inline void forward_group(const S* __restrict px, S mx, S a, S cdy2, S bdy, S o,
     const S Tl = Tr[l], Td = Tdr[l], lo = lastr[l];
     const S next_T = Tl * (S(1) - alpha);
     const S wv = alpha * Tl;
-    const bool valid = (Tl > S(0)) & (sigma >= S(0)) & (alpha >= thr);  // (S10)
-    const bool stop = valid & (next_T <= tmin);                          // (S11)
+    const bool valid = (Tl > S(0)) & (sigma >= S(0)) & (alpha >= thr);  // (R10)
+    const bool stop = valid & (next_T <= tmin);                          // (R11)
     const bool comp = valid & !stop;
     const S w = select(comp, wv, S(0));
-    Tr[l] = select(comp, next_T, select(stop, S(0), Tl));               // (S12)
+    Tr[l] = select(comp, next_T, select(stop, S(0), Tl));               // (R12)
     Tdr[l] = select(stop, Tl, Td);
     lastr[l] = select(comp, irel, lo);
     acczr[l] += w * z;
@@ -386,7 +386,7 @@ inline void backward_group(const S* __restrict px, S mx, S dy, S a, S cdy2, S bd
     }
     const S Pn = Pl + w * h;
     const S one_minus = S(1) - alpha;
-    // dL/dalpha_i = T_i h_i - (K - P_i) / (1 - alpha_i)   (S18)
+    // dL/dalpha_i = T_i h_i - (K - P_i) / (1 - alpha_i)   (R18)
     const S v_alpha = h * Tl - (Kl - Pn) / one_minus;
     const S wm = select(valid, w, S(0));
     lg_z[l] += wm * gzl;
@@ -395,7 +395,7 @@ inline void backward_group(const S* __restrict px, S mx, S dy, S a, S cdy2, S bd
     } else {
       wmbuf[l] = wm;
     }
-    // The clamp's flat side passes no gradient to opacity or the footprint.  (S19)
+    // The clamp's flat side passes no gradient to opacity or the footprint.  (R19)
     const bool free = valid & (alpha_raw <= alpha_max);
     const S vs = select(free, -alpha_raw * v_alpha, S(0));  // dL/dsigma
     lg_o[l] += select(free, vis * v_alpha, S(0));
@@ -437,7 +437,7 @@ void backward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index
 
   S* T = scratch;
   S* P = T + WW;         // running Σ_{j <= i} w_j h_j
-  S* K = P + WW;         // per-pixel constant of (S18)
+  S* K = P + WW;         // per-pixel constant of (R18)
   S* gz = K + WW;        // dL/dD_raw
   S* last = gz + WW;     // relative list position of the last composited Gaussian, -1
   S* hbuf = last + WW;   // h of the current row (dynamic C only)
@@ -472,7 +472,7 @@ void backward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index
       gzp = gE / Afl;
       if (A > kDepthAlphaFloor<S>) gA -= gE * (Draw / Afl) / A;
     }
-    // K = g·fg + gz D + T_N (g·bg - gA)   (S18)
+    // K = g·fg + gz D + T_N (g·bg - gA)   (R18)
     S Kp = gzp * Draw;
     S gbg = S(0);
     for (int k = 0; k < nc; ++k) {
@@ -543,7 +543,7 @@ void backward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index
     }
     S* out = ws.isect_grad.data() + ws.tile_src[i] * gstride;
     const S smx = group_sum(lg), smy = group_sum(lg + kGroup);
-    // sigma = ½ (a dx² + c dy²) + b dx dy with dx = mean_x - px: (S17)
+    // sigma = ½ (a dx² + c dy²) + b dx dy with dx = mean_x - px: (R17)
     out[kGMx] = a * smx + b * smy;
     out[kGMy] = b * smx + c * smy;
     out[kGConA] = S(0.5) * group_sum(lg + 2 * kGroup);

@@ -6,8 +6,8 @@
 //                      grads);
 //
 // C, the colour channel count, is a template parameter (Eigen::Dynamic = any, read from
-// params). gsplat's semantics and constants (docs/math/splat.md): projection (S1)-(S8),
-// compositing (S9)-(S13), colour from SH (S14)-(S15), backward (S16)-(S26).
+// params). gsplat's semantics and constants (docs/math/splat.md): projection (R1)-(R8),
+// compositing (R9)-(R13), colour from SH (R14)-(R15), backward (R16)-(R26).
 // Multithreaded over Gaussians and over tiles through smg::parallel_for; every output,
 // gradients included, is bit-identical for any thread count (per-(Gaussian, tile) partial
 // gradients are summed per Gaussian in a fixed order).
@@ -103,7 +103,7 @@ void project_all(const GaussianParams<S>& params, const Camera<S>& cam,
           Cull cull = project_gaussian<S>(cam, mean, params.quats.row(g), params.log_scales.row(g),
                                           set.eps2d, set.radius_sigmas, &pg);
           const S o = sigmoid(params.opacity_logits(g, 0));
-          // alpha <= o: below 1/255 no pixel can pass (S10); gsplat >= 1.5 culls these too.
+          // alpha <= o: below 1/255 no pixel can pass (R10); gsplat >= 1.5 culls these too.
           if (cull == Cull::none && !(o >= kAlphaMin<S>)) cull = Cull::transparent;
           ws.cull[g] = static_cast<std::uint8_t>(cull);
           if (cull != Cull::none) continue;
@@ -192,7 +192,7 @@ void rasterize_backward_all(const SplatSettings<S>& set, RenderWorkspace<S>& ws,
 
 // Renders the Gaussians: image [H][W][C] = Σ w_i c_i + T_N background, alpha = 1 - T_N,
 // depth = Σ w_i z_i / max(alpha, 1e-10) (alpha and depth optional), with gsplat's
-// projection, tiling and compositing (docs/math/splat.md (S1)-(S15)). ws keeps what
+// projection, tiling and compositing (docs/math/splat.md (R1)-(R15)). ws keeps what
 // render_backward needs and exposes per-Gaussian radii, means2d, depths and cull reasons.
 // Preconditions: validate_render(params, camera, settings, images, C) is ok.
 template <int C, class S>
@@ -241,7 +241,7 @@ void render_forward(const GaussianParams<S>& params, const Camera<S>& camera,
 // optional) after render_forward with the same params, camera and settings on ws. Writes
 // every non-null view of grads (overwrites): means, raw quaternion and right-tangent rotation
 // gradients, log-scales, opacity logits, colours or SH coefficients, 2D means. Culled
-// Gaussians get zeros. (S16)-(S26)
+// Gaussians get zeros. (R16)-(R26)
 // Preconditions: validate_render_backward(params, camera, settings, ws, grads_in, grads).
 template <int C, class S>
 void render_backward(const GaussianParams<S>& params, const Camera<S>& camera,
@@ -279,7 +279,7 @@ void render_backward(const GaussianParams<S>& params, const Camera<S>& camera,
             if (grads.means2d.data()) grads.means2d.row(g).setZero();
             continue;
           }
-          // Σ over the Gaussian's tiles, in its row-major tile order.  (S16)
+          // Σ over the Gaussian's tiles, in its row-major tile order.  (R16)
           const std::int32_t* r = ws.rect.data() + 4 * g;
           const Index n = Index(r[2] - r[0]) * (r[3] - r[1]);
           S acc[detail::kGradFields] = {};

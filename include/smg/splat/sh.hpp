@@ -3,7 +3,7 @@
 // The basis is the one of 3D Gaussian splatting and gsplat (coefficient index b = l² + l + m,
 // the constants of the original 3DGS code). Colour = max(Σ_b Y_b(d) coeff_b + 0.5, 0) with d
 // the normalised direction from the camera centre to the Gaussian mean, as gsplat's
-// rasterization() does.  Equations (S14)-(S15) in docs/math/splat.md.
+// rasterization() does.  Equations (R14)-(R15) in docs/math/splat.md.
 #pragma once
 
 #include "smg/core/config.hpp"
@@ -29,7 +29,7 @@ constexpr double C3[7] = {-0.5900435899266435, 2.890611442640554, -0.45704579946
 
 // Y_b(d) for b < (degree+1)², d a unit vector; optionally the 3 partial derivatives of each
 // basis function with respect to (x, y, z) (dY[3 b + i]), as polynomials in d (the caller
-// chains through the normalisation). (S14)
+// chains through the normalisation). (R14)
 template <class S>
 inline void sh_basis(int degree, const Vector3<S>& d, S* Y, S* dY = nullptr) {
   using namespace sh_detail;
@@ -86,7 +86,7 @@ inline void sh_basis(int degree, const Vector3<S>& d, S* Y, S* dY = nullptr) {
 
 // View-dependent colour of one Gaussian: out[k] = max(Σ_b Y_b(d̂) coeffs[b*channels + k] + 0.5, 0)
 // with d̂ = dir / |dir| (dir = mean - camera centre, any nonzero length; a zero direction
-// evaluates the degree-0 term only). coeffs is [K][channels], K = (degree+1)². (S15)
+// evaluates the degree-0 term only). coeffs is [K][channels], K = (degree+1)². (R15)
 template <class S>
 inline void sh_to_color(int degree, int channels, const Vector3<S>& dir, const S* coeffs, S* out) {
   S Y[16];

@@ -1,7 +1,7 @@
 // smg/splat/tiling.hpp — tile rectangles, the global depth sort, and per-tile lists.
 //
 // gsplat's isect_tiles semantics: a visible Gaussian with radius r covers the tiles
-// [floor(mx/ts - r/ts), ceil(mx/ts + r/ts)) x [same in y], clamped to the grid.  (S8)
+// [floor(mx/ts - r/ts), ceil(mx/ts + r/ts)) x [same in y], clamped to the grid.  (R8)
 // Lists are ordered by (depth, Gaussian index) — what gsplat's (tile, depth) radix sort of
 // index-ordered intersections yields. Here the visible Gaussians are sorted once (stable LSD
 // radix sort of the depth's bit pattern; depths are > 0 so the bits order as the values),
@@ -23,7 +23,7 @@
 
 namespace smg::splat::detail {
 
-// Tile rectangle of a Gaussian (S8). Writes [x0, x1) x [y0, y1), possibly empty.
+// Tile rectangle of a Gaussian (R8). Writes [x0, x1) x [y0, y1), possibly empty.
 template <class S>
 inline void tile_rect(S mx, S my, S radius, int tile_size, int tiles_x, int tiles_y,
                       std::int32_t* rect) {
