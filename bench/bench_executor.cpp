@@ -47,9 +47,10 @@ void BM_after_openmp(benchmark::State& state) {
   const Index T = s.T, N = s.N;
   std::vector<float> gx(T * N * 3), gr(T * N * 3), buf(1 << 20, 1.0f);
   smg::EnergyWorkspace<float> ws;
-  smg::ParallelOptions po(2);
+  smg::ParallelOptions po;
+  po.threads = 2;
 #ifdef _OPENMP
-  if (mode == 1) po.executor = smg::openmp_executor();
+  const smg::ScopedExecutor scoped(mode == 1 ? smg::openmp_executor() : smg::Executor{});
 #else
   if (mode == 1) {
     state.SkipWithError("built without OpenMP");

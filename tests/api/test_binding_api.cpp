@@ -249,15 +249,26 @@ TEST_CASE("a caller's executor gives the same bits as smg's pool for any thread 
     CAPTURE(threads);
     CHECK(run(smg::ParallelOptions{threads}) == ref);
     g_executor_calls = 0;
-    CHECK(run(smg::ParallelOptions{threads, 0, smg::Executor{reverse_executor, nullptr}}) == ref);
+    {
+      const smg::ScopedExecutor scoped({reverse_executor, nullptr});
+      CHECK(run(smg::ParallelOptions{threads}) == ref);
+    }
     CHECK(g_executor_calls > 0);
-    CHECK(run(smg::ParallelOptions{threads, 0, smg::Executor{inline_executor, nullptr}}) == ref);
+    const smg::ScopedExecutor scoped({inline_executor, nullptr});
+    CHECK(run(smg::ParallelOptions{threads}) == ref);
   }
-  // The process-wide default executor is used when a call names none.
+  // The process-wide executor applies unless a ScopedExecutor on this thread says otherwise;
+  // a scoped Executor{} means smg's own pool.
   smg::set_executor(smg::Executor{reverse_executor, nullptr});
   g_executor_calls = 0;
   CHECK(run(smg::ParallelOptions{3}) == ref);
   CHECK(g_executor_calls > 0);
+  {
+    const smg::ScopedExecutor own_pool(smg::Executor{});
+    g_executor_calls = 0;
+    CHECK(run(smg::ParallelOptions{3}) == ref);
+    CHECK(g_executor_calls == 0);
+  }
   smg::set_executor({});
   g_executor_calls = 0;
   CHECK(run(smg::ParallelOptions{3}) == ref);
@@ -267,12 +278,13 @@ TEST_CASE("a caller's executor gives the same bits as smg's pool for any thread 
 TEST_CASE("an exception inside a chunk run by a caller's executor reaches the caller") {
   int seen = 0;
   const auto run = [&] {
+    const smg::ScopedExecutor scoped({reverse_executor, nullptr});
     smg::parallel_for_chunks(
         100,
         [&](Index c, Index, Index) {
           if (c == 37) throw std::runtime_error("chunk 37");
         },
-        smg::ParallelOptions{4, 1, smg::Executor{reverse_executor, nullptr}});
+        smg::ParallelOptions{4, 1});
   };
   try {
     run();

@@ -48,13 +48,8 @@ struct Executor {
 };
 
 struct ParallelOptions {
-  int threads = 0;    // 0: the process default (set_num_threads)
-  Index grain = 0;    // items per chunk; 0: automatic, a function of n only
-  Executor executor;  // empty: the process default (set_executor), else smg's std::thread pool
-
-  // ParallelOptions{threads, grain} keeps working (and warning-free) with the executor member.
-  ParallelOptions(int threads_ = 0, Index grain_ = 0, Executor executor_ = {})  // NOLINT
-      : threads(threads_), grain(grain_), executor(executor_) {}
+  int threads = 0;  // 0: the process default (set_num_threads)
+  Index grain = 0;  // items per chunk; 0: automatic, a function of n only
 };
 
 namespace detail {
@@ -65,6 +60,14 @@ inline std::atomic<int>& default_threads_storage() {
 inline Executor& default_executor_storage() {
   static Executor e;
   return e;
+}
+struct ScopedExecutorState {
+  bool set = false;
+  Executor executor;
+};
+inline ScopedExecutorState& scoped_executor_storage() {
+  thread_local ScopedExecutorState state;
+  return state;
 }
 inline bool& in_parallel_region() {
   thread_local bool flag = false;
@@ -158,11 +161,33 @@ class ThreadPool {
 // Sets the process-wide default thread count (0 = hardware concurrency).
 inline void set_num_threads(int n) { detail::default_threads_storage() = std::max(0, n); }
 
-// Sets the process-wide default executor used by every parallel loop whose ParallelOptions has
-// none; Executor{} restores smg's own std::thread pool. Set it once, before loops run (it is
-// not synchronised with loops running at the same time).
+// Sets the process-wide executor of every parallel loop (unless a ScopedExecutor on the calling
+// thread says otherwise); Executor{} restores smg's own std::thread pool. Set it once, before
+// loops run (it is not synchronised with loops running at the same time).
 inline void set_executor(Executor executor) { detail::default_executor_storage() = executor; }
-inline Executor executor() { return detail::default_executor_storage(); }
+
+// The executor a loop started on this thread uses: the innermost ScopedExecutor's, else the
+// process-wide one (empty: smg's std::thread pool).
+inline Executor current_executor() {
+  const detail::ScopedExecutorState& scoped = detail::scoped_executor_storage();
+  return scoped.set ? scoped.executor : detail::default_executor_storage();
+}
+
+// While it lives, the loops started on this thread run on `executor` (Executor{}: on smg's own
+// pool, whatever set_executor says); the previous choice comes back when it goes out of scope.
+// A per-caller choice that leaves the process-wide setting alone.
+class ScopedExecutor {
+ public:
+  explicit ScopedExecutor(Executor executor) : previous_(detail::scoped_executor_storage()) {
+    detail::scoped_executor_storage() = {true, executor};
+  }
+  ~ScopedExecutor() { detail::scoped_executor_storage() = previous_; }
+  ScopedExecutor(const ScopedExecutor&) = delete;
+  ScopedExecutor& operator=(const ScopedExecutor&) = delete;
+
+ private:
+  detail::ScopedExecutorState previous_;
+};
 
 #ifdef _OPENMP
 // An executor over OpenMP (compile with -fopenmp): a process whose OpenMP threads are busy or
@@ -238,7 +263,7 @@ void parallel_for_chunks(Index n, F&& f, ParallelOptions options = {}) {
       }
     }
   };
-  const Executor ex = options.executor ? options.executor : detail::default_executor_storage();
+  const Executor ex = current_executor();
   if (ex) {
     // The caller's pool runs the chunks; the chunking above did not depend on it.
     struct Job {

@@ -32,9 +32,6 @@
 #include "smg/splat/workspace.hpp"
 
 namespace smg::splat {
-// Calls the rasteriser, whose lane groups follow __AVX__: an ISA-specific namespace
-// (smg/core/config.hpp).
-inline namespace SMG_ISA_NAMESPACE {
 
 // Everything render_forward relies on: gaussians (validate_gaussians), camera, settings and
 // the output images. channels = C of the instantiation, or -1 for Eigen::Dynamic.
@@ -74,6 +71,9 @@ Status validate_render_backward(const GaussianParams<S>& params, const Camera<S>
 }
 
 namespace detail {
+// These call the rasteriser, whose lane groups follow __AVX__: an ISA-specific namespace
+// (smg/core/config.hpp), as have render_forward and render_backward below.
+inline namespace SMG_ISA_NAMESPACE {
 
 template <class S>
 inline S sigmoid(S x) {
@@ -188,7 +188,10 @@ void rasterize_backward_all(const SplatSettings<S>& set, RenderWorkspace<S>& ws,
       p);
 }
 
+}  // inline namespace SMG_ISA_NAMESPACE
 }  // namespace detail
+
+inline namespace SMG_ISA_NAMESPACE {
 
 // Renders the Gaussians: image [H][W][C] = Σ w_i c_i + T_N background, alpha = 1 - T_N,
 // depth = Σ w_i z_i / max(alpha, 1e-10) (alpha and depth optional), with gsplat's
@@ -332,4 +335,5 @@ void render_backward(const GaussianParams<S>& params, const Camera<S>& camera,
 }
 
 }  // inline namespace SMG_ISA_NAMESPACE
+
 }  // namespace smg::splat
