@@ -7,15 +7,11 @@
 #include <stdexcept>
 #include <string>
 
+#include "trainer/util.hpp"
+
 namespace trainer {
 
 namespace {
-
-std::size_t sz(long long v) { return static_cast<std::size_t>(v); }
-
-void check(const smg::Status& s, const char* where) {
-  if (!s) throw std::logic_error(std::string(where) + ": " + s.message());
-}
 
 template <class S>
 void keep_rows(std::vector<S>& v, const std::vector<std::uint8_t>& keep, std::size_t width) {

@@ -9,12 +9,11 @@
 
 #include "smg/core/quaternion.hpp"
 #include "trainer/random.hpp"
+#include "trainer/util.hpp"
 
 namespace trainer {
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // Random streams of the scene generator (random.hpp: derive_seed).
 enum : std::uint64_t { kStreamLayout = 1, kStreamTextures = 2 };
