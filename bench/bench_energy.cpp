@@ -38,12 +38,9 @@ constexpr Index kN = 5000, kT = 100, kK = 16;
 Scene<double> make_scene(Index T, Index N) {
   smg::test::Rng rng(2024);
   Scene<double> s;
-  s.T = T;
-  s.N = N;
-  s.x.resize(static_cast<std::size_t>(T * N * 3));
-  s.q.resize(static_cast<std::size_t>(T * N * 4));
-  s.v.assign(static_cast<std::size_t>(T * N), 1);
-  s.c.assign(static_cast<std::size_t>(T * N), 1.0);
+  s.resize(T, N);
+  s.v.assign(s.v.size(), 1);
+  s.c.assign(s.c.size(), 1.0);
   const int bodies = 12;
   std::vector<Vector3<double>> centre, spin, vel;
   for (int b = 0; b < bodies; ++b) {
@@ -196,41 +193,36 @@ void BM_confidence(benchmark::State& state) {
 }
 
 // ---- C-ARAP and plain ARAP (kGradient: energy and gradients w.r.t. positions and rotations) ----
-// One row: energy(s, gx, gr, ws) is one call (the gradient views are empty without kGradient);
-// ref, ref_x and ref_r are the double results.
-template <class S, bool kGradient, class Energy>
-void rigidity_row(benchmark::State& state, Energy&& energy, double ref, const std::vector<double>& ref_x,
-                  const std::vector<double>& ref_r) {
+// One row each; kCarap picks the energy, its double results are the references.
+template <class S, bool kGradient, bool kCarap>
+void rigidity_row(benchmark::State& state) {
   const Scene<S>& s = scene_as<S>();
   std::vector<S> gx(s.x.size()), gr(s.x.size());
   smg::EnergyWorkspace<S> ws;
   const double e = time_energy(state, [&] {
-    return double(energy(s, grad_view(gx, s, kGradient), tangent_view(gr, s, kGradient), &ws));
+    const smg::PositionsView<S> vx = grad_view(gx, s, kGradient);
+    const smg::TangentsView<S> vr = tangent_view(gr, s, kGradient);
+    if constexpr (kCarap)
+      return double(smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(), carap_options(), vx,
+                                  vr, &ws, threads(state)));
+    else
+      return double(smg::arap<S>(s.positions(), s.rotations(), s.graph(), {}, vx, vr, &ws, threads(state)));
   });
+  const Reference& r = reference();
+  const double ref = kCarap ? r.carap : r.arap;
+  const std::vector<double>& ref_x = kCarap ? r.carap_x : r.arap_x;
+  const std::vector<double>& ref_r = kCarap ? r.carap_r : r.arap_r;
   set_err_vs_double<S>(state, [&] {
     return kGradient ? relative_error(gx, ref_x, gr, ref_r) : std::abs(e - ref) / ref;
   });
 }
 template <class S, bool kGradient>
 void BM_carap(benchmark::State& state) {
-  const Reference& r = reference();
-  rigidity_row<S, kGradient>(
-      state,
-      [&](const Scene<S>& s, smg::PositionsView<S> gx, smg::TangentsView<S> gr, smg::EnergyWorkspace<S>* ws) {
-        return smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(), carap_options(), gx, gr, ws,
-                             threads(state));
-      },
-      r.carap, r.carap_x, r.carap_r);
+  rigidity_row<S, kGradient, true>(state);
 }
 template <class S, bool kGradient>
 void BM_arap(benchmark::State& state) {
-  const Reference& r = reference();
-  rigidity_row<S, kGradient>(
-      state,
-      [&](const Scene<S>& s, smg::PositionsView<S> gx, smg::TangentsView<S> gr, smg::EnergyWorkspace<S>* ws) {
-        return smg::arap<S>(s.positions(), s.rotations(), s.graph(), {}, gx, gr, ws, threads(state));
-      },
-      r.arap, r.arap_x, r.arap_r);
+  rigidity_row<S, kGradient, false>(state);
 }
 
 // ---- LRM: 0 energy only, 1 exact gradient, 2 gradient with ω held constant ----
@@ -276,11 +268,7 @@ constexpr Index kResFrames = 10;
 // The scene's first `frames` frames.
 Scene<double> first_frames(Index frames) {
   Scene<double> r = scene();
-  r.T = frames;
-  r.x.resize(static_cast<std::size_t>(frames * kN * 3));
-  r.q.resize(static_cast<std::size_t>(frames * kN * 4));
-  r.v.resize(static_cast<std::size_t>(frames * kN));
-  r.c.resize(static_cast<std::size_t>(frames * kN));
+  r.resize(frames, kN);
   return r;
 }
 template <class S>
@@ -441,52 +429,48 @@ void lrm_autodiff(const Scene<double>& s, std::vector<double>& gx) {
   }
 }
 
-void BM_autodiff_carap(benchmark::State& state) {
-  const Scene<double>& s = ad_scene();
-  std::vector<double> gx(s.x.size()), gr(s.x.size());
+// An autodiff row: times autodiff() (AutoDiffScalar gradients into gx), then ad_ratio against
+// analytic(one_thread, ws), the analytic kernel on the same sub-problem (best of 5).
+template <class AutoDiff, class Analytic>
+void autodiff_row(benchmark::State& state, const std::vector<double>& gx, AutoDiff&& autodiff,
+                  Analytic&& analytic) {
   for (auto _ : state) {
-    carap_autodiff(s, gx, gr);
+    autodiff();
     benchmark::DoNotOptimize(gx.data());
   }
   set_ms(state);
-  std::vector<double> ax(s.x.size(), 0.0), ar(s.x.size(), 0.0);
   smg::ParallelOptions one;
   one.threads = 1;
   smg::EnergyWorkspace<double> ws;
-  const double analytic = seconds_of(
-      [&] {
+  const double analytic_seconds = seconds_of([&] { analytic(one, ws); }, 5);
+  const double ad = seconds_of(autodiff, 1);
+  state.counters["ad_ratio"] = ad / analytic_seconds;
+}
+void BM_autodiff_carap(benchmark::State& state) {
+  const Scene<double>& s = ad_scene();
+  std::vector<double> gx(s.x.size()), gr(s.x.size());
+  std::vector<double> ax(s.x.size(), 0.0), ar(s.x.size(), 0.0);
+  autodiff_row(
+      state, gx, [&] { carap_autodiff(s, gx, gr); },
+      [&](smg::ParallelOptions one, smg::EnergyWorkspace<double>& ws) {
         std::fill(ax.begin(), ax.end(), 0.0);
         std::fill(ar.begin(), ar.end(), 0.0);
-        smg::carap<double>(s.positions(), s.rotations(), s.confidence(), s.graph(),
-                           carap_options(), {ax.data(), s.T, s.N}, {ar.data(), s.T, s.N}, &ws,
-                           one);
-      },
-      5);
-  const double ad = seconds_of([&] { carap_autodiff(s, gx, gr); }, 1);
-  state.counters["ad_ratio"] = ad / analytic;
+        smg::carap<double>(s.positions(), s.rotations(), s.confidence(), s.graph(), carap_options(),
+                           {ax.data(), s.T, s.N}, {ar.data(), s.T, s.N}, &ws, one);
+      });
   state.counters["err_vs_analytic"] = relative_error(gx, ax, gr, ar);
 }
 void BM_autodiff_lrm(benchmark::State& state) {
   const Scene<double>& s = ad_scene();
   std::vector<double> gx(s.x.size());
-  for (auto _ : state) {
-    lrm_autodiff(s, gx);
-    benchmark::DoNotOptimize(gx.data());
-  }
-  set_ms(state);
   std::vector<double> ax(s.x.size(), 0.0);
-  smg::ParallelOptions one;
-  one.threads = 1;
-  smg::EnergyWorkspace<double> ws;
-  const double analytic = seconds_of(
-      [&] {
+  autodiff_row(
+      state, gx, [&] { lrm_autodiff(s, gx); },
+      [&](smg::ParallelOptions one, smg::EnergyWorkspace<double>& ws) {
         std::fill(ax.begin(), ax.end(), 0.0);
-        smg::lrm<double>(s.positions(), s.confidence(), s.graph(), lrm_options(),
-                         {ax.data(), s.T, s.N}, &ws, one);
-      },
-      5);
-  const double ad = seconds_of([&] { lrm_autodiff(s, gx); }, 1);
-  state.counters["ad_ratio"] = ad / analytic;
+        smg::lrm<double>(s.positions(), s.confidence(), s.graph(), lrm_options(), {ax.data(), s.T, s.N}, &ws,
+                         one);
+      });
   state.counters["err_vs_analytic"] = relative_error(gx, ax);
 }
 

@@ -19,7 +19,6 @@ using smg::Quaternion;
 using smg::Vector3;
 using smg::test::Rng;
 using smg::test::Scene;
-using smg::test::relative_error;
 
 namespace {
 
@@ -119,8 +118,8 @@ TEST_CASE("C-ARAP gradient matches central finite differences") {
     CAPTURE(T);
     const Grad a = run_carap(s, o, true);
     const Grad f = finite_difference(s, o, true);
-    CHECK(relative_error(a.x, f.x) < 1e-7);
-    CHECK(relative_error(a.r, f.r) < 1e-7);
+    CHECK(smg::test::relative_error(a.x, f.x) < 1e-7);
+    CHECK(smg::test::relative_error(a.r, f.r) < 1e-7);
   }
 }
 
@@ -150,8 +149,8 @@ TEST_CASE("C-ARAP gradient with long gaps and many blocks matches finite differe
   o.gaps = {{2, 1.0}, {9, 0.7}, {20, 1.5}};
   const Grad a = run_carap(s, o, true);
   const Grad f = finite_difference(s, o, true);
-  CHECK(relative_error(a.x, f.x) < 1e-7);
-  CHECK(relative_error(a.r, f.r) < 1e-7);
+  CHECK(smg::test::relative_error(a.x, f.x) < 1e-7);
+  CHECK(smg::test::relative_error(a.r, f.r) < 1e-7);
 }
 
 TEST_CASE("C-ARAP is zero for a rigidly moving scene") {
@@ -187,8 +186,8 @@ TEST_CASE("C-ARAP and its gradients are invariant to a global rigid transform") 
     rotated[k + 1] = g(1);
     rotated[k + 2] = g(2);
   }
-  CHECK(relative_error(b.x, rotated) < 1e-11);
-  CHECK(relative_error(b.r, a.r) < 1e-11);
+  CHECK(smg::test::relative_error(b.x, rotated) < 1e-11);
+  CHECK(smg::test::relative_error(b.r, a.r) < 1e-11);
 }
 
 TEST_CASE("C-ARAP: all-zero confidences fall back to the alpha floor; ARAP is c = 1, alpha = 1") {
@@ -247,8 +246,8 @@ TEST_CASE("C-ARAP: float agrees with double") {
   const double ef = smg::carap<float>(f.positions(), f.rotations(), f.confidence(), f.graph(), o,
                                       {gx.data(), s.T, s.N}, {gr.data(), s.T, s.N});
   CHECK(std::abs(ef - d.energy) <= 1e-5 * d.energy);
-  CHECK(relative_error(std::vector<double>(gx.begin(), gx.end()), d.x) < 1e-4);
-  CHECK(relative_error(std::vector<double>(gr.begin(), gr.end()), d.r) < 1e-4);
+  CHECK(smg::test::relative_error(std::vector<double>(gx.begin(), gx.end()), d.x) < 1e-4);
+  CHECK(smg::test::relative_error(std::vector<double>(gr.begin(), gr.end()), d.r) < 1e-4);
 }
 
 TEST_CASE("C-ARAP: validation") {

@@ -19,7 +19,6 @@ using smg::Quaternion;
 using smg::Vector3;
 using smg::test::Rng;
 using smg::test::Scene;
-using smg::test::relative_error;
 
 TEST_CASE("C-ARAP residuals: sum of squares, 2 J^T r and the block count") {
   Rng rng(701);
@@ -47,8 +46,8 @@ TEST_CASE("C-ARAP residuals: sum of squares, 2 J^T r and the block count") {
       true, par);
   CHECK(blocks == smg::carap_residual_count(s.graph(), s.T, o));
   CHECK(sum == doctest::Approx(e).epsilon(1e-12));
-  CHECK(relative_error(hx, gx) < 1e-12);
-  CHECK(relative_error(hr, gr) < 1e-12);
+  CHECK(smg::test::relative_error(hx, gx) < 1e-12);
+  CHECK(smg::test::relative_error(hr, gr) < 1e-12);
 }
 
 TEST_CASE("C-ARAP residual blocks: Jacobians match central finite differences") {
@@ -133,7 +132,7 @@ TEST_CASE("LRM residuals: block energies, IRLS sum of squares and 2 J_f^T f") {
       if (delta > 1) CHECK(sum_f == doctest::Approx(e).epsilon(1e-12));  // quadratic zone
       // In the linear zone ½ ψ r² = ½ δ r < δ (r − δ/2): the IRLS sum understates the value...
       if (delta < 1) CHECK(sum_f < e);
-      CHECK(relative_error(h, g) < 1e-10);  // ...but its gradient is exact
+      CHECK(smg::test::relative_error(h, g) < 1e-10);  // ...but its gradient is exact
     }
 }
 
