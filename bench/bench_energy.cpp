@@ -22,6 +22,7 @@
 #include "energy/reference_energies.hpp"
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
+#include "support/finite_diff.hpp"
 
 namespace {
 
@@ -37,12 +38,9 @@ constexpr Index kN = 5000, kT = 100, kK = 16;
 Scene<double> make_scene(Index T, Index N) {
   smg::test::Rng rng(2024);
   Scene<double> s;
-  s.T = T;
-  s.N = N;
-  s.x.resize(static_cast<std::size_t>(T * N * 3));
-  s.q.resize(static_cast<std::size_t>(T * N * 4));
-  s.v.assign(static_cast<std::size_t>(T * N), 1);
-  s.c.assign(static_cast<std::size_t>(T * N), 1.0);
+  s.resize(T, N);
+  s.v.assign(s.v.size(), 1);
+  s.c.assign(s.c.size(), 1.0);
   const int bodies = 12;
   std::vector<Vector3<double>> centre, spin, vel;
   for (int b = 0; b < bodies; ++b) {
@@ -122,26 +120,17 @@ const Reference& reference() {
   return r;
 }
 
+// ‖a − b‖ / ‖b‖ (tests/support/finite_diff.hpp); over two gradients at once, positions and
+// rotations, as one vector.
+using smg::test::relative_error;
 template <class A>
-double rel_error(const std::vector<A>& a, const std::vector<double>& b) {
-  double num = 0, den = 0;
-  for (std::size_t k = 0; k < b.size(); ++k) {
-    const double d = double(a[k]) - b[k];
-    num += d * d;
-    den += b[k] * b[k];
-  }
-  return std::sqrt(num) / std::max(std::sqrt(den), 1e-300);
-}
-template <class A>
-double rel_error2(const std::vector<A>& a1, const std::vector<double>& b1,
-                  const std::vector<A>& a2, const std::vector<double>& b2) {
-  double num = 0, den = 0;
-  for (std::size_t k = 0; k < b1.size(); ++k) {
-    num += (double(a1[k]) - b1[k]) * (double(a1[k]) - b1[k]) +
-           (double(a2[k]) - b2[k]) * (double(a2[k]) - b2[k]);
-    den += b1[k] * b1[k] + b2[k] * b2[k];
-  }
-  return std::sqrt(num) / std::max(std::sqrt(den), 1e-300);
+double relative_error(const std::vector<A>& a1, const std::vector<double>& b1, const std::vector<A>& a2,
+                      const std::vector<double>& b2) {
+  std::vector<A> a(a1);
+  a.insert(a.end(), a2.begin(), a2.end());
+  std::vector<double> b(b1);
+  b.insert(b.end(), b2.begin(), b2.end());
+  return relative_error(a, b);
 }
 
 smg::ParallelOptions threads(const benchmark::State& state) {
@@ -159,6 +148,35 @@ constexpr bool is_double() {
   return sizeof(S) == sizeof(double);
 }
 
+// The body every energy row shares: times `call()` (one evaluation, returning its energy), sets
+// ms, and returns the energy of the last call.
+template <class Call>
+double time_energy(benchmark::State& state, Call&& call) {
+  double e = 0;
+  for (auto _ : state) {
+    e = call();
+    benchmark::DoNotOptimize(e);
+  }
+  set_ms(state);
+  return e;
+}
+// err_vs_double: error() for float rows (evaluated only there), 0 for double.
+template <class S, class Error>
+void set_err_vs_double(benchmark::State& state, Error&& error) {
+  state.counters["err_vs_double"] = is_double<S>() ? 0.0 : error();
+}
+// The gradient views of a row: `on` = false gives empty views (energy-only rows).
+template <class S>
+smg::PositionsView<S> grad_view(std::vector<S>& g, const Scene<S>& s, bool on) {
+  if (on) std::fill(g.begin(), g.end(), S(0));
+  return on ? smg::PositionsView<S>(g.data(), s.T, s.N) : smg::PositionsView<S>();
+}
+template <class S>
+smg::TangentsView<S> tangent_view(std::vector<S>& g, const Scene<S>& s, bool on) {
+  if (on) std::fill(g.begin(), g.end(), S(0));
+  return on ? smg::TangentsView<S>(g.data(), s.T, s.N) : smg::TangentsView<S>();
+}
+
 // ---- confidences ----
 template <class S>
 void BM_confidence(benchmark::State& state) {
@@ -171,63 +189,40 @@ void BM_confidence(benchmark::State& state) {
     benchmark::DoNotOptimize(c.data());
   }
   set_ms(state);
-  state.counters["err_vs_double"] = is_double<S>() ? 0.0 : rel_error(c, reference().conf);
+  set_err_vs_double<S>(state, [&] { return relative_error(c, reference().conf); });
 }
 
-// ---- C-ARAP (with_gradient: positions and rotations) ----
+// ---- C-ARAP and plain ARAP (kGradient: energy and gradients w.r.t. positions and rotations) ----
+// One row each; kCarap picks the energy, its double results are the references.
+template <class S, bool kGradient, bool kCarap>
+void rigidity_row(benchmark::State& state) {
+  const Scene<S>& s = scene_as<S>();
+  std::vector<S> gx(s.x.size()), gr(s.x.size());
+  smg::EnergyWorkspace<S> ws;
+  const double e = time_energy(state, [&] {
+    const smg::PositionsView<S> vx = grad_view(gx, s, kGradient);
+    const smg::TangentsView<S> vr = tangent_view(gr, s, kGradient);
+    if constexpr (kCarap)
+      return double(smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(), carap_options(), vx,
+                                  vr, &ws, threads(state)));
+    else
+      return double(smg::arap<S>(s.positions(), s.rotations(), s.graph(), {}, vx, vr, &ws, threads(state)));
+  });
+  const Reference& r = reference();
+  const double ref = kCarap ? r.carap : r.arap;
+  const std::vector<double>& ref_x = kCarap ? r.carap_x : r.arap_x;
+  const std::vector<double>& ref_r = kCarap ? r.carap_r : r.arap_r;
+  set_err_vs_double<S>(state, [&] {
+    return kGradient ? relative_error(gx, ref_x, gr, ref_r) : std::abs(e - ref) / ref;
+  });
+}
 template <class S, bool kGradient>
 void BM_carap(benchmark::State& state) {
-  const Scene<S>& s = scene_as<S>();
-  std::vector<S> gx(s.x.size()), gr(s.x.size());
-  smg::EnergyWorkspace<S> ws;
-  double e = 0;
-  for (auto _ : state) {
-    if (kGradient) {
-      std::fill(gx.begin(), gx.end(), S(0));
-      std::fill(gr.begin(), gr.end(), S(0));
-    }
-    e = double(smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(),
-                             carap_options(), kGradient ? smg::PositionsView<S>(gx.data(), s.T, s.N)
-                                                        : smg::PositionsView<S>(),
-                             kGradient ? smg::TangentsView<S>(gr.data(), s.T, s.N)
-                                       : smg::TangentsView<S>(),
-                             &ws, threads(state)));
-    benchmark::DoNotOptimize(e);
-  }
-  set_ms(state);
-  const Reference& r = reference();
-  state.counters["err_vs_double"] =
-      is_double<S>() ? 0.0
-                     : (kGradient ? rel_error2(gx, r.carap_x, gr, r.carap_r)
-                                  : std::abs(e - r.carap) / r.carap);
+  rigidity_row<S, kGradient, true>(state);
 }
-
-// ---- plain ARAP ----
 template <class S, bool kGradient>
 void BM_arap(benchmark::State& state) {
-  const Scene<S>& s = scene_as<S>();
-  std::vector<S> gx(s.x.size()), gr(s.x.size());
-  smg::EnergyWorkspace<S> ws;
-  double e = 0;
-  for (auto _ : state) {
-    if (kGradient) {
-      std::fill(gx.begin(), gx.end(), S(0));
-      std::fill(gr.begin(), gr.end(), S(0));
-    }
-    e = double(smg::arap<S>(s.positions(), s.rotations(), s.graph(), {},
-                            kGradient ? smg::PositionsView<S>(gx.data(), s.T, s.N)
-                                      : smg::PositionsView<S>(),
-                            kGradient ? smg::TangentsView<S>(gr.data(), s.T, s.N)
-                                      : smg::TangentsView<S>(),
-                            &ws, threads(state)));
-    benchmark::DoNotOptimize(e);
-  }
-  set_ms(state);
-  const Reference& r = reference();
-  state.counters["err_vs_double"] =
-      is_double<S>() ? 0.0
-                     : (kGradient ? rel_error2(gx, r.arap_x, gr, r.arap_r)
-                                  : std::abs(e - r.arap) / r.arap);
+  rigidity_row<S, kGradient, false>(state);
 }
 
 // ---- LRM: 0 energy only, 1 exact gradient, 2 gradient with ω held constant ----
@@ -236,25 +231,15 @@ void BM_lrm(benchmark::State& state) {
   const Scene<S>& s = scene_as<S>();
   std::vector<S> gx(s.x.size());
   smg::EnergyWorkspace<S> ws;
-  double e = 0;
-  for (auto _ : state) {
-    if (kMode > 0) std::fill(gx.begin(), gx.end(), S(0));
-    e = double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(kMode == 2),
-                           kMode > 0 ? smg::PositionsView<S>(gx.data(), s.T, s.N)
-                                     : smg::PositionsView<S>(),
-                           &ws, threads(state)));
-    benchmark::DoNotOptimize(e);
-  }
-  set_ms(state);
+  const double e = time_energy(state, [&] {
+    return double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(kMode == 2),
+                              grad_view(gx, s, kMode > 0), &ws, threads(state)));
+  });
   const Reference& r = reference();
-  if (!is_double<S>()) {
-    state.counters["err_vs_double"] =
-        kMode == 0 ? std::abs(e - r.lrm) / r.lrm
-                   : rel_error(gx, kMode == 1 ? r.lrm_x : r.lrm_detached_x);
-  } else {
-    state.counters["err_vs_double"] = 0.0;
-  }
-  if (kMode == 2) state.counters["err_detach_vs_exact"] = rel_error(r.lrm_detached_x, r.lrm_x);
+  set_err_vs_double<S>(state, [&] {
+    return kMode == 0 ? std::abs(e - r.lrm) / r.lrm : relative_error(gx, kMode == 1 ? r.lrm_x : r.lrm_detached_x);
+  });
+  if (kMode == 2) state.counters["err_detach_vs_exact"] = relative_error(r.lrm_detached_x, r.lrm_x);
 }
 
 // ---- The target: C-ARAP + LRM, energy + exact gradient, into one gradient buffer ----
@@ -263,21 +248,16 @@ void BM_carap_plus_lrm(benchmark::State& state) {
   const Scene<S>& s = scene_as<S>();
   std::vector<S> gx(s.x.size()), gr(s.x.size());
   smg::EnergyWorkspace<S> ws;
-  for (auto _ : state) {
-    std::fill(gx.begin(), gx.end(), S(0));
-    std::fill(gr.begin(), gr.end(), S(0));
-    const double e = double(smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(),
-                                          carap_options(), {gx.data(), s.T, s.N},
-                                          {gr.data(), s.T, s.N}, &ws, threads(state))) +
-                     double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(),
-                                        {gx.data(), s.T, s.N}, &ws, threads(state)));
-    benchmark::DoNotOptimize(e);
-  }
-  set_ms(state);
+  time_energy(state, [&] {
+    const smg::PositionsView<S> g = grad_view(gx, s, true);
+    return double(smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(), carap_options(), g,
+                                tangent_view(gr, s, true), &ws, threads(state))) +
+           double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(), g, &ws, threads(state)));
+  });
   const Reference& r = reference();
   std::vector<double> sum(r.carap_x.size());
   for (std::size_t k = 0; k < sum.size(); ++k) sum[k] = r.carap_x[k] + r.lrm_x[k];
-  state.counters["err_vs_double"] = is_double<S>() ? 0.0 : rel_error2(gx, sum, gr, r.carap_r);
+  set_err_vs_double<S>(state, [&] { return relative_error(gx, sum, gr, r.carap_r); });
   state.counters["target_ms"] = 100.0;
 }
 
@@ -285,19 +265,22 @@ void BM_carap_plus_lrm(benchmark::State& state) {
 // sum (the sum of squares, so nothing is optimised away). Run on the first kResFrames frames:
 // the per-block cost does not depend on T. ----
 constexpr Index kResFrames = 10;
+// The scene's first `frames` frames.
+Scene<double> first_frames(Index frames) {
+  Scene<double> r = scene();
+  r.resize(frames, kN);
+  return r;
+}
 template <class S>
 const Scene<S>& residual_scene() {
-  static const Scene<S> s = [] {
-    const Scene<double>& f = scene();
-    Scene<double> r = f;
-    r.T = kResFrames;
-    r.x.resize(static_cast<std::size_t>(kResFrames * kN * 3));
-    r.q.resize(static_cast<std::size_t>(kResFrames * kN * 4));
-    r.v.resize(static_cast<std::size_t>(kResFrames * kN));
-    r.c.resize(static_cast<std::size_t>(kResFrames * kN));
-    return r.cast<S>();
-  }();
+  static const Scene<S> s = first_frames(kResFrames).cast<S>();
   return s;
+}
+// ns_per_block: wall time per residual block.
+void set_ns_per_block(benchmark::State& state, double blocks) {
+  state.counters["ns_per_block"] =
+      benchmark::Counter(static_cast<double>(state.iterations()) * blocks * 1e-9,
+                         benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
 template <class S>
 void BM_carap_residuals(benchmark::State& state) {
@@ -322,9 +305,7 @@ void BM_carap_residuals(benchmark::State& state) {
   }
   blocks = smg::carap_residual_count(s.graph(), s.T, carap_options());
   set_ms(state);
-  state.counters["ns_per_block"] = benchmark::Counter(
-      static_cast<double>(state.iterations()) * static_cast<double>(blocks) * 1e-9,
-      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+  set_ns_per_block(state, static_cast<double>(blocks));
 }
 template <class S>
 void BM_lrm_residuals(benchmark::State& state) {
@@ -344,9 +325,7 @@ void BM_lrm_residuals(benchmark::State& state) {
     benchmark::DoNotOptimize(partial.data());
   }
   set_ms(state);
-  state.counters["ns_per_block"] = benchmark::Counter(
-      static_cast<double>(state.iterations()) * static_cast<double>(s.T * s.N) * 1e-9,
-      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+  set_ns_per_block(state, static_cast<double>(s.T * s.N));
 }
 
 // ---- Eigen AutoDiffScalar, per term (the fair comparison): each C-ARAP pair term with an
@@ -357,15 +336,7 @@ void BM_lrm_residuals(benchmark::State& state) {
 // analytic kernel is timed on the same sub-problem for ad_ratio. ----
 constexpr Index kAdFrames = 8;
 const Scene<double>& ad_scene() {
-  static const Scene<double> s = [] {
-    Scene<double> r = scene();
-    r.T = kAdFrames;
-    r.x.resize(static_cast<std::size_t>(kAdFrames * kN * 3));
-    r.q.resize(static_cast<std::size_t>(kAdFrames * kN * 4));
-    r.v.resize(static_cast<std::size_t>(kAdFrames * kN));
-    r.c.resize(static_cast<std::size_t>(kAdFrames * kN));
-    return r;
-  }();
+  static const Scene<double> s = first_frames(kAdFrames);
   return s;
 }
 template <class F>
@@ -458,53 +429,49 @@ void lrm_autodiff(const Scene<double>& s, std::vector<double>& gx) {
   }
 }
 
-void BM_autodiff_carap(benchmark::State& state) {
-  const Scene<double>& s = ad_scene();
-  std::vector<double> gx(s.x.size()), gr(s.x.size());
+// An autodiff row: times autodiff() (AutoDiffScalar gradients into gx), then ad_ratio against
+// analytic(one_thread, ws), the analytic kernel on the same sub-problem (best of 5).
+template <class AutoDiff, class Analytic>
+void autodiff_row(benchmark::State& state, const std::vector<double>& gx, AutoDiff&& autodiff,
+                  Analytic&& analytic) {
   for (auto _ : state) {
-    carap_autodiff(s, gx, gr);
+    autodiff();
     benchmark::DoNotOptimize(gx.data());
   }
   set_ms(state);
-  std::vector<double> ax(s.x.size(), 0.0), ar(s.x.size(), 0.0);
   smg::ParallelOptions one;
   one.threads = 1;
   smg::EnergyWorkspace<double> ws;
-  const double analytic = seconds_of(
-      [&] {
+  const double analytic_seconds = seconds_of([&] { analytic(one, ws); }, 5);
+  const double ad = seconds_of(autodiff, 1);
+  state.counters["ad_ratio"] = ad / analytic_seconds;
+}
+void BM_autodiff_carap(benchmark::State& state) {
+  const Scene<double>& s = ad_scene();
+  std::vector<double> gx(s.x.size()), gr(s.x.size());
+  std::vector<double> ax(s.x.size(), 0.0), ar(s.x.size(), 0.0);
+  autodiff_row(
+      state, gx, [&] { carap_autodiff(s, gx, gr); },
+      [&](smg::ParallelOptions one, smg::EnergyWorkspace<double>& ws) {
         std::fill(ax.begin(), ax.end(), 0.0);
         std::fill(ar.begin(), ar.end(), 0.0);
-        smg::carap<double>(s.positions(), s.rotations(), s.confidence(), s.graph(),
-                           carap_options(), {ax.data(), s.T, s.N}, {ar.data(), s.T, s.N}, &ws,
-                           one);
-      },
-      5);
-  const double ad = seconds_of([&] { carap_autodiff(s, gx, gr); }, 1);
-  state.counters["ad_ratio"] = ad / analytic;
-  state.counters["err_vs_analytic"] = rel_error2(gx, ax, gr, ar);
+        smg::carap<double>(s.positions(), s.rotations(), s.confidence(), s.graph(), carap_options(),
+                           {ax.data(), s.T, s.N}, {ar.data(), s.T, s.N}, &ws, one);
+      });
+  state.counters["err_vs_analytic"] = relative_error(gx, ax, gr, ar);
 }
 void BM_autodiff_lrm(benchmark::State& state) {
   const Scene<double>& s = ad_scene();
   std::vector<double> gx(s.x.size());
-  for (auto _ : state) {
-    lrm_autodiff(s, gx);
-    benchmark::DoNotOptimize(gx.data());
-  }
-  set_ms(state);
   std::vector<double> ax(s.x.size(), 0.0);
-  smg::ParallelOptions one;
-  one.threads = 1;
-  smg::EnergyWorkspace<double> ws;
-  const double analytic = seconds_of(
-      [&] {
+  autodiff_row(
+      state, gx, [&] { lrm_autodiff(s, gx); },
+      [&](smg::ParallelOptions one, smg::EnergyWorkspace<double>& ws) {
         std::fill(ax.begin(), ax.end(), 0.0);
-        smg::lrm<double>(s.positions(), s.confidence(), s.graph(), lrm_options(),
-                         {ax.data(), s.T, s.N}, &ws, one);
-      },
-      5);
-  const double ad = seconds_of([&] { lrm_autodiff(s, gx); }, 1);
-  state.counters["ad_ratio"] = ad / analytic;
-  state.counters["err_vs_analytic"] = rel_error(gx, ax);
+        smg::lrm<double>(s.positions(), s.confidence(), s.graph(), lrm_options(), {ax.data(), s.T, s.N}, &ws,
+                         one);
+      });
+  state.counters["err_vs_analytic"] = relative_error(gx, ax);
 }
 
 void Threads(benchmark::internal::Benchmark* b) {

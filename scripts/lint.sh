@@ -19,8 +19,7 @@ cppcheck --quiet --error-exitcode=1 --std=c++17 --language=c++ --inline-suppr \
 echo "== clang-tidy"
 # One clang-tidy per translation unit, nproc at a time; each file's findings are printed as one
 # block (captured, so parallel runs do not interleave).
-# tests/*/src_*.cpp only #include an example's .cpp (linted as itself) into a test executable.
-find tests examples -name '*.cpp' -not -path 'tests/consumer/*' -not -name 'src_*.cpp' | sort |
+find tests examples -name '*.cpp' -not -path 'tests/consumer/*' | sort |
   xargs -P "$(nproc)" -I{} bash -c '
     out=$(clang-tidy -p "$1" --quiet --extra-arg=-std=c++17 "$2" 2>/dev/null) && exit 0
     printf "%s\nclang-tidy: findings in %s\n" "$out" "$2"; exit 1' _ "$build" {}

@@ -4,13 +4,9 @@
 #include <chrono>
 #include <stdexcept>
 
-namespace trainer {
+#include "trainer/progress.hpp"
 
-namespace {
-double since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-}  // namespace
+namespace trainer {
 
 Dataset make_dataset(const DatasetConfig& config, smg::ParallelOptions parallel) {
   if (smg::Status st = validate_scene_config(config.scene); !st) throw std::invalid_argument(st.message());
@@ -22,30 +18,30 @@ Dataset make_dataset(const DatasetConfig& config, smg::ParallelOptions parallel)
   Dataset d;
   auto t0 = std::chrono::steady_clock::now();
   d.scene = make_scene(config.scene);
-  d.seconds.scene = since(t0);
+  d.seconds.scene = seconds_since(t0);
 
   RenderOptions ro;
   ro.supersample = config.supersample;
   ro.parallel = parallel;
   t0 = std::chrono::steady_clock::now();
   d.train = render_training_view(d.scene, ro);
-  d.seconds.render_train = since(t0);
+  d.seconds.render_train = seconds_since(t0);
 
   ro.surface_points = config.covisibility;
   t0 = std::chrono::steady_clock::now();
   for (int v = 0; v < static_cast<int>(d.scene.test_cameras.size()); ++v) d.test.push_back(render_test_view(d.scene, v, ro));
-  d.seconds.render_test = since(t0);
+  d.seconds.render_test = seconds_since(t0);
 
   if (config.covisibility) {
     t0 = std::chrono::steady_clock::now();
     for (const auto& view : d.test) d.test_covisible.push_back(covisibility_mask(d.scene, view, config.covisible_min_frames, parallel));
-    d.seconds.covisibility = since(t0);
+    d.seconds.covisibility = seconds_since(t0);
   }
 
   t0 = std::chrono::steady_clock::now();
   d.priors = make_priors(d.scene, d.train, config.priors, parallel);
-  d.seconds.priors = since(t0);
-  d.seconds.total = since(start);
+  d.seconds.priors = seconds_since(t0);
+  d.seconds.total = seconds_since(start);
   return d;
 }
 

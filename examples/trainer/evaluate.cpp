@@ -6,12 +6,11 @@
 #include <cstdint>
 
 #include "trainer/progress.hpp"
+#include "trainer/util.hpp"
 
 namespace trainer {
 
 namespace {
-
-std::size_t sz(long long v) { return static_cast<std::size_t>(v); }
 
 double mean(const std::vector<double>& v) {
   double s = 0;

@@ -7,15 +7,11 @@
 #include <stdexcept>
 #include <string>
 
+#include "trainer/util.hpp"
+
 namespace trainer {
 
 namespace {
-
-std::size_t sz(long long v) { return static_cast<std::size_t>(v); }
-
-void check(const smg::Status& s, const char* where) {
-  if (!s) throw std::logic_error(std::string(where) + ": " + s.message());
-}
 
 template <class S>
 void keep_rows(std::vector<S>& v, const std::vector<std::uint8_t>& keep, std::size_t width) {
@@ -112,51 +108,49 @@ GaussianModel<S> init_model(const Dataset& d, const Nodes& nodes, const InitOpti
     g.quats.insert(g.quats.end(), {S(1), S(0), S(0), S(0)});
     g.opacity.push_back(static_cast<S>(std::log(o.opacity / (1 - o.opacity))));
   };
-  auto frame_ok = [&](int t) { return t >= 0 && t < T; };
+  // Every s-th pixel (s = max(1, stride)) of the listed training frames that has a depth value and
+  // is (object) or is not (!object) in the object mask: visit(t, point, rgb, sigma).
+  auto for_each_sample = [&](const std::vector<int>& frames, int stride, bool object, auto&& visit) {
+    const int s = std::max(1, stride);
+    for (int t : frames) {
+      if (t < 0 || t >= T) continue;
+      const Camera& cam = scene.train_cameras[sz(t)];
+      for (int y = s / 2; y < H; y += s)
+        for (int x = s / 2; x < W; x += s) {
+          const std::size_t pix = sz(y) * W + x;
+          const float z = d.priors.depth[sz(t) * plane + pix];
+          if (z <= 0 || (d.priors.object_mask[sz(t) * plane + pix] != 0) != object) continue;
+          visit(t, cam.unproject(Eigen::Vector2d(x + 0.5, y + 0.5), z), &d.train[sz(t)].rgb.pixels[pix * 3],
+                o.scale * s * z / cam.fx);
+        }
+    }
+  };
   // Static: non-object pixels with a depth value.
-  for (int t : o.static_frames) {
-    if (!frame_ok(t)) continue;
-    const Camera& cam = scene.train_cameras[sz(t)];
-    const int s = std::max(1, o.static_stride);
-    for (int y = s / 2; y < H; y += s)
-      for (int x = s / 2; x < W; x += s) {
-        const std::size_t pix = sz(y) * W + x;
-        const float z = d.priors.depth[sz(t) * plane + pix];
-        if (z <= 0 || d.priors.object_mask[sz(t) * plane + pix]) continue;
-        add(cam.unproject(Eigen::Vector2d(x + 0.5, y + 0.5), z), &d.train[sz(t)].rgb.pixels[pix * 3],
-            o.scale * s * z / cam.fx);
-      }
-  }
+  for_each_sample(o.static_frames, o.static_stride, false,
+                  [&](int, const Eigen::Vector3d& p, const float* rgb, double sigma) { add(p, rgb, sigma); });
   m.fixed = g.size();
   // Dynamic: object pixels, attached to the nearest node at their frame.
   const int N = nodes.count;
   const double max_d = o.max_anchor_distance * nodes.unit;
   std::vector<std::int32_t> anchor;
-  for (int t : o.dynamic_frames) {
-    if (!frame_ok(t)) continue;
-    const Camera& cam = scene.train_cameras[sz(t)];
-    const int s = std::max(1, o.dynamic_stride);
-    for (int y = s / 2; y < H; y += s)
-      for (int x = s / 2; x < W; x += s) {
-        const std::size_t pix = sz(y) * W + x;
-        const float z = d.priors.depth[sz(t) * plane + pix];
-        if (z <= 0 || !d.priors.object_mask[sz(t) * plane + pix]) continue;
-        const Eigen::Vector3d p = cam.unproject(Eigen::Vector2d(x + 0.5, y + 0.5), z);
-        int best = -1;
-        double best_d2 = std::numeric_limits<double>::infinity();
-        for (int i = 0; i < N; ++i) {
-          const double d2 = (Eigen::Map<const Eigen::Vector3d>(nodes.positions.data() + (sz(t) * N + i) * 3) - p).squaredNorm();
-          if (d2 < best_d2) {
-            best_d2 = d2;
-            best = i;
-          }
-        }
-        if (best < 0 || std::sqrt(best_d2) > max_d) continue;
-        add(p, &d.train[sz(t)].rgb.pixels[pix * 3], o.scale * s * z / cam.fx);
-        anchor.push_back(best);
-        m.skin.t_ref.push_back(t);
-      }
-  }
+  for_each_sample(o.dynamic_frames, o.dynamic_stride, true,
+                  [&](int t, const Eigen::Vector3d& p, const float* rgb, double sigma) {
+                    int best = -1;
+                    double best_d2 = std::numeric_limits<double>::infinity();
+                    for (int i = 0; i < N; ++i) {
+                      const double d2 =
+                          (Eigen::Map<const Eigen::Vector3d>(nodes.positions.data() + (sz(t) * N + i) * 3) - p)
+                              .squaredNorm();
+                      if (d2 < best_d2) {
+                        best_d2 = d2;
+                        best = i;
+                      }
+                    }
+                    if (best < 0 || std::sqrt(best_d2) > max_d) return;
+                    add(p, rgb, sigma);
+                    anchor.push_back(best);
+                    m.skin.t_ref.push_back(t);
+                  });
   // Drivers (anchor + its graph neighbours) and weights.
   const int P = static_cast<int>(anchor.size());
   const smg::NeighborsView<double> graph = nodes.graph.view();

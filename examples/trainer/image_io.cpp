@@ -76,41 +76,30 @@ void write_png(const std::string& path, const Image& image) {
     throw std::runtime_error("cannot write PNG '" + path + "'");
 }
 
-Image hstack(const std::vector<Image>& parts, int gap, float gap_value) {
+namespace {
+// hstack (horizontal) and vstack: the parts one after the other, `gap` pixels of gap_value between.
+Image stack(const std::vector<Image>& parts, int gap, float gap_value, bool horizontal) {
   if (parts.empty()) return {};
   const int C = common_channels(parts);
-  int W = 0, H = 0;
+  int along = 0, across = 0;
   for (const Image& p : parts) {
-    W += p.width;
-    H = std::max(H, p.height);
+    along += horizontal ? p.width : p.height;
+    across = std::max(across, horizontal ? p.height : p.width);
   }
-  W += gap * static_cast<int>(parts.size() - 1);
-  Image out(W, H, C, gap_value);
-  int x = 0;
+  along += gap * static_cast<int>(parts.size() - 1);
+  Image out(horizontal ? along : across, horizontal ? across : along, C, gap_value);
+  int at = 0;
   for (const Image& p : parts) {
-    blit(out, to_channels(p, C), x, 0);
-    x += p.width + gap;
+    blit(out, to_channels(p, C), horizontal ? at : 0, horizontal ? 0 : at);
+    at += (horizontal ? p.width : p.height) + gap;
   }
   return out;
 }
+}  // namespace
 
-Image vstack(const std::vector<Image>& parts, int gap, float gap_value) {
-  if (parts.empty()) return {};
-  const int C = common_channels(parts);
-  int W = 0, H = 0;
-  for (const Image& p : parts) {
-    H += p.height;
-    W = std::max(W, p.width);
-  }
-  H += gap * static_cast<int>(parts.size() - 1);
-  Image out(W, H, C, gap_value);
-  int y = 0;
-  for (const Image& p : parts) {
-    blit(out, to_channels(p, C), 0, y);
-    y += p.height + gap;
-  }
-  return out;
-}
+Image hstack(const std::vector<Image>& parts, int gap, float gap_value) { return stack(parts, gap, gap_value, true); }
+
+Image vstack(const std::vector<Image>& parts, int gap, float gap_value) { return stack(parts, gap, gap_value, false); }
 
 Image grid(const std::vector<Image>& cells, int columns, int gap, float gap_value) {
   if (cells.empty()) return {};

@@ -10,20 +10,9 @@
 #include <Eigen/SVD>
 
 #include "trainer/adam.hpp"
+#include "trainer/util.hpp"
 
 namespace trainer {
-
-namespace {
-
-std::size_t sz(long long v) { return static_cast<std::size_t>(v); }
-
-// Throws with the library's message when a precondition fails (a bug in the trainer, not a
-// user error: the inputs are all produced here).
-void check(const smg::Status& s, const char* where) {
-  if (!s) throw std::logic_error(std::string(where) + ": " + s.message());
-}
-
-}  // namespace
 
 void build_graph(Nodes& n, const NodeOptions& o, bool semantic, smg::ParallelOptions parallel) {
   const int N = n.count, K = o.k;

@@ -7,13 +7,11 @@
 
 #include "trainer/frames.hpp"
 #include "trainer/image_io.hpp"
+#include "trainer/util.hpp"
 
 namespace trainer {
 
 namespace {
-
-std::size_t sz(long long v) { return static_cast<std::size_t>(v); }
-
 
 Image labelled(Image im, const std::string& text) {
   draw_text(im, 2, 2, text, Eigen::Vector3f(1, 1, 1));

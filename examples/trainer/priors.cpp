@@ -9,12 +9,11 @@
 #include <unordered_set>
 
 #include "trainer/random.hpp"
+#include "trainer/util.hpp"
 
 namespace trainer {
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // Random streams (random.hpp: derive_seed); the index is the frame or the track.
 enum : std::uint64_t {
@@ -26,8 +25,6 @@ enum : std::uint64_t {
 };
 
 std::uint64_t prior_seed(const Scene& s, const PriorConfig& c) { return mix64(s.config.seed) ^ mix64(c.seed + 0x5EEDull); }
-
-std::size_t sz(long long v) { return static_cast<std::size_t>(v); }
 
 // Orthonormal class embeddings (Gram-Schmidt on Gaussian vectors), the last one for "void".
 std::vector<Eigen::VectorXd> class_embeddings(Random& rng, int count, int dim) {

@@ -11,14 +11,17 @@
 
 namespace trainer {
 
+// Seconds since t0.
+inline double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
 class Progress {
  public:
   explicit Progress(std::FILE* stream = stderr, bool quiet = false)
       : stream_(stream), quiet_(quiet), start_(std::chrono::steady_clock::now()) {}
 
-  double elapsed() const {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  }
+  double elapsed() const { return seconds_since(start_); }
   void line(const std::string& stage, const std::string& text) const {
     if (quiet_ || !stream_) return;
     std::fprintf(stream_, "[%7.1fs] %-7s %s\n", elapsed(), stage.c_str(), text.c_str());
@@ -31,11 +34,6 @@ class Progress {
   bool quiet_;
   std::chrono::steady_clock::time_point start_;
 };
-
-// Seconds since t0.
-inline double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 // printf into a std::string.
 template <class... A>

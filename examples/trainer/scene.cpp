@@ -9,12 +9,11 @@
 
 #include "smg/core/quaternion.hpp"
 #include "trainer/random.hpp"
+#include "trainer/util.hpp"
 
 namespace trainer {
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // Random streams of the scene generator (random.hpp: derive_seed).
 enum : std::uint64_t { kStreamLayout = 1, kStreamTextures = 2 };
@@ -155,6 +154,20 @@ void extend_bounds(const Scene& s, int b, int t, Eigen::AlignedBox3d* box) {
 Eigen::Vector3d jitter_color(Random& rng, const Eigen::Vector3d& c, double amount) {
   return clamp01(c + Eigen::Vector3d(rng.uniform(-amount, amount), rng.uniform(-amount, amount),
                                      rng.uniform(-amount, amount)));
+}
+
+// A body's material: colours a and b, each jittered by up to its amount, a scale uniform in
+// [scale_lo, scale_hi] and a texture seed, drawn from tex in that order.
+Material draw_material(Random& tex, Pattern pattern, const Eigen::Vector3d& a, double jitter_a,
+                       const Eigen::Vector3d& b, double jitter_b, double scale_lo, double scale_hi, double detail) {
+  Material m;
+  m.pattern = pattern;
+  m.color_a = jitter_color(tex, a, jitter_a);
+  m.color_b = jitter_color(tex, b, jitter_b);
+  m.scale = tex.uniform(scale_lo, scale_hi);
+  m.detail = detail;
+  m.seed = tex.next();
+  return m;
 }
 
 // Times at which gaps are checked: motions are functions of u = frame / (T - 1), so a fixed
@@ -335,24 +348,14 @@ Scene make_scene(const SceneConfig& config) {
   // little beyond them. The wall's local x is world x and its local y is world z, so its local +z
   // normal points to -y.
   {
-    Material m;
-    m.pattern = Pattern::checker;
-    m.color_a = jitter_color(tex, {0.78, 0.74, 0.66}, 0.06);
-    m.color_b = jitter_color(tex, {0.42, 0.40, 0.38}, 0.06);
-    m.scale = tex.uniform(0.12, 0.15);
-    m.detail = 0.18;
-    m.seed = tex.next();
+    const Material m = draw_material(tex, Pattern::checker, {0.78, 0.74, 0.66}, 0.06, {0.42, 0.40, 0.38}, 0.06,
+                                     0.12, 0.15, 0.18);
     add("floor", classes::floor, false, Motion::fixed, {ShapeKind::rectangle, {3.5, 3.0, 0}}, m,
         {Eigen::Matrix3d::Identity(), {0.0, -1.8, 0.0}});
   }
   {
-    Material m;
-    m.pattern = Pattern::noise;
-    m.color_a = jitter_color(tex, {0.30, 0.45, 0.55}, 0.06);
-    m.color_b = jitter_color(tex, {0.75, 0.80, 0.70}, 0.06);
-    m.scale = tex.uniform(0.10, 0.13);
-    m.detail = 0.12;
-    m.seed = tex.next();
+    const Material m = draw_material(tex, Pattern::noise, {0.30, 0.45, 0.55}, 0.06, {0.75, 0.80, 0.70}, 0.06,
+                                     0.10, 0.13, 0.12);
     Eigen::Matrix3d R;
     R.col(0) = Eigen::Vector3d::UnitX();
     R.col(1) = Eigen::Vector3d::UnitZ();
@@ -379,14 +382,9 @@ Scene make_scene(const SceneConfig& config) {
   s.arm.cycles = rng.uniform(1.3, 1.7);
   s.arm.phase = rng.uniform(0, 2 * kPi);
   {
-    Material m;
-    m.pattern = Pattern::stripes;
-    m.color_a = jitter_color(tex, {0.90, 0.55, 0.25}, 0.05);
-    m.color_b = jitter_color(tex, {0.55, 0.20, 0.12}, 0.05);
-    m.scale = tex.uniform(0.06, 0.08);
+    Material m = draw_material(tex, Pattern::stripes, {0.90, 0.55, 0.25}, 0.05, {0.55, 0.20, 0.12}, 0.05,
+                               0.06, 0.08, 0.15);
     m.stripe_axis = Eigen::Vector3d(1.0, 0.35, 0.0).normalized();
-    m.detail = 0.15;
-    m.seed = tex.next();
     add("upper_arm", classes::arm, true, Motion::upper_arm,
         {ShapeKind::capsule, {s.arm.upper_length, s.arm.upper_radius, 0}}, m, {});
     m.seed = tex.next();
@@ -398,13 +396,8 @@ Scene make_scene(const SceneConfig& config) {
   // Static box on the floor behind the arm's sweep, pushed back until the arm's closest
   // approach is config.box_gap: near enough to tempt a geometric graph, never touching.
   {
-    Material m;
-    m.pattern = Pattern::checker;
-    m.color_a = jitter_color(tex, {0.15, 0.30, 0.75}, 0.05);
-    m.color_b = jitter_color(tex, {0.90, 0.92, 0.95}, 0.04);
-    m.scale = tex.uniform(0.04, 0.05);
-    m.detail = 0.12;
-    m.seed = tex.next();
+    const Material m = draw_material(tex, Pattern::checker, {0.15, 0.30, 0.75}, 0.05, {0.90, 0.92, 0.95}, 0.04,
+                                     0.04, 0.05, 0.12);
     const double h = 0.1;
     add("box", classes::box, true, Motion::fixed, {ShapeKind::box, {h, h, h}}, m,
         {rot_z(0.35 + rng.uniform(-0.15, 0.15)), {0.02 + rng.uniform(-0.02, 0.02), 0.1, h}});
@@ -445,13 +438,8 @@ Scene make_scene(const SceneConfig& config) {
   s.ball.phase = rng.uniform(0, 2 * kPi);
   s.ball.direction = rng.uniform() < 0.5 ? -1.0 : 1.0;
   {
-    Material m;
-    m.pattern = Pattern::checker;
-    m.color_a = jitter_color(tex, {0.85, 0.15, 0.15}, 0.05);
-    m.color_b = jitter_color(tex, {0.95, 0.85, 0.30}, 0.05);
-    m.scale = tex.uniform(0.045, 0.055);
-    m.detail = 0.10;
-    m.seed = tex.next();
+    const Material m = draw_material(tex, Pattern::checker, {0.85, 0.15, 0.15}, 0.05, {0.95, 0.85, 0.30}, 0.05,
+                                     0.045, 0.055, 0.10);
     add("ball", classes::ball, true, Motion::ball, {ShapeKind::sphere, {s.ball.radius, 0, 0}}, m, {});
   }
 

@@ -17,15 +17,17 @@
 #include <string>
 #include <vector>
 
-#include "cli_args.hpp"
 #include "json_line.hpp"
 #include "trainer/dataset.hpp"
+#include "trainer/flags.hpp"
 #include "trainer/frames.hpp"
 #include "trainer/image_io.hpp"
+#include "trainer/progress.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using trainer::flags::int_in;
 using trainer::Image;
 
 std::vector<cli::FlagSpec> flags() {
@@ -45,58 +47,41 @@ std::vector<cli::FlagSpec> flags() {
           {"help", "", "print this help", true}};
 }
 
-int to_int(const cli::Args& a, const std::string& name, long long lo, long long hi) {
-  const long long v = a.get_int(name);
-  if (v < lo || v > hi)
-    throw cli::UsageError("--" + name + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
-                          std::to_string(v));
-  return static_cast<int>(v);
-}
-
-
 Image labelled(Image im, const std::string& text) {
   trainer::draw_text(im, 3, 3, text, Eigen::Vector3f(1, 1, 1));
   return im;
 }
-
 
 }  // namespace
 
 int main(int argc, char** argv) {
   try {
     cli::Args args(flags());
-    args.parse(argc, argv, 1);
-    if (args.get_switch("help")) {
-      std::cout << "usage: scene_preview [--flags]\nGenerates the example scene and its priors and writes "
-                   "pictures (docs/trainer.md).\n\nflags:\n"
-                << args.help();
+    if (!trainer::flags::parse(args, argc, argv, "scene_preview",
+                               "Generates the example scene and its priors and writes pictures (docs/trainer.md)."))
       return 0;
-    }
-    if (!args.positionals().empty())
-      throw cli::UsageError("unexpected argument '" + args.positionals()[0] + "' (flags only; see --help)");
 
     trainer::DatasetConfig cfg;
-    cfg.scene.seed = static_cast<std::uint64_t>(to_int(args, "seed", 0, 2147483647));
-    cfg.scene.frames = to_int(args, "frames", 2, 1000);
-    cfg.scene.width = to_int(args, "width", 16, 4096);
-    cfg.scene.height = to_int(args, "height", 16, 4096);
-    cfg.priors.tracks = to_int(args, "tracks", 1, 1000000);
-    cfg.priors.feature_dim = to_int(args, "feature-dim", trainer::classes::count + 1, 1024);
-    cfg.supersample = to_int(args, "supersample", 1, 8);
+    cfg.scene.seed = static_cast<std::uint64_t>(int_in(args, "seed", 0, 2147483647));
+    cfg.scene.frames = int_in(args, "frames", 2, 1000);
+    cfg.scene.width = int_in(args, "width", 16, 4096);
+    cfg.scene.height = int_in(args, "height", 16, 4096);
+    cfg.priors.tracks = int_in(args, "tracks", 1, 1000000);
+    cfg.priors.feature_dim = int_in(args, "feature-dim", trainer::classes::count + 1, 1024);
+    cfg.supersample = int_in(args, "supersample", 1, 8);
     cfg.priors.jitter_px = args.get_double("jitter-px");
     cfg.priors.outlier_rate = args.get_double("outlier-rate");
     cfg.priors.depth_noise = args.get_double("depth-noise");
-    const int show = to_int(args, "show", 1, 64);
-    const int threads = to_int(args, "threads", 0, 1024);
-    if (smg::Status st = trainer::validate_scene_config(cfg.scene); !st) throw cli::UsageError(st.message());
-    if (smg::Status st = trainer::validate_prior_config(cfg.priors); !st) throw cli::UsageError(st.message());
+    const int show = int_in(args, "show", 1, 64);
+    const int threads = int_in(args, "threads", 0, 1024);
+    trainer::flags::validate(cfg.scene, cfg.priors);
     const fs::path out = args.get("out");
     cli::ensure_writable_dir(out);
 
     const auto t0 = std::chrono::steady_clock::now();
     const trainer::Dataset d = trainer::make_dataset(cfg, smg::ParallelOptions{threads, 0});
     const trainer::LiftedTracks lifted = trainer::lift_tracks(d.scene, d.priors);
-    const double seconds_lift = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() - d.seconds.total;
+    const double seconds_lift = trainer::seconds_since(t0) - d.seconds.total;
 
     // Pictures.
     const int T = d.scene.frames(), W = d.scene.width(), H = d.scene.height(), C = d.priors.feature_dim;
@@ -171,7 +156,7 @@ int main(int argc, char** argv) {
       }
       trainer::write_png((out / "overview.png").string(), trainer::vstack(rows));
     }
-    const double seconds_total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double seconds_total = trainer::seconds_since(t0);
 
     const trainer::TrackStats st = trainer::track_stats(d.priors.tracks);
     double covisible[2] = {0, 0};

@@ -10,12 +10,9 @@
 
 #include "trainer/adam.hpp"
 #include "trainer/random.hpp"
+#include "trainer/util.hpp"
 
 namespace trainer {
-
-namespace {
-std::size_t sz(long long v) { return static_cast<std::size_t>(v); }
-}  // namespace
 
 template <class S>
 void photometric_loss(const S* image, const S* depth, const float* rgb, const float* target_depth, int W, int H,

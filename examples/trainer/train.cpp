@@ -15,14 +15,16 @@
 #include <string>
 #include <vector>
 
-#include "cli_args.hpp"
 #include "json_line.hpp"
+#include "trainer/flags.hpp"
 #include "trainer/pictures.hpp"
 #include "trainer/pipeline.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using trainer::flags::double_in;
+using trainer::flags::int_in;
 
 std::vector<cli::FlagSpec> flags() {
   std::string variants;
@@ -47,23 +49,6 @@ std::vector<cli::FlagSpec> flags() {
           {"quiet", "", "no progress lines", true},
           {"help", "", "print this help", true}};
 }
-
-long long int_in(const cli::Args& a, const std::string& name, long long lo, long long hi) {
-  const long long v = a.get_int(name);
-  if (v < lo || v > hi)
-    throw cli::UsageError("--" + name + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
-                          std::to_string(v));
-  return v;
-}
-
-double double_in(const cli::Args& a, const std::string& name, double lo, double hi) {
-  const double v = a.get_double(name);
-  if (!(v >= lo && v <= hi))
-    throw cli::UsageError("--" + name + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
-                          a.get(name));
-  return v;
-}
-
 
 std::string view_json(const trainer::ViewMetrics& v) {
   cli::JsonLine j;
@@ -95,27 +80,22 @@ int main(int argc, char** argv) {
   bool pictures = true, quiet = false;
   try {
     cli::Args args(flags());
-    args.parse(argc, argv, 1);
-    if (args.get_switch("help")) {
-      std::cout << "usage: smg_trainer [--flags]\nReconstructs the example dynamic scene with SMG and evaluates it on "
-                   "two held-out views (docs/trainer.md).\n\nflags:\n"
-                << args.help();
+    if (!trainer::flags::parse(args, argc, argv, "smg_trainer",
+                               "Reconstructs the example dynamic scene with SMG and evaluates it on two held-out "
+                               "views (docs/trainer.md)."))
       return 0;
-    }
-    if (!args.positionals().empty())
-      throw cli::UsageError("unexpected argument '" + args.positionals()[0] + "' (flags only; see --help)");
     const bool quick = args.get_switch("quick");
     cfg = trainer::default_config(quick);
     if (!trainer::parse_variant(args.get_choice("variant", trainer::variant_names()), &cfg.variant))
       throw cli::UsageError("unknown variant");
     cfg.dataset.scene.seed = static_cast<std::uint64_t>(int_in(args, "seed", 0, 2147483647));
-    cfg.threads = static_cast<int>(int_in(args, "threads", 0, 1024));
-    if (args.given("frames")) cfg.dataset.scene.frames = static_cast<int>(int_in(args, "frames", 4, 1000));
-    if (args.given("width")) cfg.dataset.scene.width = static_cast<int>(int_in(args, "width", 32, 4096));
-    if (args.given("height")) cfg.dataset.scene.height = static_cast<int>(int_in(args, "height", 32, 4096));
-    if (args.given("tracks")) cfg.dataset.priors.tracks = static_cast<int>(int_in(args, "tracks", 10, 1000000));
-    if (args.given("stage1-iters")) cfg.stage1.iterations = static_cast<int>(int_in(args, "stage1-iters", 0, 1000000));
-    if (args.given("stage2-iters")) cfg.stage2.iterations = static_cast<int>(int_in(args, "stage2-iters", 0, 1000000));
+    cfg.threads = int_in(args, "threads", 0, 1024);
+    if (args.given("frames")) cfg.dataset.scene.frames = int_in(args, "frames", 4, 1000);
+    if (args.given("width")) cfg.dataset.scene.width = int_in(args, "width", 32, 4096);
+    if (args.given("height")) cfg.dataset.scene.height = int_in(args, "height", 32, 4096);
+    if (args.given("tracks")) cfg.dataset.priors.tracks = int_in(args, "tracks", 10, 1000000);
+    if (args.given("stage1-iters")) cfg.stage1.iterations = int_in(args, "stage1-iters", 0, 1000000);
+    if (args.given("stage2-iters")) cfg.stage2.iterations = int_in(args, "stage2-iters", 0, 1000000);
     if (args.given("unit")) cfg.nodes.unit = double_in(args, "unit", 0.005, 1.0);
     if (args.given("w-data")) cfg.node_loss.data_weight = double_in(args, "w-data", 0.0, 1e6);
     if (args.given("w-rigidity")) cfg.node_loss.rigidity_weight = double_in(args, "w-rigidity", 0.0, 1e6);
@@ -123,8 +103,7 @@ int main(int argc, char** argv) {
     if (args.given("lambda-depth")) cfg.stage2.lambda_depth = double_in(args, "lambda-depth", 0.0, 100.0);
     pictures = !args.get_switch("no-pictures");
     quiet = args.get_switch("quiet");
-    if (smg::Status st = trainer::validate_scene_config(cfg.dataset.scene); !st) throw cli::UsageError(st.message());
-    if (smg::Status st = trainer::validate_prior_config(cfg.dataset.priors); !st) throw cli::UsageError(st.message());
+    trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
     out = args.get("out");
     cli::ensure_writable_dir(out);
   } catch (const std::exception& e) {

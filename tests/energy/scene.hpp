@@ -25,6 +25,17 @@ struct Scene {
   std::vector<std::int32_t> idx;  // [N][K]
   std::vector<S> w;               // [N][K]
 
+  // T frames of N nodes: x, q, v and c get their sizes (new entries 0; shrinking T keeps the
+  // first frames).
+  void resize(Index frames, Index nodes) {
+    T = frames;
+    N = nodes;
+    x.resize(static_cast<std::size_t>(T * N * 3));
+    q.resize(static_cast<std::size_t>(T * N * 4));
+    v.resize(static_cast<std::size_t>(T * N));
+    c.resize(static_cast<std::size_t>(T * N));
+  }
+
   PositionsView<const S> positions() const { return {x.data(), T, N}; }
   QuaternionsView<const S> rotations() const { return {q.data(), T, N}; }
   VisibilityView<const std::uint8_t> visibility() const { return {v.data(), T, N}; }
@@ -115,12 +126,7 @@ void random_graph(Scene<S>& s, Index K, Index min_deg, Rng& rng) {
 // [0, 1].
 inline Scene<double> random_scene(Index T, Index N, Index K, Rng& rng, bool knn = false) {
   Scene<double> s;
-  s.T = T;
-  s.N = N;
-  s.x.resize(static_cast<std::size_t>(T * N * 3));
-  s.q.resize(static_cast<std::size_t>(T * N * 4));
-  s.v.resize(static_cast<std::size_t>(T * N));
-  s.c.resize(static_cast<std::size_t>(T * N));
+  s.resize(T, N);
   for (Index i = 0; i < N; ++i) {
     const Vector3<double> p0 = rng.vec3(1.0), vel = rng.vec3(0.05), acc = rng.vec3(0.01);
     const Quaternion<double> r0 = rng.quaternion();
@@ -147,12 +153,9 @@ inline Scene<double> rigid_scene(Index T, Index N, Index K, double theta, const 
                                  Rng& rng, Vector3<double> axis = Vector3<double>(0.3, -0.5, 0.8)) {
   axis.normalize();
   Scene<double> s;
-  s.T = T;
-  s.N = N;
-  s.x.resize(static_cast<std::size_t>(T * N * 3));
-  s.q.resize(static_cast<std::size_t>(T * N * 4));
-  s.v.assign(static_cast<std::size_t>(T * N), 1);
-  s.c.assign(static_cast<std::size_t>(T * N), 1.0);
+  s.resize(T, N);
+  s.v.assign(s.v.size(), 1);
+  s.c.assign(s.c.size(), 1.0);
   std::vector<Vector3<double>> p(static_cast<std::size_t>(N));
   std::vector<Quaternion<double>> r(static_cast<std::size_t>(N));
   for (Index i = 0; i < N; ++i) {

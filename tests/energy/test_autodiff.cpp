@@ -9,6 +9,7 @@
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
 #include "support/autodiff.hpp"
+#include "support/finite_diff.hpp"
 #include "support/random.hpp"
 
 using smg::Index;
@@ -46,14 +47,9 @@ AdScene to_ad(const Scene<double>& s) {
   return a;
 }
 
+// ‖a − b‖ / ‖b‖ (support/finite_diff.hpp) of an AD derivative vector against a gradient.
 double max_rel(const Eigen::VectorXd& a, const std::vector<double>& b) {
-  double num = 0, den = 0;
-  for (std::size_t k = 0; k < b.size(); ++k) {
-    const double ak = k < static_cast<std::size_t>(a.size()) ? a(static_cast<Index>(k)) : 0.0;
-    num += (ak - b[k]) * (ak - b[k]);
-    den += b[k] * b[k];
-  }
-  return std::sqrt(num / den);
+  return smg::test::relative_error(a, Eigen::Map<const Eigen::VectorXd>(b.data(), static_cast<Index>(b.size())));
 }
 
 }  // namespace

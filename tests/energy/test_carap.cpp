@@ -68,39 +68,16 @@ double reference(const Scene<double>& s, const smg::CarapOptions& o, bool use_co
 Grad finite_difference(const Scene<double>& s, const smg::CarapOptions& o, bool use_conf,
                        double h = 1e-6) {
   Grad g;
-  g.x.assign(s.x.size(), 0.0);
-  g.r.assign(s.x.size(), 0.0);
   Scene<double> p = s;
-  for (std::size_t k = 0; k < s.x.size(); ++k) {
-    p.x[k] = s.x[k] + h;
-    const double ep = energy_only(p, o, use_conf);
-    p.x[k] = s.x[k] - h;
-    const double em = energy_only(p, o, use_conf);
-    p.x[k] = s.x[k];
-    g.x[k] = (ep - em) / (2 * h);
-  }
+  const auto energy = [&] { return energy_only(p, o, use_conf); };
+  g.x = smg::test::central_gradient(p.x, energy, h);
+  g.r.assign(s.x.size(), 0.0);
   for (Index t = 0; t < s.T; ++t)
     for (Index i = 0; i < s.N; ++i)
-      for (int c = 0; c < 3; ++c) {
-        Vector3<double> d = Vector3<double>::Zero();
-        d(c) = h;
-        p.set_rot(t, i, s.rot(t, i) * smg::so3::exp(d));
-        const double ep = energy_only(p, o, use_conf);
-        p.set_rot(t, i, s.rot(t, i) * smg::so3::exp(Vector3<double>(-d)));
-        const double em = energy_only(p, o, use_conf);
-        p.set_rot(t, i, s.rot(t, i));
-        g.r[(t * s.N + i) * 3 + c] = (ep - em) / (2 * h);
-      }
+      for (int c = 0; c < 3; ++c)
+        g.r[(t * s.N + i) * 3 + c] = smg::test::central_difference_tangent(
+            s.rot(t, i), c, [&](const smg::Quaternion<double>& q) { p.set_rot(t, i, q); }, energy, h);
   return g;
-}
-
-double rel(const std::vector<double>& a, const std::vector<double>& b) {
-  double num = 0, den = 0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    num += (a[k] - b[k]) * (a[k] - b[k]);
-    den += b[k] * b[k];
-  }
-  return std::sqrt(num) / std::max(std::sqrt(den), 1e-300);
 }
 
 }  // namespace
@@ -141,8 +118,8 @@ TEST_CASE("C-ARAP gradient matches central finite differences") {
     CAPTURE(T);
     const Grad a = run_carap(s, o, true);
     const Grad f = finite_difference(s, o, true);
-    CHECK(rel(a.x, f.x) < 1e-7);
-    CHECK(rel(a.r, f.r) < 1e-7);
+    CHECK(smg::test::relative_error(a.x, f.x) < 1e-7);
+    CHECK(smg::test::relative_error(a.r, f.r) < 1e-7);
   }
 }
 
@@ -172,8 +149,8 @@ TEST_CASE("C-ARAP gradient with long gaps and many blocks matches finite differe
   o.gaps = {{2, 1.0}, {9, 0.7}, {20, 1.5}};
   const Grad a = run_carap(s, o, true);
   const Grad f = finite_difference(s, o, true);
-  CHECK(rel(a.x, f.x) < 1e-7);
-  CHECK(rel(a.r, f.r) < 1e-7);
+  CHECK(smg::test::relative_error(a.x, f.x) < 1e-7);
+  CHECK(smg::test::relative_error(a.r, f.r) < 1e-7);
 }
 
 TEST_CASE("C-ARAP is zero for a rigidly moving scene") {
@@ -209,8 +186,8 @@ TEST_CASE("C-ARAP and its gradients are invariant to a global rigid transform") 
     rotated[k + 1] = g(1);
     rotated[k + 2] = g(2);
   }
-  CHECK(rel(b.x, rotated) < 1e-11);
-  CHECK(rel(b.r, a.r) < 1e-11);
+  CHECK(smg::test::relative_error(b.x, rotated) < 1e-11);
+  CHECK(smg::test::relative_error(b.r, a.r) < 1e-11);
 }
 
 TEST_CASE("C-ARAP: all-zero confidences fall back to the alpha floor; ARAP is c = 1, alpha = 1") {
@@ -269,8 +246,8 @@ TEST_CASE("C-ARAP: float agrees with double") {
   const double ef = smg::carap<float>(f.positions(), f.rotations(), f.confidence(), f.graph(), o,
                                       {gx.data(), s.T, s.N}, {gr.data(), s.T, s.N});
   CHECK(std::abs(ef - d.energy) <= 1e-5 * d.energy);
-  CHECK(rel(std::vector<double>(gx.begin(), gx.end()), d.x) < 1e-4);
-  CHECK(rel(std::vector<double>(gr.begin(), gr.end()), d.r) < 1e-4);
+  CHECK(smg::test::relative_error(std::vector<double>(gx.begin(), gx.end()), d.x) < 1e-4);
+  CHECK(smg::test::relative_error(std::vector<double>(gr.begin(), gr.end()), d.r) < 1e-4);
 }
 
 TEST_CASE("C-ARAP: validation") {

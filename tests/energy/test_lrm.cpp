@@ -10,6 +10,7 @@
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
 #include "support/autodiff.hpp"
+#include "support/finite_diff.hpp"
 #include "support/random.hpp"
 
 using smg::Index;
@@ -35,26 +36,8 @@ double lrm_energy(const Scene<double>& s, const smg::LrmOptions& o, bool use_con
 
 std::vector<double> fd(const Scene<double>& s, const smg::LrmOptions& o, bool use_conf,
                        double h = 1e-6) {
-  std::vector<double> g(s.x.size());
   Scene<double> p = s;
-  for (std::size_t k = 0; k < s.x.size(); ++k) {
-    p.x[k] = s.x[k] + h;
-    const double ep = lrm_energy(p, o, use_conf);
-    p.x[k] = s.x[k] - h;
-    const double em = lrm_energy(p, o, use_conf);
-    p.x[k] = s.x[k];
-    g[k] = (ep - em) / (2 * h);
-  }
-  return g;
-}
-
-double rel(const std::vector<double>& a, const std::vector<double>& b) {
-  double num = 0, den = 0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    num += (a[k] - b[k]) * (a[k] - b[k]);
-    den += b[k] * b[k];
-  }
-  return std::sqrt(num) / std::max(std::sqrt(den), 1e-300);
+  return smg::test::central_gradient(p.x, [&] { return lrm_energy(p, o, use_conf); }, h);
 }
 
 }  // namespace
@@ -96,7 +79,7 @@ TEST_CASE("LRM gradient matches central finite differences") {
           // AutoDiffScalar through the reference with ω's derivatives dropped (below).
           continue;
         }
-        CHECK(rel(g, fd(s, o, true)) < 1e-7);
+        CHECK(smg::test::relative_error(g, fd(s, o, true)) < 1e-7);
       }
   }
 }
@@ -124,7 +107,7 @@ TEST_CASE("LRM with omega held constant equals autodiff of the reference with om
     const double v = lrm_energy(s, o, true, &g);
     CHECK(std::abs(e.value() - v) <= 1e-12 * v);
     std::vector<double> ad(e.derivatives().data(), e.derivatives().data() + n);
-    CHECK(rel(g, ad) < 1e-10);
+    CHECK(smg::test::relative_error(g, ad) < 1e-10);
   }
 }
 
@@ -213,7 +196,7 @@ TEST_CASE("LRM and its gradient are invariant to a global rigid transform") {
     const Vector3<double> g = Q * Vector3<double>(a[k], a[k + 1], a[k + 2]);
     for (int c = 0; c < 3; ++c) rotated[k + c] = g(c);
   }
-  CHECK(rel(b, rotated) < 1e-9);
+  CHECK(smg::test::relative_error(b, rotated) < 1e-9);
 }
 
 TEST_CASE("LRM: confidences only reweight; all-zero confidences equal all-one (normalised)") {
@@ -226,7 +209,7 @@ TEST_CASE("LRM: confidences only reweight; all-zero confidences equal all-one (n
   std::fill(s.c.begin(), s.c.end(), 0.0);
   const double e0 = lrm_energy(s, o, true, &zero);
   CHECK(e0 == doctest::Approx(e1).epsilon(1e-13));
-  CHECK(rel(zero, none) < 1e-13);
+  CHECK(smg::test::relative_error(zero, none) < 1e-13);
   // alpha = 0 and zero confidences: no weight at all, so every term is 0.
   o.alpha = 0.0;
   CHECK(lrm_energy(s, o, true) == 0.0);
@@ -244,12 +227,12 @@ TEST_CASE("LRM: detached and exact gradients agree where Huber is quadratic (env
   lrm_energy(s, o, true, &exact);
   o.detach_omega = true;
   lrm_energy(s, o, true, &detached);
-  CHECK(rel(detached, exact) < 1e-8);
+  CHECK(smg::test::relative_error(detached, exact) < 1e-8);
   o.huber_delta = 0.01;  // most residuals in the linear zone: the implicit term matters
   lrm_energy(s, o, true, &detached);
   o.detach_omega = false;
   lrm_energy(s, o, true, &exact);
-  CHECK(rel(detached, exact) > 1e-3);
+  CHECK(smg::test::relative_error(detached, exact) > 1e-3);
 }
 
 TEST_CASE("LRM: float agrees with double; accumulation, normalisation and weight") {
@@ -263,7 +246,7 @@ TEST_CASE("LRM: float agrees with double; accumulation, normalisation and weight
   std::vector<float> gf(s.x.size(), 0.f);
   const double ef = smg::lrm<float>(f.positions(), f.confidence(), f.graph(), o, {gf.data(), s.T, s.N});
   CHECK(std::abs(ef - ed) <= 1e-4 * ed);
-  CHECK(rel(std::vector<double>(gf.begin(), gf.end()), gd) < 1e-3);
+  CHECK(smg::test::relative_error(std::vector<double>(gf.begin(), gf.end()), gd) < 1e-3);
   // += semantics
   std::vector<double> acc(s.x.size(), 0.5);
   smg::EnergyWorkspace<double> ws;
@@ -278,7 +261,7 @@ TEST_CASE("LRM: float agrees with double; accumulation, normalisation and weight
   const double em = lrm_energy(s, m, true, &gm);
   const double terms = double(smg::lrm_term_count(s.graph(), s.T));
   CHECK(em == doctest::Approx(3.0 * ed / terms).epsilon(1e-13));
-  CHECK(rel(gm, std::vector<double>(gd.size())) > 0);
+  CHECK(smg::test::relative_error(gm, std::vector<double>(gd.size())) > 0);
   for (std::size_t k = 0; k < gm.size(); ++k)
     CHECK(gm[k] == doctest::Approx(3.0 * gd[k] / terms).epsilon(1e-12).scale(1e-15));
 }

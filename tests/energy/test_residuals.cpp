@@ -11,6 +11,7 @@
 
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
+#include "support/finite_diff.hpp"
 #include "support/random.hpp"
 
 using smg::Index;
@@ -18,19 +19,6 @@ using smg::Quaternion;
 using smg::Vector3;
 using smg::test::Rng;
 using smg::test::Scene;
-
-namespace {
-
-double rel(const std::vector<double>& a, const std::vector<double>& b) {
-  double num = 0, den = 0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    num += (a[k] - b[k]) * (a[k] - b[k]);
-    den += b[k] * b[k];
-  }
-  return std::sqrt(num) / std::max(std::sqrt(den), 1e-300);
-}
-
-}  // namespace
 
 TEST_CASE("C-ARAP residuals: sum of squares, 2 J^T r and the block count") {
   Rng rng(701);
@@ -58,8 +46,8 @@ TEST_CASE("C-ARAP residuals: sum of squares, 2 J^T r and the block count") {
       true, par);
   CHECK(blocks == smg::carap_residual_count(s.graph(), s.T, o));
   CHECK(sum == doctest::Approx(e).epsilon(1e-12));
-  CHECK(rel(hx, gx) < 1e-12);
-  CHECK(rel(hr, gr) < 1e-12);
+  CHECK(smg::test::relative_error(hx, gx) < 1e-12);
+  CHECK(smg::test::relative_error(hr, gr) < 1e-12);
 }
 
 TEST_CASE("C-ARAP residual blocks: Jacobians match central finite differences") {
@@ -144,7 +132,7 @@ TEST_CASE("LRM residuals: block energies, IRLS sum of squares and 2 J_f^T f") {
       if (delta > 1) CHECK(sum_f == doctest::Approx(e).epsilon(1e-12));  // quadratic zone
       // In the linear zone ½ ψ r² = ½ δ r < δ (r − δ/2): the IRLS sum understates the value...
       if (delta < 1) CHECK(sum_f < e);
-      CHECK(rel(h, g) < 1e-10);  // ...but its gradient is exact
+      CHECK(smg::test::relative_error(h, g) < 1e-10);  // ...but its gradient is exact
     }
 }
 

@@ -114,28 +114,14 @@ TEST_CASE("NodeObjective: exact gradients match finite differences for every var
     CHECK(plain.total() == doctest::Approx(terms.total()).epsilon(1e-14));
     CHECK(obj.confidences() == confidences);
 
-    const double h = 1e-6;
+    const auto total = [&] { return obj.evaluate(n).total(); };
     Eigen::VectorXd fd_p(static_cast<Eigen::Index>(gp.size())), fd_r(static_cast<Eigen::Index>(gr.size()));
-    for (std::size_t k = 0; k < n.positions.size(); ++k) {
-      const double x0 = n.positions[k];
-      n.positions[k] = x0 + h;
-      const double ep = obj.evaluate(n).total();
-      n.positions[k] = x0 - h;
-      const double em = obj.evaluate(n).total();
-      n.positions[k] = x0;
-      fd_p(static_cast<Eigen::Index>(k)) = (ep - em) / (2 * h);
-    }
+    for (std::size_t k = 0; k < n.positions.size(); ++k)
+      fd_p(static_cast<Eigen::Index>(k)) = smg::test::central_difference(n.positions[k], total);
     for (int s = 0; s < T * N; ++s) {
       const Eigen::Quaterniond q0 = smg::from_wxyz(n.rotations.data() + 4 * s);
-      for (int c = 0; c < 3; ++c) {
-        const Eigen::Vector3d e = h * Eigen::Vector3d::Unit(c);
-        smg::to_wxyz(Eigen::Quaterniond(q0 * smg::so3::exp(e)), n.rotations.data() + 4 * s);
-        const double ep = obj.evaluate(n).total();
-        smg::to_wxyz(Eigen::Quaterniond(q0 * smg::so3::exp(Eigen::Vector3d(-e))), n.rotations.data() + 4 * s);
-        const double em = obj.evaluate(n).total();
-        smg::to_wxyz(q0, n.rotations.data() + 4 * s);
-        fd_r(3 * s + c) = (ep - em) / (2 * h);
-      }
+      const auto set = [&](const Eigen::Quaterniond& q) { smg::to_wxyz(q, n.rotations.data() + 4 * s); };
+      for (int c = 0; c < 3; ++c) fd_r(3 * s + c) = smg::test::central_difference_tangent(q0, c, set, total);
     }
     CHECK(obj.confidences() == confidences);
     const double ep = smg::test::relative_error(as_vector(gp), fd_p);

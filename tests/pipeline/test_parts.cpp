@@ -12,6 +12,7 @@
 
 #include "smg/core/quaternion.hpp"
 #include "smg/core/so3.hpp"
+#include "support/finite_diff.hpp"
 #include "support/random.hpp"
 #include "trainer/adam.hpp"
 #include "trainer/gaussians.hpp"
@@ -105,28 +106,15 @@ TEST_CASE("photometric_loss<double>: values and gradient against finite differen
                                       a.data(), b.data(), &x, &y);
     return x + lambda * y;
   };
-  const double h = 1e-6;
   double err = 0, ref = 0;
   for (int k = 0; k < 3 * n; ++k) {
-    const double x0 = image[k];
-    image[k] = x0 + h;
-    const double lp = total();
-    image[k] = x0 - h;
-    const double lm = total();
-    image[k] = x0;
-    const double fd = (lp - lm) / (2 * h);
+    const double fd = smg::test::central_difference(image[k], total);
     err = std::max(err, std::abs(fd - gi[k]));
     ref = std::max(ref, std::abs(fd));
   }
   int zero_where_no_prior = 0;
   for (int k = 0; k < n; ++k) {
-    const double x0 = depth[k];
-    depth[k] = x0 + h;
-    const double lp = total();
-    depth[k] = x0 - h;
-    const double lm = total();
-    depth[k] = x0;
-    const double fd = (lp - lm) / (2 * h);
+    const double fd = smg::test::central_difference(depth[k], total);
     err = std::max(err, std::abs(fd - gd[k]));
     ref = std::max(ref, std::abs(fd));
     if (!(target_depth[k] > 0) && gd[k] == 0.0 && fd == 0.0) ++zero_where_no_prior;

@@ -130,17 +130,8 @@ double loss(const Fixture& f, const GaussianModel<double>& m, const NodeState<do
 
 // Central differences of L in each entry of a flat parameter array.
 Eigen::VectorXd fd_flat(std::vector<double>& x, const std::function<double()>& L, double h = 1e-6) {
-  Eigen::VectorXd g(static_cast<Eigen::Index>(x.size()));
-  for (std::size_t k = 0; k < x.size(); ++k) {
-    const double x0 = x[k];
-    x[k] = x0 + h;
-    const double lp = L();
-    x[k] = x0 - h;
-    const double lm = L();
-    x[k] = x0;
-    g(static_cast<Eigen::Index>(k)) = (lp - lm) / (2 * h);
-  }
-  return g;
+  const std::vector<double> g = smg::test::central_gradient(x, L, h);
+  return Eigen::Map<const Eigen::VectorXd>(g.data(), static_cast<Eigen::Index>(g.size()));
 }
 
 Eigen::VectorXd as_vector(const std::vector<double>& v) {
@@ -216,18 +207,10 @@ TEST_CASE("ModelRenderer<double>: backward matches finite differences (Gaussians
   SUBCASE("node positions and right-tangent rotations, at the rendered and reference frames") {
     const Eigen::VectorXd fd_x = fd_flat(n.positions, L);
     Eigen::VectorXd fd_q(kT * kN * 3);
-    const double h = 1e-6;
     for (int s = 0; s < kT * kN; ++s) {
       const Eigen::Quaterniond q0 = smg::from_wxyz(f.nodes.rotations.data() + 4 * s);
-      for (int k = 0; k < 3; ++k) {
-        const Eigen::Vector3d e = h * Eigen::Vector3d::Unit(k);
-        smg::to_wxyz(Eigen::Quaterniond(q0 * smg::so3::exp(e)), n.rotations.data() + 4 * s);
-        const double lp = L();
-        smg::to_wxyz(Eigen::Quaterniond(q0 * smg::so3::exp(Eigen::Vector3d(-e))), n.rotations.data() + 4 * s);
-        const double lm = L();
-        smg::to_wxyz(q0, n.rotations.data() + 4 * s);
-        fd_q(3 * s + k) = (lp - lm) / (2 * h);
-      }
+      const auto set = [&](const Eigen::Quaterniond& q) { smg::to_wxyz(q, n.rotations.data() + 4 * s); };
+      for (int k = 0; k < 3; ++k) fd_q(3 * s + k) = smg::test::central_difference_tangent(q0, k, set, L);
     }
     const Eigen::VectorXd an_x = as_vector(grads.node_positions), an_q = as_vector(grads.node_rotations);
     // Per frame: the rendered frame (2) and both reference frames (0, 1) must carry gradient.

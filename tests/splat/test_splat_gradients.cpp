@@ -41,15 +41,7 @@ std::vector<BlockError> gradient_errors(SplatScene<double> scene, const Camera<d
     return test::loss(test::render<C>(scene, cam, set, ws2, 1), w);
   };
   std::vector<double> fd;
-  for (double* p : scene.flat()) {
-    const double x = *p;
-    *p = x + h;
-    const double lp = L();
-    *p = x - h;
-    const double lm = L();
-    *p = x;
-    fd.push_back((lp - lm) / (2 * h));
-  }
+  for (double* p : scene.flat()) fd.push_back(test::central_difference(*p, L, h));
   const std::vector<double> an = grads.flat();
   std::vector<BlockError> out;
   std::size_t off = 0;

@@ -11,6 +11,7 @@
 
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
+#include "support/finite_diff.hpp"
 #include "support/random.hpp"
 
 using smg::Index;
@@ -56,37 +57,19 @@ bool all_finite(const All& a) {
 double lrm_fd_error(const Scene<double>& s, const smg::LrmOptions& o, double h) {
   std::vector<double> g(s.x.size(), 0.0);
   smg::lrm<double>(s.positions(), {}, s.graph(), o, {g.data(), s.T, s.N});
-  double num = 0, den = 0;
   Scene<double> p = s;
-  for (std::size_t k = 0; k < s.x.size(); ++k) {
-    p.x[k] = s.x[k] + h;
-    const double ep = smg::lrm<double>(p.positions(), {}, p.graph(), o);
-    p.x[k] = s.x[k] - h;
-    const double em = smg::lrm<double>(p.positions(), {}, p.graph(), o);
-    p.x[k] = s.x[k];
-    const double f = (ep - em) / (2 * h);
-    num += (g[k] - f) * (g[k] - f);
-    den += f * f;
-  }
-  return std::sqrt(num / std::max(den, 1e-300));
+  const std::vector<double> f =
+      smg::test::central_gradient(p.x, [&] { return smg::lrm<double>(p.positions(), {}, p.graph(), o); }, h);
+  return smg::test::relative_error(g, f, 1e-150);
 }
 
 double carap_fd_error(const Scene<double>& s, double h) {
   std::vector<double> g(s.x.size(), 0.0);
   smg::carap<double>(s.positions(), s.rotations(), {}, s.graph(), {}, {g.data(), s.T, s.N});
-  double num = 0, den = 0;
   Scene<double> p = s;
-  for (std::size_t k = 0; k < s.x.size(); ++k) {
-    p.x[k] = s.x[k] + h;
-    const double ep = smg::carap<double>(p.positions(), p.rotations(), {}, p.graph(), {});
-    p.x[k] = s.x[k] - h;
-    const double em = smg::carap<double>(p.positions(), p.rotations(), {}, p.graph(), {});
-    p.x[k] = s.x[k];
-    const double f = (ep - em) / (2 * h);
-    num += (g[k] - f) * (g[k] - f);
-    den += f * f;
-  }
-  return std::sqrt(num / std::max(den, 1e-300));
+  const std::vector<double> f = smg::test::central_gradient(
+      p.x, [&] { return smg::carap<double>(p.positions(), p.rotations(), {}, p.graph(), {}); }, h);
+  return smg::test::relative_error(g, f, 1e-150);
 }
 
 // Node 0 with neighbours 1..n placed by `place(t, k)`; other rows empty.

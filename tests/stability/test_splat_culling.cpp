@@ -189,14 +189,8 @@ TEST_CASE("partly off-screen Gaussians are drawn, culled when their box misses t
   std::vector<double> fd;
   const double h = 1e-5;
   for (double* p : s.flat()) {
-    const double x = *p;
     RenderWorkspace<double> w2;
-    *p = x + h;
-    const double lp = test::loss(test::render<3>(s, cam, {}, w2), w);
-    *p = x - h;
-    const double lm = test::loss(test::render<3>(s, cam, {}, w2), w);
-    *p = x;
-    fd.push_back((lp - lm) / (2 * h));
+    fd.push_back(test::central_difference(*p, [&] { return test::loss(test::render<3>(s, cam, {}, w2), w); }, h));
   }
   const double err = test::relative_error(Eigen::Map<const Eigen::VectorXd>(an.data(), Index(an.size())),
                                           Eigen::Map<const Eigen::VectorXd>(fd.data(), Index(fd.size())));

@@ -1,6 +1,6 @@
 // The scene_preview program: one JSON line and its pictures; bad flags or an unwritable output
 // folder give one line on stderr and exit code 2. Runs when the examples are built (the CMake
-// block in examples/CMakeLists.txt passes SMG_SCENE_PREVIEW_PATH).
+// block in tests/CMakeLists.txt passes SMG_SCENE_PREVIEW_PATH).
 #include <doctest/doctest.h>
 
 #include <algorithm>

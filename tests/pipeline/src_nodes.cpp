@@ -1,2 +1,0 @@
-// Compiles examples/trainer/nodes.cpp into test_pipeline (see examples/CMakeLists.txt).
-#include "trainer/nodes.cpp"

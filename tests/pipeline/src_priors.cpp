@@ -1,2 +1,0 @@
-// Compiles examples/trainer/priors.cpp into test_pipeline (see examples/CMakeLists.txt).
-#include "trainer/priors.cpp"

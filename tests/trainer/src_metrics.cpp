@@ -1,2 +1,0 @@
-// Compiles examples/trainer/metrics.cpp into test_trainer (see examples/CMakeLists.txt).
-#include "trainer/metrics.cpp"
