@@ -164,8 +164,8 @@ void run_dqb(const Invocation& inv, JsonLine& summary) {
     const double bytes = double(c.Q) * double(c.P) * 7 * s + double(c.P) * D * (4 + s) +
                          double(c.T) * double(c.N) * 7 * s + double(c.P) * 7 * s;
     check_memory(bytes, inv.max_bytes,
-                 cd.file("t_query.npy") + " x " + cd.file("points.npy") + " (Q = " + std::to_string(c.Q) +
-                     ", P = " + std::to_string(c.P) + ": blended outputs [Q,P,7])");
+                 cd.file("t_query.npy") + ": Q = " + std::to_string(c.Q) + " query frames x P = " + std::to_string(c.P) +
+                     " points (points.npy) of blended outputs [Q,P,7]");
   }
 
   const smg::SkinMethod method = inv.args.get_switch("lbs") ? smg::SkinMethod::lbs

@@ -199,7 +199,7 @@ void run_energies(const Invocation& inv, JsonLine& summary) {
     // frame tables) and the graph's per-edge work.
     const double s = inv.use_float ? 4 : 8, tn = double(T) * double(N);
     check_memory(tn * (3 * 8 + 4 * 8 + 1) + tn * s * (3 + 4 + 1 + 15 + 12), inv.max_bytes,
-                 c.file("positions.npy") + " (T = " + std::to_string(T) + ", N = " + std::to_string(N) + ")");
+                 c.file("positions.npy") + ": T = " + std::to_string(T) + " frames x N = " + std::to_string(N) + " nodes");
   }
   std::vector<double> q;
   if (auto qs = c.load_optional<double>("quats.npy", {{"T", T}, {"N", N}, {"", 4}})) {

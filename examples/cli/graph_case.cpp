@@ -108,8 +108,8 @@ CaseGraph build_typed(const Invocation& inv, const Tensor<double>& positions, Co
     // trajectory copy and candidate buffers + the converted inputs.
     const double K = double(cfg.graph.knn.k), n = double(N), t = double(T), s = double(sizeof(S));
     const double bytes = n * K * (4 + 3 * s + 3 * 8) * 2 + n * t * (3 * s * 3 + 8);
-    check_memory(bytes, inv.max_bytes, "--k " + std::to_string(cfg.graph.knn.k) + " with N = " + std::to_string(N) +
-                                           ", T = " + std::to_string(T) + " (" + c.file("positions.npy") + ")");
+    check_memory(bytes, inv.max_bytes, "--k: k = " + std::to_string(cfg.graph.knn.k) + " neighbours of N = " +
+                                           std::to_string(N) + " nodes over T = " + std::to_string(T) + " frames");
   }
   const AllocContext ctx("graph of " + c.file("positions.npy"));
   const auto vis = c.load_optional<std::uint8_t>("visibility.npy", {{"T", T}, {"N", N}});

@@ -231,7 +231,7 @@ inline Array read(const std::string& path, std::uint64_t max_bytes = 0) {
   namespace fs = std::filesystem;
   std::error_code ec;
   const fs::file_status st = fs::status(path, ec);
-  if (ec || !fs::exists(st)) throw Error(path + ": cannot open (no such file)");
+  if (ec || !fs::exists(st)) throw Error(path + ": cannot open");
   if (!fs::is_regular_file(st)) throw Error(path + ": not a regular file");
   const std::uint64_t file_size = fs::file_size(path, ec);
   if (ec) throw Error(path + ": cannot read the file size");

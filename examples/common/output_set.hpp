@@ -22,7 +22,7 @@
 //    included, deepest first) are removed, and the error propagates.
 //
 // Test hook: the environment variable SMG_CLI_TEST_FAIL_MOVE=k (k >= 1) makes the k-th move into
-// an existing OUT fail, so that the rollback can be tested without a full disk.
+// an existing OUT fail (k = 1: also the single move of a new OUT), so that the rollback can be tested without a full disk.
 #pragma once
 
 #include <cerrno>
@@ -74,7 +74,7 @@ class OutputSet {
       commit_into_existing(dir);
       return;
     }
-    if (errno != ENOENT) throw npy::Error(dir.string() + ": " + std::strerror(errno));
+    if (errno != ENOENT && errno != ENOTDIR) throw npy::Error(dir.string() + ": " + std::strerror(errno));
     // OUT does not exist: create its missing parents, remembering them for the cleanup.
     fs::path parent = dir.has_parent_path() ? dir.parent_path() : fs::path(".");
     if (parent.empty()) parent = ".";
@@ -103,6 +103,8 @@ class OutputSet {
         if (::mkdir(out.c_str(), 0777) != 0)
           throw npy::Error(out.string() + ": cannot create folder: " + std::strerror(errno));
         for (const auto& it : items_) it.write((out / it.file).string());
+        if (fail_move_at() == 1)
+          throw npy::Error(dir.string() + ": cannot move the outputs into place: injected failure (SMG_CLI_TEST_FAIL_MOVE)");
         if (::rename(out.c_str(), dir.c_str()) != 0)
           throw npy::Error(dir.string() + ": cannot move the outputs into place: " + std::strerror(errno));
       } catch (...) {
