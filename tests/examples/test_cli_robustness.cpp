@@ -404,6 +404,7 @@ TEST_CASE("smg_cli robustness: malformed inputs give one error line, exit code 2
                               " " + cs.args,
                           cs.env);
     CAPTURE(r.err);
+    if (std::getenv("SMG_PRINT_CASES")) std::cout << cs.sub << ": " << cs.name << "\n    " << r.err;
     CHECK(r.code == 2);
     CHECK(r.out.empty());
     CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
