@@ -134,10 +134,18 @@ void compute(const Invocation& inv, const Params& prm, const Tensor<double>& x_d
   std::vector<S> conf(static_cast<std::size_t>(T * N)), gxc(x.size(), S(0)), grc(x.size(), S(0)),
       gxl(x.size(), S(0)), gxa(x.size(), S(0)), gra(x.size(), S(0));
   const smg::FrameScalarsView<const S> cv(conf.data(), T, N);
-  ok(smg::validate_confidence<S>(xv, vv, graph, prm.conf, {conf.data(), T, N}));
-  ok(smg::validate_carap<S>(xv, qv, {}, graph, prm.carap));
-  ok(smg::validate_lrm<S>(xv, {}, graph, prm.lrm));
-  ok(smg::validate_arap<S>(xv, qv, graph, prm.arap));
+  // Library messages name views ("graph: entry [i=..]"); report them under the case's files.
+  const CaseDir& cd = inv.case_dir;
+  const std::string graph_file = cd.file(g.built ? "positions.npy" : "graph_indices.npy");
+  const NameMap names = {{"graph", graph_file},           {"neighbors", graph_file},
+                         {"positions", cd.file("positions.npy")}, {"x", cd.file("positions.npy")},
+                         {"quaternions", cd.file("quats.npy")},   {"quats", cd.file("quats.npy")},
+                         {"q", cd.file("quats.npy")},             {"visibility", cd.file("visibility.npy")}};
+  auto checked = [&](const smg::Status& st) { check_mapped(st, names, cd.path().string()); };
+  checked(smg::validate_confidence<S>(xv, vv, graph, prm.conf, {conf.data(), T, N}));
+  checked(smg::validate_carap<S>(xv, qv, {}, graph, prm.carap));
+  checked(smg::validate_lrm<S>(xv, {}, graph, prm.lrm));
+  checked(smg::validate_arap<S>(xv, qv, graph, prm.arap));
 
   smg::ParallelOptions par;
   par.threads = inv.threads;

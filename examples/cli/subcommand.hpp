@@ -54,7 +54,7 @@ inline std::string map_message(std::string m, const NameMap& names, const std::s
       if (!best || n.first.size() > best->first.size()) best = &n;
   if (!best) return fallback + ": " + m;
   std::string rest = m.substr(best->first.size());
-  if (!rest.empty() && rest[0] == ':') return best->second + ":" + rest;
+  if (!rest.empty() && rest[0] == ':') return best->second + rest;
   return best->second + ": " + m;
 }
 // Throws a UsageError (a flag) or RunError (a file) for a failed library Status.
