@@ -63,7 +63,8 @@ class OutputSet {
   // they were before the call.
   void commit(const std::filesystem::path& dir_in) const {
     namespace fs = std::filesystem;
-    const fs::path dir = dir_in.lexically_normal();
+    fs::path dir = dir_in.lexically_normal();
+    while (dir.has_parent_path() && dir.filename().empty() && dir != dir.root_path()) dir = dir.parent_path();  // "out/" -> "out"
     std::error_code ec;
     struct stat st {};
     const bool exists = ::lstat(dir.c_str(), &st) == 0;

@@ -485,6 +485,10 @@ TEST_CASE("smg_cli outputs: planted symlinks at staging names are never followed
     ++entries;
   }
   CHECK(entries == 5);
+  // OUT given with a trailing slash.
+  r = run_cli("graph " + shell_quote(case_dir.string()) + " " + shell_quote((root / "t" / "out").string() + "/") + " --k 4");
+  CHECK(r.code == 0);
+  CHECK(fs::exists(root / "t" / "out" / "graph_indices.npy"));
   fs::remove_all(root);
 }
 #endif
