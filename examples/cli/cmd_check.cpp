@@ -20,25 +20,25 @@ void check_case(const Invocation& inv, JsonLine& summary) {
   auto ok = [](const smg::Status& s) {
     if (!s) throw RunError(s.message());
   };
-  ok(smg::validate_positions<double>({x.ptr(), T, N}, T, N, "positions.npy"));
+  ok(smg::validate_positions<double>({x.ptr(), T, N}, T, N, c.file("positions.npy")));
   if (auto q = c.load_optional<double>("quats.npy", {{"T", T}, {"N", N}, {"", 4}})) {
     ok(smg::validate_quaternions<double>({q->ptr(), T, N}, T, N,
-                                         smg::QuaternionNorm::normalize_on_entry, "quats.npy"));
+                                         smg::QuaternionNorm::normalize_on_entry, c.file("quats.npy")));
     files += ",\"quats.npy\"";
   }
   if (auto v = c.load_optional<std::uint8_t>("visibility.npy", {{"T", T}, {"N", N}})) {
-    ok(smg::validate_visibility<std::uint8_t>({v->ptr(), T, N}, T, N, "visibility.npy"));
+    ok(smg::validate_visibility<std::uint8_t>({v->ptr(), T, N}, T, N, c.file("visibility.npy")));
     files += ",\"visibility.npy\"";
   }
   std::int64_t C = 0;
   if (auto g = c.load_optional<double>("feature_samples.npy", {{"T", T}, {"N", N}, {"C"}})) {
     C = g->dim(2);
-    ok(smg::validate_feature_samples<double>({g->ptr(), T, N, C}, T, N, C, "feature_samples.npy"));
+    ok(smg::validate_feature_samples<double>({g->ptr(), T, N, C}, T, N, C, c.file("feature_samples.npy")));
     files += ",\"feature_samples.npy\"";
   }
   if (auto f = c.load_optional<double>("features.npy", {{"N", N}, {"C", C > 0 ? C : -1}})) {
     C = f->dim(1);
-    ok(smg::validate_features<double>({f->ptr(), N, C}, N, C, "features.npy"));
+    ok(smg::validate_features<double>({f->ptr(), N, C}, N, C, c.file("features.npy")));
     files += ",\"features.npy\"";
   }
   files += "]";

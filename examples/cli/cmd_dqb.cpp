@@ -28,6 +28,16 @@ void ok(const smg::Status& s) {
   if (!s) throw RunError(s.message());
 }
 
+// Library view names -> the case's files.
+NameMap skin_names(const CaseDir& c) {
+  NameMap n;
+  for (const char* f : {"anchor", "t_ref", "t_query", "points", "point_quats", "sigma", "positions", "quats"})
+    n.push_back({f, c.file(std::string(f) + ".npy")});
+  n.push_back({"quaternions", c.file("quats.npy")});
+  n.push_back({"graph", c.file("graph_indices.npy")});
+  return n;
+}
+
 // An index array, loaded as int64 (so that an int64 value beyond int32 cannot wrap into a
 // valid index) and checked against [0, bound) before narrowing.
 std::vector<std::int32_t> load_index(const CaseDir& cd, const std::string& file,
@@ -36,7 +46,7 @@ std::vector<std::int32_t> load_index(const CaseDir& cd, const std::string& file,
   const auto t = cd.load<std::int64_t>(file, dims);
   for (std::size_t i = 0; i < t.data.size(); ++i)
     if (t.data[i] < 0 || t.data[i] >= bound)
-      throw RunError(file + ": element [" + std::to_string(i) + "] = " + std::to_string(t.data[i]) +
+      throw RunError(cd.file(file) + ": element [" + std::to_string(i) + "] = " + std::to_string(t.data[i]) +
                      " is out of range [0, " + bound_name + "=" + std::to_string(bound) + ")");
   return std::vector<std::int32_t>(t.data.begin(), t.data.end());
 }
@@ -58,6 +68,10 @@ void blend(const Invocation& inv, const DqbCase& c, smg::SkinMethod method, Outp
   smg::ParallelOptions par;
   par.threads = inv.threads;
   const smg::NeighborsView<S> graph(c.graph.indices.data(), graph_w.data(), N, c.K);
+  const NameMap names = skin_names(inv.case_dir);
+  const std::string fallback = inv.case_dir.path().string();
+  auto ok = [&](const smg::Status& s) { check_mapped(s, names, fallback); };
+  const AllocContext ctx("blend of " + inv.case_dir.file("points.npy") + " at " + inv.case_dir.file("t_query.npy"));
   std::vector<std::int32_t> drivers(static_cast<std::size_t>(P * D));
   const smg::TableView<std::int32_t, Eigen::Dynamic> drivers_out(drivers.data(), P, D);
   ok(smg::validate_skin_drivers(graph, {c.anchor.data(), P}, N, drivers_out));
@@ -88,6 +102,11 @@ void blend(const Invocation& inv, const DqbCase& c, smg::SkinMethod method, Outp
   opt.method = method;
   opt.parallel = par;
   smg::skin_blend(nodes, pts, {c.t_query.data(), Q}, o, opt);
+  // Finite inputs must give finite results (docs/interop.md "Overflow").
+  const std::string cause = inv.case_dir.file("positions.npy") + ": coordinates too large: the blend overflows (non-finite ";
+  require_finite(weights, cause + "skinning weight)");
+  require_finite(blended_points, cause + "blended point)");
+  require_finite(blended_quats, cause + "blended rotation)");
   out.add("blended_points.npy", std::move(blended_points), {Q, P, 3});
   out.add("blended_quats.npy", std::move(blended_quats), {Q, P, 4});
 }
@@ -99,10 +118,14 @@ void run_dqb(const Invocation& inv, JsonLine& summary) {
   auto x = cd.load<double>("positions.npy", {{"T"}, {"N"}, {"", 3}});
   c.T = x.dim(0);
   c.N = x.dim(1);
-  ok(smg::validate_positions<double>({x.ptr(), c.T, c.N}, c.T, c.N, "positions.npy"));
+  ok(smg::validate_positions<double>({x.ptr(), c.T, c.N}, c.T, c.N, cd.file("positions.npy")));
+  if (inv.use_float)
+    require_coordinates<float>(x.data, cd.file("positions.npy"));
+  else
+    require_coordinates<double>(x.data, cd.file("positions.npy"));
   if (auto q = cd.load_optional<double>("quats.npy", {{"T", c.T}, {"N", c.N}, {"", 4}})) {
     ok(smg::validate_quaternions<double>({q->ptr(), c.T, c.N}, c.T, c.N,
-                                         smg::QuaternionNorm::normalize_on_entry, "quats.npy"));
+                                         smg::QuaternionNorm::normalize_on_entry, cd.file("quats.npy")));
     c.quats = std::move(q->data);
   } else {
     c.quats.assign(static_cast<std::size_t>(c.T * c.N * 4), 0.0);
@@ -114,11 +137,15 @@ void run_dqb(const Invocation& inv, JsonLine& summary) {
 
   auto pts = cd.load<double>("points.npy", {{"P"}, {"", 3}});
   c.P = pts.dim(0);
+  if (inv.use_float)
+    require_coordinates<float>(pts.data, cd.file("points.npy"));
+  else
+    require_coordinates<double>(pts.data, cd.file("points.npy"));
   c.points = std::move(pts.data);
   if (auto pq = cd.load_optional<double>("point_quats.npy", {{"P", c.P}, {"", 4}})) {
     for (std::int64_t p = 0; p < c.P; ++p)
       if (!(smg::Vector4<double>::Map(&pq->data[p * 4]).norm() > 0))
-        throw RunError("point_quats.npy: element [" + std::to_string(p) + "] is the zero quaternion");
+        throw RunError(cd.file("point_quats.npy") + ": element [" + std::to_string(p) + "] is the zero quaternion");
     c.point_quats = std::move(pq->data);
   } else {
     c.point_quats.assign(static_cast<std::size_t>(c.P * 4), 0.0);
@@ -129,7 +156,17 @@ void run_dqb(const Invocation& inv, JsonLine& summary) {
   c.t_query = load_index(cd, "t_query.npy", {{"Q"}}, c.T, "T");
   c.Q = static_cast<std::int64_t>(c.t_query.size());
   c.sigma = cd.load<double>("sigma.npy", {{"N", c.N}}).data;
-  ok(smg::validate_skin_sigma<double>({c.sigma.data(), c.N}, c.N, "sigma.npy"));
+  ok(smg::validate_skin_sigma<double>({c.sigma.data(), c.N}, c.N, cd.file("sigma.npy")));
+  {
+    // Outputs [Q,P,3] + [Q,P,4] in the computation's precision (the output set holds them until
+    // written) + per-point drivers and weights + the converted inputs.
+    const double s = inv.use_float ? 4 : 8, D = double(c.K + 1);
+    const double bytes = double(c.Q) * double(c.P) * 7 * s + double(c.P) * D * (4 + s) +
+                         double(c.T) * double(c.N) * 7 * s + double(c.P) * 7 * s;
+    check_memory(bytes, inv.max_bytes,
+                 cd.file("t_query.npy") + ": Q = " + std::to_string(c.Q) + " query frames x P = " + std::to_string(c.P) +
+                     " points (points.npy) of blended outputs [Q,P,7]");
+  }
 
   const smg::SkinMethod method = inv.args.get_switch("lbs") ? smg::SkinMethod::lbs
                                                             : smg::SkinMethod::dqb;

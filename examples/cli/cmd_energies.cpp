@@ -8,6 +8,8 @@
 // grad_positions_lrm.npy, grad_positions_arap.npy, grad_rotations_arap.npy (all [T,N,3]), in
 // float64, or float32 with --float. Confidences are computed once and used by C-ARAP and LRM.
 #include <chrono>
+#include <cmath>
+#include <limits>
 #include <cstdint>
 #include <sstream>
 #include <string>
@@ -21,27 +23,35 @@ namespace cli {
 
 namespace {
 
+// Comma-separated list of the default gaps' deltas or weights.
+std::string gap_list(bool weights) {
+  std::string out;
+  for (const smg::Gap& g : smg::CarapOptions{}.gaps)
+    out += (out.empty() ? "" : ",") + (weights ? format_number(g.weight) : format_number(g.delta));
+  return out;
+}
+
 std::vector<FlagSpec> energy_flags() {
+  // Defaults come from the library's option structs, so each exists once.
+  const smg::ConfidenceOptions conf{};
+  const smg::CarapOptions carap{};
+  const smg::LrmOptions lrm{};
   std::vector<FlagSpec> f = {
-      {"alpha", "0.6", "confidence floor of the edge weights (C-ARAP and LRM), in [0, 1]"},
-      {"kappa-m", "2.5", "confidence: soft threshold of the motion factor"},
-      {"kappa-r", "2.5", "confidence: soft threshold of the rigidity factor"},
-      {"lambda-m", "1", "confidence: exponent of the motion factor"},
-      {"lambda-r", "1", "confidence: exponent of the rigidity factor"},
-      {"eps", "1e-4", "confidence: epsilon of the normalisers (a length per frame)"},
-      {"lambda-c", "1", "C-ARAP/ARAP: weight of the vector-consistency term"},
-      {"lambda-l", "1", "C-ARAP/ARAP: weight of the length-preservation term"},
-      {"gaps", "1,2,4", "C-ARAP/ARAP: temporal gaps (frames), comma separated"},
-      {"gap-weights", "1,1,1", "C-ARAP/ARAP: one weight per gap"},
-      {"huber-delta", "0.01", "LRM: Huber threshold (a velocity, length per frame)"},
+      {"alpha", format_number(carap.alpha), "confidence floor of the edge weights (C-ARAP and LRM), in [0, 1]"},
+      {"kappa-m", format_number(conf.kappa_m), "confidence: soft threshold of the motion factor"},
+      {"kappa-r", format_number(conf.kappa_r), "confidence: soft threshold of the rigidity factor"},
+      {"lambda-m", format_number(conf.lambda_m), "confidence: exponent of the motion factor"},
+      {"lambda-r", format_number(conf.lambda_r), "confidence: exponent of the rigidity factor"},
+      {"eps", format_number(conf.eps), "confidence: epsilon of the normalisers (a length per frame)"},
+      {"lambda-c", format_number(carap.lambda_c), "C-ARAP/ARAP: weight of the vector-consistency term"},
+      {"lambda-l", format_number(carap.lambda_l), "C-ARAP/ARAP: weight of the length-preservation term"},
+      {"gaps", gap_list(false), "C-ARAP/ARAP: temporal gaps (frames), comma separated"},
+      {"gap-weights", gap_list(true), "C-ARAP/ARAP: one weight per gap"},
+      {"huber-delta", format_number(lrm.huber_delta), "LRM: Huber threshold (a velocity, length per frame)"},
       {"detach-omega", "", "LRM: hold omega constant in the gradient", true},
       {"normalize", "", "divide each energy (and gradient) by its number of terms", true}};
   for (auto& g : graph_flags()) f.push_back(g);
   return f;
-}
-
-void require(bool ok, const std::string& message) {
-  if (!ok) throw UsageError(message);
 }
 
 struct Params {
@@ -51,6 +61,16 @@ struct Params {
   smg::ArapOptions arap;
 };
 
+// Library option names -> flags (for the messages of smg::validate_options).
+const NameMap& energy_flag_names() {
+  static const NameMap names = {{"alpha", "--alpha"},         {"kappa_m", "--kappa-m"},
+                                {"kappa_r", "--kappa-r"},     {"lambda_m", "--lambda-m"},
+                                {"lambda_r", "--lambda-r"},   {"eps", "--eps"},
+                                {"lambda_c", "--lambda-c"},   {"lambda_l", "--lambda-l"},
+                                {"gaps", "--gaps"},           {"huber_delta", "--huber-delta"}};
+  return names;
+}
+
 Params read_params(const Args& a) {
   Params p;
   p.conf.kappa_m = a.get_double("kappa-m");
@@ -58,44 +78,40 @@ Params read_params(const Args& a) {
   p.conf.lambda_m = a.get_double("lambda-m");
   p.conf.lambda_r = a.get_double("lambda-r");
   p.conf.eps = a.get_double("eps");
-  require(p.conf.kappa_m > 0, "--kappa-m must be > 0");
-  require(p.conf.kappa_r > 0, "--kappa-r must be > 0");
-  require(p.conf.lambda_m >= 0, "--lambda-m must be >= 0");
-  require(p.conf.lambda_r >= 0, "--lambda-r must be >= 0");
-  require(p.conf.eps > 0, "--eps must be > 0");
-  const double alpha = a.get_double("alpha");
-  require(alpha >= 0 && alpha <= 1, "--alpha must be in [0, 1]");
-  const double lc = a.get_double("lambda-c"), ll = a.get_double("lambda-l");
-  require(lc >= 0, "--lambda-c must be >= 0");
-  require(ll >= 0, "--lambda-l must be >= 0");
   const auto gaps = a.get_ints("gaps");
   const auto weights = a.get_doubles("gap-weights");
-  require(!gaps.empty(), "--gaps needs at least one gap");
-  require(weights.size() == gaps.size(), "--gap-weights needs one weight per gap (" +
-                                             std::to_string(gaps.size()) + "), got " +
-                                             std::to_string(weights.size()));
+  if (gaps.empty()) throw UsageError("--gaps: needs at least one gap");
+  if (weights.size() != gaps.size())
+    throw UsageError("--gap-weights: needs one weight per gap (" + std::to_string(gaps.size()) + "), got " +
+                     std::to_string(weights.size()));
   std::vector<smg::Gap> g;
   for (std::size_t k = 0; k < gaps.size(); ++k) {
-    require(gaps[k] >= 1 && gaps[k] <= 1000000, "--gaps entries must be integers >= 1");
-    require(weights[k] >= 0, "--gap-weights entries must be >= 0");
-    g.push_back({static_cast<int>(gaps[k]), weights[k]});
+    // Narrowing to int is range-checked; the rule (delta >= 1, weight >= 0) is the library's.
+    const long long delta = Args::in_range("gaps", gaps[k], std::numeric_limits<int>::min(),
+                                           std::numeric_limits<int>::max());
+    g.push_back({static_cast<int>(delta), weights[k]});
   }
-  const double huber = a.get_double("huber-delta");
-  require(huber > 0, "--huber-delta must be > 0");
   const auto norm = a.get_switch("normalize") ? smg::Normalization::mean : smg::Normalization::sum;
-  p.carap.alpha = alpha;
-  p.carap.lambda_c = lc;
-  p.carap.lambda_l = ll;
+  p.carap.alpha = a.get_double("alpha");
+  p.carap.lambda_c = a.get_double("lambda-c");
+  p.carap.lambda_l = a.get_double("lambda-l");
   p.carap.gaps = smg::GapList(g.begin(), g.end());
   p.carap.normalization = norm;
-  p.arap.lambda_c = lc;
-  p.arap.lambda_l = ll;
-  p.arap.gaps = smg::GapList(g.begin(), g.end());
+  p.arap.lambda_c = p.carap.lambda_c;
+  p.arap.lambda_l = p.carap.lambda_l;
+  p.arap.gaps = p.carap.gaps;
   p.arap.normalization = norm;
-  p.lrm.alpha = alpha;
-  p.lrm.huber_delta = huber;
+  p.lrm.alpha = p.carap.alpha;
+  p.lrm.huber_delta = a.get_double("huber-delta");
   p.lrm.detach_omega = a.get_switch("detach-omega");
   p.lrm.normalization = norm;
+  NameMap names = energy_flag_names();
+  // A gap weight message names "gaps[k].weight": that value came from --gap-weights.
+  for (std::size_t k = 0; k < gaps.size(); ++k) names.push_back({"gaps[" + std::to_string(k) + "].weight", "--gap-weights"});
+  check_mapped(smg::validate_options(p.conf), names, "energy options");
+  check_mapped(smg::validate_options(p.carap), names, "energy options");
+  check_mapped(smg::validate_options(p.lrm), names, "energy options");
+  check_mapped(smg::validate_options(p.arap), names, "energy options");
   return p;
 }
 
@@ -114,13 +130,22 @@ void compute(const Invocation& inv, const Params& prm, const Tensor<double>& x_d
   const smg::QuaternionsView<const S> qv(q.data(), T, N);
   const smg::VisibilityView<const std::uint8_t> vv(vis.data(), T, N);
   const smg::NeighborsView<S> graph(g.indices.data(), w.data(), N, g.k);
+  const AllocContext ctx("energies of " + inv.case_dir.file("positions.npy"));
   std::vector<S> conf(static_cast<std::size_t>(T * N)), gxc(x.size(), S(0)), grc(x.size(), S(0)),
       gxl(x.size(), S(0)), gxa(x.size(), S(0)), gra(x.size(), S(0));
   const smg::FrameScalarsView<const S> cv(conf.data(), T, N);
-  ok(smg::validate_confidence<S>(xv, vv, graph, prm.conf, {conf.data(), T, N}));
-  ok(smg::validate_carap<S>(xv, qv, {}, graph, prm.carap));
-  ok(smg::validate_lrm<S>(xv, {}, graph, prm.lrm));
-  ok(smg::validate_arap<S>(xv, qv, graph, prm.arap));
+  // Library messages name views ("graph: entry [i=..]"); report them under the case's files.
+  const CaseDir& cd = inv.case_dir;
+  const std::string graph_file = cd.file(g.built ? "positions.npy" : "graph_indices.npy");
+  const NameMap names = {{"graph", graph_file},           {"neighbors", graph_file},
+                         {"positions", cd.file("positions.npy")}, {"x", cd.file("positions.npy")},
+                         {"quaternions", cd.file("quats.npy")},   {"quats", cd.file("quats.npy")},
+                         {"q", cd.file("quats.npy")},             {"visibility", cd.file("visibility.npy")}};
+  auto checked = [&](const smg::Status& st) { check_mapped(st, names, cd.path().string()); };
+  checked(smg::validate_confidence<S>(xv, vv, graph, prm.conf, {conf.data(), T, N}));
+  checked(smg::validate_carap<S>(xv, qv, {}, graph, prm.carap));
+  checked(smg::validate_lrm<S>(xv, {}, graph, prm.lrm));
+  checked(smg::validate_arap<S>(xv, qv, graph, prm.arap));
 
   smg::ParallelOptions par;
   par.threads = inv.threads;
@@ -134,6 +159,18 @@ void compute(const Invocation& inv, const Params& prm, const Tensor<double>& x_d
                                             {gra.data(), T, N}, &ws, par));
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+  // Finite inputs must give finite results (docs/interop.md "Overflow").
+  const std::string cause = inv.case_dir.file("positions.npy") + ": coordinates too large: the energies overflow (non-finite ";
+  if (!std::isfinite(e_carap)) throw RunError(cause + "C-ARAP energy)");
+  if (!std::isfinite(e_lrm)) throw RunError(cause + "LRM energy)");
+  if (!std::isfinite(e_arap)) throw RunError(cause + "ARAP energy)");
+  require_finite(conf, cause + "confidence)");
+  require_finite(gxc, cause + "C-ARAP position gradient)");
+  require_finite(grc, cause + "C-ARAP rotation gradient)");
+  require_finite(gxl, cause + "LRM gradient)");
+  require_finite(gxa, cause + "ARAP position gradient)");
+  require_finite(gra, cause + "ARAP rotation gradient)");
 
   OutputSet out;
   out.add("confidence.npy", conf, {T, N});
@@ -160,11 +197,22 @@ void run_energies(const Invocation& inv, JsonLine& summary) {
   const CaseDir& c = inv.case_dir;
   const auto x = c.load<double>("positions.npy", {{"T"}, {"N"}, {"", 3}});
   const std::int64_t T = x.dim(0), N = x.dim(1);
-  ok(smg::validate_positions<double>({x.ptr(), T, N}, T, N, "positions.npy"));
+  ok(smg::validate_positions<double>({x.ptr(), T, N}, T, N, c.file("positions.npy")));
+  if (inv.use_float)
+    require_coordinates<float>(x.data, c.file("positions.npy"));
+  else
+    require_coordinates<double>(x.data, c.file("positions.npy"));
+  {
+    // Inputs in the computation's precision, confidences, 5 gradients, the workspace (~4 per-node
+    // frame tables) and the graph's per-edge work.
+    const double s = inv.use_float ? 4 : 8, tn = double(T) * double(N);
+    check_memory(tn * (3 * 8 + 4 * 8 + 1) + tn * s * (3 + 4 + 1 + 15 + 12), inv.max_bytes,
+                 c.file("positions.npy") + ": T = " + std::to_string(T) + " frames x N = " + std::to_string(N) + " nodes");
+  }
   std::vector<double> q;
   if (auto qs = c.load_optional<double>("quats.npy", {{"T", T}, {"N", N}, {"", 4}})) {
     ok(smg::validate_quaternions<double>({qs->ptr(), T, N}, T, N,
-                                         smg::QuaternionNorm::normalize_on_entry, "quats.npy"));
+                                         smg::QuaternionNorm::normalize_on_entry, c.file("quats.npy")));
     q = std::move(qs->data);
   } else {
     q.assign(static_cast<std::size_t>(T * N * 4), 0.0);

@@ -24,14 +24,36 @@ namespace {
 
 namespace sp = smg::splat;
 
+// Library names -> the case's files and the flags.
+NameMap render_names(const CaseDir& c) {
+  return {{"means", c.file("means.npy")},
+          {"quats", c.file("quats.npy")},
+          {"log_scales", c.file("scales.npy")},
+          {"opacity_logits", c.file("opacities.npy")},
+          {"colors", c.file("colors.npy")},
+          {"sh_degree", c.file("colors.npy")},
+          {"viewmat", c.file("viewmat.npy")},
+          {"focal lengths", c.file("K.npy")},
+          {"principal point", c.file("K.npy")},
+          {"image size", "--width"},
+          {"near plane", "--near"},
+          {"far plane", "--far"},
+          {"tile_size", "--tile-size"},
+          {"radius_sigmas", "--radius-sigmas"},
+          {"eps2d", "--eps2d"},
+          {"alpha_max", "--alpha-max"},
+          {"image", c.file("grad_image.npy")},
+          {"alpha", c.file("grad_alpha.npy")},
+          {"depth", c.file("grad_depth.npy")}};
+}
+
 template <int C, class S>
 void run_splat(const sp::GaussianParams<S>& params, const sp::Camera<S>& cam,
                const sp::SplatSettings<S>& set, sp::RenderWorkspace<S>& ws,
                const sp::RenderImages<S>& images, const sp::RenderImageGrads<S>* gin,
-               const sp::GaussianGrads<S>& gout, int threads, double* t_fwd, double* t_bwd) {
-  auto ok = [](const smg::Status& s) {
-    if (!s) throw RunError(s.message());
-  };
+               const sp::GaussianGrads<S>& gout, int threads, double* t_fwd, double* t_bwd,
+               const NameMap& names, const std::string& fallback) {
+  auto ok = [&](const smg::Status& s) { check_mapped(s, names, fallback); };
   ok(sp::validate_render(params, cam, set, images, C > 0 ? C : -1));
   const smg::ParallelOptions par{threads, 0};
   auto t0 = std::chrono::steady_clock::now();
@@ -52,7 +74,8 @@ void render_case(const Invocation& inv, JsonLine& summary) {
   const auto quats = c.load<S>("quats.npy", {{"G", G}, {"", 4}});
   const auto scales = c.load<S>("scales.npy", {{"G", G}, {"", 3}});
   const auto opac = c.load<S>("opacities.npy", {{"G", G}});
-  const npy::Array craw = npy::read((c.path() / "colors.npy").string());
+  if (!c.has("colors.npy")) throw RunError(c.file("colors.npy") + ": missing required file");
+  const npy::Array craw = npy::read(c.file("colors.npy"), static_cast<std::uint64_t>(c.max_bytes() / 2));
   std::optional<Tensor<S>> colors;
   int sh_degree = -1;
   std::int64_t C = 0;
@@ -73,26 +96,35 @@ void render_case(const Invocation& inv, JsonLine& summary) {
   const auto viewmat = c.load<S>("viewmat.npy", {{"", 4}, {"", 4}});
   const auto Kmat = c.load<S>("K.npy", {{"", 3}, {"", 3}});
 
-  const long long width = inv.args.get_int("width"), height = inv.args.get_int("height");
-  if (width < 1 || height < 1 || width > 65536 || height > 65536)
-    throw UsageError("--width and --height are required, 1..65536");
+  const int width = inv.args.get_int32_in("width", 1, 65536), height = inv.args.get_int32_in("height", 1, 65536);
+  {
+    // Images (image, alpha, depth), the optional image gradients (same size), the workspace's
+    // per-pixel state (~4 scalars) and per-Gaussian state (~64 scalars incl. gradients).
+    const double s = sizeof(S), px = double(width) * double(height), C1 = double(C) + 2;
+    check_memory(px * (C1 * s * 2 + 4 * s) + double(G) * 64 * s, inv.max_bytes,
+                 "--width: a " + std::to_string(width) + "x" + std::to_string(height) + " image with C = " +
+                     std::to_string(C) + " channels and G = " + std::to_string(G) + " Gaussians");
+  }
   const Eigen::Matrix<S, 3, 3> Km = Eigen::Map<const Eigen::Matrix<S, 3, 3, Eigen::RowMajor>>(Kmat.ptr());
   if (smg::Status s = sp::validate_camera_matrix<S>(Km); !s)
-    throw RunError((c.path() / "K.npy").string() + ": " + s.message().substr(3));
+    throw RunError(c.file("K.npy") + ": " + s.message().substr(3));
   sp::Camera<S> cam = sp::Camera<S>::from_K(
-      Eigen::Map<const Eigen::Matrix<S, 4, 4, Eigen::RowMajor>>(viewmat.ptr()), Km, int(width),
-      int(height));
+      Eigen::Map<const Eigen::Matrix<S, 4, 4, Eigen::RowMajor>>(viewmat.ptr()), Km, width, height);
   cam.near_plane = S(inv.args.get_double("near"));
   cam.far_plane = S(inv.args.get_double("far"));
+  const NameMap names = render_names(c);
+  const std::string fallback = c.path().string();
+  check_mapped(sp::validate_camera(cam), names, fallback);
 
   sp::SplatSettings<S> set;
-  set.tile_size = int(inv.args.get_int("tile-size"));
+  set.tile_size = inv.args.get_int32_in("tile-size");
   set.radius_sigmas = S(inv.args.get_double("radius-sigmas"));
   set.eps2d = S(inv.args.get_double("eps2d"));
   set.alpha_max = S(inv.args.get_double("alpha-max"));
+  check_mapped(sp::validate_settings(set), names, fallback);
   const std::vector<double> bg_in = inv.args.get_doubles("background");
   if (bg_in.size() != 1 && std::int64_t(bg_in.size()) != C)
-    throw UsageError("--background takes 1 or C = " + std::to_string(C) + " comma-separated values");
+    throw UsageError("--background: takes 1 or C = " + std::to_string(C) + " comma-separated values");
   std::vector<S> bg(static_cast<std::size_t>(C));
   for (std::int64_t k = 0; k < C; ++k) bg[std::size_t(k)] = S(bg_in.size() == 1 ? bg_in[0] : bg_in[std::size_t(k)]);
   set.background = bg.data();
@@ -106,6 +138,7 @@ void render_case(const Invocation& inv, JsonLine& summary) {
   params.sh_degree = sh_degree;
 
   const std::int64_t H = height, W = width;
+  const AllocContext ctx("--width: render of a " + std::to_string(W) + "x" + std::to_string(H) + " image");
   std::vector<S> image(std::size_t(H * W * C)), alpha(std::size_t(H * W)), depth(std::size_t(H * W));
   const sp::RenderImages<S> images{{image.data(), H, W, C}, {alpha.data(), H, W}, {depth.data(), H, W}};
 
@@ -140,12 +173,20 @@ void render_case(const Invocation& inv, JsonLine& summary) {
   double t_fwd = 0, t_bwd = 0;
   const sp::RenderImageGrads<S>* gptr = backward ? &gin : nullptr;
   switch (C) {
-    case 1: run_splat<1>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd); break;
-    case 3: run_splat<3>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd); break;
-    case 4: run_splat<4>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd); break;
+    case 1: run_splat<1>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd, names, fallback); break;
+    case 3: run_splat<3>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd, names, fallback); break;
+    case 4: run_splat<4>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd, names, fallback); break;
     default:
-      run_splat<Eigen::Dynamic>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd);
+      run_splat<Eigen::Dynamic>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd, names, fallback);
   }
+
+  // Finite inputs must give finite results (docs/interop.md "Overflow").
+  const std::string cause = c.file("means.npy") + ": values too large: the render overflows (non-finite ";
+  require_finite(image, cause + "image)");
+  require_finite(alpha, cause + "alpha)");
+  require_finite(depth, cause + "depth)");
+  for (const auto* g : {&g_means, &g_quats, &g_tan, &g_scales, &g_opac, &g_colors, &g_m2d})
+    require_finite(*g, cause + "gradient)");
 
   OutputSet out;
   out.add("image.npy", std::move(image), {H, W, C});
@@ -177,15 +218,18 @@ Subcommand render_subcommand() {
   Subcommand s;
   s.name = "render";
   s.summary = "render Gaussians with the reference CPU splatter (and backward with grad_image.npy)";
-  s.flags = {{"width", "0", "image width in pixels (required)"},
-             {"height", "0", "image height in pixels (required)"},
+  // Defaults come from the library's structs (Camera, SplatSettings), so each exists once.
+  const sp::Camera<double> cam{};
+  const sp::SplatSettings<double> set{};
+  s.flags = {{"width", "0", "image width in pixels (required), 1..65536"},
+             {"height", "0", "image height in pixels (required), 1..65536"},
              {"background", "0", "background colour: 1 value or C comma-separated values"},
-             {"near", "0.01", "near plane (camera-space z)"},
-             {"far", "1e10", "far plane (camera-space z)"},
-             {"tile-size", "16", "tile edge in pixels: 8, 16 or 32"},
-             {"radius-sigmas", "3", "binning radius in standard deviations (gsplat: 3)"},
-             {"eps2d", "0.3", "2D covariance dilation, pixels^2"},
-             {"alpha-max", "0.99", "alpha clamp (gsplat v1.0-1.4 used 0.999)"}};
+             {"near", format_number(cam.near_plane), "near plane (camera-space z)"},
+             {"far", format_number(cam.far_plane), "far plane (camera-space z)"},
+             {"tile-size", format_number(set.tile_size), "tile edge in pixels: 8, 16 or 32"},
+             {"radius-sigmas", format_number(set.radius_sigmas), "binning radius in standard deviations (gsplat: 3)"},
+             {"eps2d", format_number(set.eps2d), "2D covariance dilation, pixels^2"},
+             {"alpha-max", format_number(set.alpha_max), "alpha clamp (gsplat v1.0-1.4 used 0.999)"}};
   s.run = [](const Invocation& inv, JsonLine& summary) {
     if (inv.use_float)
       render_case<float>(inv, summary);

@@ -3,6 +3,7 @@
 
 #include <chrono>
 #include <limits>
+#include <utility>
 #include <string>
 
 #include "smg/graph.hpp"
@@ -10,26 +11,34 @@
 namespace cli {
 
 std::vector<FlagSpec> graph_flags() {
-  return {{"k", "16", "neighbours per node (trajectory-level KNN)"},
-          {"tau", "0.75", "semantic gate: keep an edge when cos(f_i, f_j) >= tau"},
-          {"aggregation", "paper", "trajectory distance: paper | robust_max"},
-          {"m", "3", "co-visible distances aggregated per pair"},
-          {"min-covisible", "1", "minimum co-visible frames for a candidate pair"},
-          {"isolated", "keep_nearest", "node left without gated edges: keep_nearest | leave"},
-          {"rho", "0.5", "descriptor: fraction of most consistent feature samples kept"},
-          {"weighting", "uniform", "topology weights: uniform (1/|N(i)|) | distance (Gaussian in D_ij)"},
+  // Defaults come from the library's option structs, so each exists once.
+  const smg::GraphOptions g{};
+  const smg::DescriptorOptions d{};
+  return {{"k", format_number(g.knn.k), "neighbours per node (trajectory-level KNN)"},
+          {"tau", format_number(g.tau), "semantic gate: keep an edge when cos(f_i, f_j) >= tau"},
+          {"aggregation", smg::to_string(g.knn.distance.aggregation), "trajectory distance: paper | robust_max"},
+          {"m", format_number(g.knn.distance.m), "co-visible distances aggregated per pair"},
+          {"min-covisible", format_number(g.knn.distance.min_covisible), "minimum co-visible frames for a candidate pair"},
+          {"isolated", smg::to_string(g.isolated), "node left without gated edges: keep_nearest | leave"},
+          {"rho", format_number(d.rho), "descriptor: fraction of most consistent feature samples kept"},
+          {"weighting", smg::to_string(g.weighting), "topology weights: uniform (1/|N(i)|) | distance (Gaussian in D_ij)"},
           {"no-gate", "", "build a purely geometric graph even when the case has features", true},
-          {"segment-frames", "0", "frames per segment of the exact KNN's candidate index, 0 = automatic"}};
+          {"segment-frames", format_number(g.knn.segment_frames),
+           "frames per segment of the exact KNN's candidate index, 0 = automatic"}};
 }
 
 namespace {
 
-long long int_flag(const Args& a, const std::string& name, long long lo, long long hi) {
-  const long long v = a.get_int(name);
-  if (v < lo || v > hi)
-    throw UsageError("--" + name + " must be between " + std::to_string(lo) + " and " + std::to_string(hi) +
-                     ", got " + std::to_string(v));
-  return v;
+// Library option names -> flags.
+const NameMap& graph_flag_names() {
+  static const NameMap names = {{"k", "--k"},
+                                {"tau", "--tau"},
+                                {"m", "--m"},
+                                {"min_covisible", "--min-covisible"},
+                                {"aggregation", "--aggregation"},
+                                {"segment_frames", "--segment-frames"},
+                                {"rho", "--rho"}};
+  return names;
 }
 
 struct Config {
@@ -41,14 +50,15 @@ struct Config {
 Config parse(const Invocation& inv) {
   const Args& a = inv.args;
   Config c;
-  constexpr long long kIntMax = std::numeric_limits<int>::max();
-  c.graph.knn.k = static_cast<int>(int_flag(a, "k", 1, 1 << 20));
-  c.graph.knn.distance.m = static_cast<int>(int_flag(a, "m", 1, kIntMax));
-  c.graph.knn.distance.min_covisible = static_cast<int>(int_flag(a, "min-covisible", 0, kIntMax));
+  // Integer flags: parsed as 64-bit, range-checked to int before narrowing; the option rules
+  // themselves are the library's (validate_distance_options, validate_semantic_descriptors).
+  c.graph.knn.k = a.get_int32_in("k", 1);
+  c.graph.knn.distance.m = a.get_int32_in("m");
+  c.graph.knn.distance.min_covisible = a.get_int32_in("min-covisible");
   c.graph.knn.distance.aggregation = a.get_choice("aggregation", {"paper", "robust_max"}) == "paper"
                                          ? smg::Aggregation::paper
                                          : smg::Aggregation::robust_max;
-  c.graph.knn.segment_frames = static_cast<int>(int_flag(a, "segment-frames", 0, kIntMax));
+  c.graph.knn.segment_frames = a.get_int32_in("segment-frames");
   c.graph.knn.parallel.threads = inv.threads;
   c.graph.tau = a.get_double("tau");
   c.graph.isolated = a.get_choice("isolated", {"keep_nearest", "leave"}) == "keep_nearest"
@@ -58,15 +68,27 @@ Config parse(const Invocation& inv) {
                           ? smg::TopologyWeighting::uniform
                           : smg::TopologyWeighting::distance;
   c.descriptor.rho = a.get_double("rho");
-  if (!(c.descriptor.rho > 0 && c.descriptor.rho <= 1))
-    throw UsageError("--rho must be in (0, 1], got '" + a.get("rho") + "'");
   c.descriptor.parallel.threads = inv.threads;
   c.no_gate = a.get_switch("no-gate");
+  check_mapped(smg::detail::validate_distance_options(c.graph.knn.distance), graph_flag_names(), "graph options");
+  if (c.graph.knn.segment_frames < 0)  // the library's own rule, checked again by validate_semantic_graph
+    check_mapped(smg::Status::error("segment_frames: must be >= 0, got " + std::to_string(c.graph.knn.segment_frames)),
+                 graph_flag_names(), "graph options");
+  {  // rho: the library's rule, on a 1x1x1 dummy input
+    const double sample = 1, visible_out = 0;
+    double out = visible_out;
+    check_mapped(smg::validate_semantic_descriptors<double>({&sample, 1, 1, 1}, {}, c.descriptor, {&out, 1, 1}),
+                 graph_flag_names(), "graph options");
+  }
   return c;
 }
 
-void check(const smg::Status& s) {
-  if (!s) throw RunError(s.message());
+// Library data names -> the case's files.
+NameMap data_names(const CaseDir& c) {
+  NameMap n = graph_flag_names();
+  for (const char* f : {"positions", "visibility", "features", "feature_samples", "samples"})
+    n.push_back({f, c.file(std::string(f == std::string("samples") ? "feature_samples" : f) + ".npy")});
+  return n;
 }
 
 template <class S>
@@ -78,6 +100,18 @@ template <class S>
 CaseGraph build_typed(const Invocation& inv, const Tensor<double>& positions, Config cfg) {
   const CaseDir& c = inv.case_dir;
   const std::int64_t T = positions.dim(0), N = positions.dim(1);
+  const NameMap names = data_names(c);
+  auto check = [&](const smg::Status& s) { check_mapped(s, names, c.file("positions.npy")); };
+  require_coordinates<S>(positions.data, c.file("positions.npy"));
+  {
+    // Outputs (indices, weights, distances; kept as double and converted) + the KNN's node-major
+    // trajectory copy and candidate buffers + the converted inputs.
+    const double K = double(cfg.graph.knn.k), n = double(N), t = double(T), s = double(sizeof(S));
+    const double bytes = n * K * (4 + 3 * s + 3 * 8) * 2 + n * t * (3 * s * 3 + 8);
+    check_memory(bytes, inv.max_bytes, "--k: k = " + std::to_string(cfg.graph.knn.k) + " neighbours of N = " +
+                                           std::to_string(N) + " nodes over T = " + std::to_string(T) + " frames");
+  }
+  const AllocContext ctx("graph of " + c.file("positions.npy"));
   const auto vis = c.load_optional<std::uint8_t>("visibility.npy", {{"T", T}, {"N", N}});
   const smg::VisibilityView<const std::uint8_t> v =
       vis ? smg::VisibilityView<const std::uint8_t>(vis->ptr(), T, N) : smg::VisibilityView<const std::uint8_t>();
@@ -105,6 +139,8 @@ CaseGraph build_typed(const Invocation& inv, const Tensor<double>& positions, Co
   }
   if (g.features_source != "none" && g.channels < 1)
     throw RunError((c.path() / g.features_source).string() + ": needs at least one channel (C >= 1)");
+  if (g.features_source != "none")
+    require_coordinates<S>(g.features_source == "features.npy" ? features : samples, c.file(g.features_source));
 
   const auto t0 = std::chrono::steady_clock::now();
   if (!samples.empty()) {
@@ -127,6 +163,11 @@ CaseGraph build_typed(const Invocation& inv, const Tensor<double>& positions, Co
   const smg::GraphStats st = smg::build_semantic_graph<S>({x.data(), T, N}, v, fv, cfg.graph, iv, wv, dv);
   g.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
+  // Finite inputs must give finite results (docs/interop.md "Overflow").
+  require_finite(d, c.file("positions.npy") +
+                        ": coordinates too large: the trajectory distances overflow (non-finite distance)");
+  require_finite(w, c.file("positions.npy") + ": coordinates too large: the graph weights overflow (non-finite weight)");
+  require_finite(features, c.file(g.features_source) + ": values too large: the descriptors overflow (non-finite descriptor)");
   g.indices = std::move(idx);
   g.weights.assign(w.begin(), w.end());
   g.distances.assign(d.begin(), d.end());
@@ -154,11 +195,13 @@ CaseGraph load_or_build_graph(const Invocation& inv, const Tensor<double>& posit
   const std::int64_t N = positions.dim(1);
   const CaseDir& c = inv.case_dir;
   if (!c.has("graph_indices.npy")) return build_case_graph(inv, positions);
+  // Loaded as int32 through a range-checked conversion (an int64 value beyond int32 is an error,
+  // never wrapped); validate_neighbors then checks each index against [-1, N).
   const auto idx = c.load<std::int32_t>("graph_indices.npy", {{"N", N}, {"K"}});
   const std::int64_t K = idx.dim(1);
   const auto w = c.load<double>("graph_weights.npy", {{"N", N}, {"K", K}});
   const smg::NeighborsView<double> view(idx.ptr(), w.ptr(), N, K);
-  if (smg::Status s = smg::validate_neighbors(view, N, "graph_indices.npy/graph_weights.npy"); !s)
+  if (smg::Status s = smg::validate_neighbors(view, N, c.file("graph_indices.npy")); !s)
     throw RunError(s.message());
   CaseGraph g;
   g.nodes = N;

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <exception>
 #include <iostream>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,8 @@ std::vector<cli::Subcommand> registry() {
 std::vector<cli::FlagSpec> common_flags() {
   return {{"float", "", "compute in float (default: double)", true},
           {"threads", "0", "worker threads, 0 = all hardware threads", false},
+          {"max-memory-gb", cli::format_number(cli::kDefaultMaxMemoryGb),
+           "refuse requests whose estimated memory (outputs + main workspaces) exceeds this many GiB", false},
           {"help", "", "print this help", true}};
 }
 
@@ -32,7 +35,8 @@ void print_usage(std::ostream& os, const std::vector<cli::Subcommand>& subs) {
 }
 
 int fail(const std::string& where, const std::string& message) {
-  std::cerr << "smg_cli" << (where.empty() ? "" : " " + where) << ": error: " << message << "\n";
+  std::cerr << "smg_cli" << (where.empty() ? "" : " " + cli::escape_line(where)) << ": error: "
+            << cli::escape_line(message) << "\n";
   return 2;
 }
 
@@ -68,17 +72,24 @@ int main(int argc, char** argv) {
     if (args.positionals().size() != want)
       throw cli::UsageError(std::string("expected ") + (want == 2 ? "CASE OUT" : "CASE") + ", got " +
                             std::to_string(args.positionals().size()) + " positional argument(s)");
-    const long long threads = args.get_int("threads");
-    if (threads < 0) throw cli::UsageError("--threads must be >= 0");
+    const int threads = args.get_int32_in("threads", 0, 4096);
+    const double max_gb = args.get_double("max-memory-gb");
+    if (!(max_gb > 0 && max_gb <= 1048576))
+      throw cli::UsageError("--max-memory-gb: must be in (0, 1048576], got '" + args.get("max-memory-gb") + "'");
+    const double max_bytes = max_gb * 1073741824.0;
 
-    const cli::CaseDir case_dir(args.positionals()[0]);
+    const cli::CaseDir case_dir(args.positionals()[0], max_bytes);
     const cli::Invocation inv{case_dir, sub->writes_output ? args.positionals()[1] : "", args,
-                              args.get_switch("float"), static_cast<int>(threads)};
+                              args.get_switch("float"), threads, max_bytes};
     cli::JsonLine summary;
     summary.add("subcommand", sub->name);
     sub->run(inv, summary);
     std::cout << summary.str() << std::endl;
     return 0;
+  } catch (const std::bad_alloc&) {
+    const std::string& what = cli::alloc_context();
+    return fail(sub->name, (what.empty() ? std::string("smg_cli") : what) +
+                               ": out of memory (std::bad_alloc; see --max-memory-gb)");
   } catch (const std::exception& e) {
     return fail(sub->name, e.what());
   }

@@ -6,13 +6,17 @@
 // them only after all computation succeeded, so a failure writes nothing.
 #pragma once
 
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <functional>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "case_dir.hpp"
+#include "smg/core/status.hpp"
 #include "cli_args.hpp"
 #include "json_line.hpp"
 #include "output_set.hpp"
@@ -31,7 +35,65 @@ struct Invocation {
   const Args& args;
   bool use_float = false;  // --float: compute in float instead of double
   int threads = 0;         // --threads: 0 = all hardware threads
+  double max_bytes = 0;    // --max-memory-gb in bytes: requests estimated above it are refused
 };
+
+// A library message mapped to the user's names: `names` pairs a library field or view name
+// ("alpha", "kappa_m", "quats", "settings: tile_size" is read as "tile_size") with the flag
+// ("--alpha") or file (CASE/quats.npy) it came from. "XOptions.alpha must be in [0, 1], got 2"
+// becomes "--alpha: alpha must be in [0, 1], got 2"; "k: must be >= 1" becomes "--k: must be
+// >= 1"; an unmatched message is prefixed with `fallback`.
+using NameMap = std::vector<std::pair<std::string, std::string>>;
+inline std::string map_message(std::string m, const NameMap& names, const std::string& fallback) {
+  if (const auto dot = m.find("Options."); dot != std::string::npos && m.find(' ') > dot) m = m.substr(dot + 8);
+  for (const char* pre : {"settings: ", "camera: "})
+    if (m.rfind(pre, 0) == 0) m = m.substr(std::string(pre).size());
+  const std::pair<std::string, std::string>* best = nullptr;
+  for (const auto& n : names)
+    if (m.rfind(n.first, 0) == 0 && (m.size() == n.first.size() || std::string(" :[.").find(m[n.first.size()]) != std::string::npos))
+      if (!best || n.first.size() > best->first.size()) best = &n;
+  if (!best) return fallback + ": " + m;
+  std::string rest = m.substr(best->first.size());
+  if (!rest.empty() && rest[0] == ':') return best->second + rest;
+  return best->second + ": " + m;
+}
+// Throws a UsageError (a flag) or RunError (a file) for a failed library Status.
+inline void check_mapped(const smg::Status& s, const NameMap& names, const std::string& fallback) {
+  if (s) return;
+  const std::string m = map_message(s.message(), names, fallback);
+  if (m.rfind("--", 0) == 0) throw UsageError(m);
+  throw RunError(m);
+}
+
+// Default of --max-memory-gb (docs/interop.md "Limits").
+inline constexpr double kDefaultMaxMemoryGb = 8;
+
+// Non-finite results from finite inputs are an error (docs/interop.md "Overflow"): throws
+// RunError("<cause>") when any value of `v` is NaN or Inf.
+template <class V>
+void require_finite(const V& v, const std::string& cause) {
+  for (const auto x : v)
+    if (!std::isfinite(static_cast<double>(x))) throw RunError(cause);
+}
+
+// Largest coordinate magnitude the computations accept: squared differences of coordinates
+// below it, summed over frames, stay finite (sqrt(max) / 1e4, so 1.3e150 in double, 1.8e15 in
+// float). Larger finite coordinates are refused as "coordinates too large".
+template <class S>
+constexpr double max_coordinate() {
+  return sizeof(S) == 4 ? 1.8e15 : 1.3e150;
+}
+template <class S, class V>
+void require_coordinates(const V& v, const std::string& file) {
+  const double lim = max_coordinate<S>();
+  for (const auto x : v)
+    if (!(std::abs(static_cast<double>(x)) <= lim)) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%.3g", lim);
+      throw RunError(file + ": coordinates too large (|value| > " + buf + (sizeof(S) == 4 ? " with --float" : "") +
+                     "): the computation would overflow");
+    }
+}
 
 struct Subcommand {
   std::string name;

@@ -7,6 +7,8 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
+#include <exception>
 #include <filesystem>
 #include <optional>
 #include <sstream>
@@ -17,6 +19,46 @@
 #include "npy.hpp"
 
 namespace cli {
+
+// What the program is allocating right now, for the one-line error when a std::bad_alloc
+// escapes anyway ("<context>: out of memory"). Set with AllocContext; kept when an exception
+// leaves the scope so that the driver can report it.
+inline std::string& alloc_context() {
+  static std::string context;
+  return context;
+}
+class AllocContext {
+ public:
+  explicit AllocContext(std::string what) : prev_(alloc_context()), exceptions_(std::uncaught_exceptions()) {
+    alloc_context() = std::move(what);
+  }
+  ~AllocContext() {
+    if (std::uncaught_exceptions() == exceptions_) alloc_context() = prev_;
+  }
+  AllocContext(const AllocContext&) = delete;
+  AllocContext& operator=(const AllocContext&) = delete;
+
+ private:
+  std::string prev_;
+  int exceptions_;
+};
+
+// A request larger than the memory limit (--max-memory-gb).
+class LimitError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Throws LimitError("<what>: needs about X GiB, more than the limit of Y GiB ...") when
+// `bytes` (an estimate of outputs + main workspaces) exceeds `limit` bytes.
+inline void check_memory(double bytes, double limit, const std::string& what) {
+  if (limit > 0 && !(bytes <= limit)) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, ": needs about %.3g GiB, more than the limit of %.3g GiB (--max-memory-gb)",
+                  bytes / 1073741824.0, limit / 1073741824.0);
+    throw LimitError(what + buf);
+  }
+}
 
 template <class T>
 struct Tensor {
@@ -36,13 +78,24 @@ struct Dim {
 
 class CaseDir {
  public:
-  explicit CaseDir(std::filesystem::path dir) : dir_(std::move(dir)) {
-    if (!std::filesystem::is_directory(dir_))
-      throw npy::Error(dir_.string() + ": case directory does not exist");
+  // max_bytes > 0: the memory limit; a file whose array (plus its converted copy) exceeds it is
+  // refused before it is read.
+  explicit CaseDir(std::filesystem::path dir, double max_bytes = 0) : dir_(std::move(dir)), max_bytes_(max_bytes) {
+    std::error_code ec;
+    const auto st = std::filesystem::status(dir_, ec);
+    if (!std::filesystem::exists(st)) throw npy::Error(dir_.string() + ": case directory does not exist");
+    if (!std::filesystem::is_directory(st)) throw npy::Error(dir_.string() + ": not a directory");
   }
 
   const std::filesystem::path& path() const { return dir_; }
-  bool has(const std::string& file) const { return std::filesystem::exists(dir_ / file); }
+  // The path of a file of the case as the user names it (CASE/file), for messages.
+  std::string file(const std::string& name) const { return (dir_ / name).string(); }
+  // symlink_status: a dangling symlink or a FIFO "exists" too, and is then refused by load.
+  bool has(const std::string& file) const {
+    std::error_code ec;
+    return std::filesystem::exists(std::filesystem::symlink_status(dir_ / file, ec));
+  }
+  double max_bytes() const { return max_bytes_; }
 
   // T = float or double: a float32/float64 array, all finite.
   // T = int32_t or int64_t: an int32/int64 array.
@@ -51,7 +104,8 @@ class CaseDir {
   Tensor<T> load(const std::string& file, const std::vector<Dim>& expected) const {
     const std::string path = (dir_ / file).string();
     if (!has(file)) throw npy::Error(path + ": missing required file");
-    const npy::Array a = npy::read(path);
+    const AllocContext ctx(path);
+    const npy::Array a = npy::read(path, max_bytes_ > 0 ? static_cast<std::uint64_t>(max_bytes_ / 2) : 0);
     check_dtype<T>(a.dtype, path);
     check_shape(a.shape, expected, path);
     Tensor<T> t;
@@ -97,7 +151,14 @@ class CaseDir {
     bool ok = shape.size() == expected.size();
     for (std::size_t k = 0; ok && k < shape.size(); ++k)
       if (expected[k].size >= 0 && shape[k] != expected[k].size) ok = false;
-    if (ok) return;
+    if (ok) {
+      // Empty inputs are refused consistently (docs/interop.md "Empty inputs").
+      for (std::size_t k = 0; k < shape.size(); ++k)
+        if ((expected[k].name == "T" || expected[k].name == "N") && shape[k] == 0)
+          throw npy::Error(path + ": empty input (" + expected[k].name + " = 0 in shape " +
+                           npy::shape_string(shape) + "); T and N must be at least 1");
+      return;
+    }
     std::ostringstream s;
     s << path << ": expected shape [";
     for (std::size_t k = 0; k < expected.size(); ++k) {
@@ -118,6 +179,7 @@ class CaseDir {
   }
 
   std::filesystem::path dir_;
+  double max_bytes_ = 0;
 };
 
 }  // namespace cli

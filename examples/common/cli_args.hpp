@@ -5,11 +5,14 @@
 // one line on stderr and exit code 2 (docs/interop.md).
 #pragma once
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <cstdio>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <stdexcept>
@@ -49,13 +52,13 @@ class Args {
           has_value = true;
         }
         const FlagSpec* spec = find(name);
-        if (!spec) throw UsageError("unknown flag --" + name);
+        if (!spec) throw UsageError("--" + name + ": unknown flag");
         if (spec->is_switch) {
-          if (has_value) throw UsageError("--" + name + " takes no value");
+          if (has_value) throw UsageError("--" + name + ": takes no value");
           values_[name] = "1";
         } else {
           if (!has_value) {
-            if (k + 1 >= argc) throw UsageError("--" + name + " needs a value");
+            if (k + 1 >= argc) throw UsageError("--" + name + ": needs a value");
             value = argv[++k];
           }
           values_[name] = value;
@@ -78,6 +81,23 @@ class Args {
   bool get_switch(const std::string& name) const { return get(name) == "1"; }
   double get_double(const std::string& name) const { return to_double(name, get(name)); }
   long long get_int(const std::string& name) const { return to_int(name, get(name)); }
+  // A 64-bit parse with a full-string check, then a range check before any narrowing:
+  // "--name: must be between lo and hi, got v".
+  long long get_int_in(const std::string& name, long long lo, long long hi) const {
+    return in_range(name, get_int(name), lo, hi);
+  }
+  int get_int32_in(const std::string& name, long long lo = std::numeric_limits<int>::min(),
+                   long long hi = std::numeric_limits<int>::max()) const {
+    lo = std::max<long long>(lo, std::numeric_limits<int>::min());
+    hi = std::min<long long>(hi, std::numeric_limits<int>::max());
+    return static_cast<int>(get_int_in(name, lo, hi));
+  }
+  static long long in_range(const std::string& name, long long v, long long lo, long long hi) {
+    if (v < lo || v > hi)
+      throw UsageError("--" + name + ": must be between " + std::to_string(lo) + " and " + std::to_string(hi) +
+                       ", got " + std::to_string(v));
+    return v;
+  }
   std::vector<double> get_doubles(const std::string& name) const {
     std::vector<double> out;
     for (const auto& item : split(get(name))) out.push_back(to_double(name, item));
@@ -95,7 +115,7 @@ class Args {
       if (c == v) return v;
     std::string list;
     for (const auto& c : choices) list += (list.empty() ? "" : " | ") + c;
-    throw UsageError("--" + name + " must be one of " + list + ", got '" + v + "'");
+    throw UsageError("--" + name + ": must be one of " + list + ", got '" + v + "'");
   }
 
   std::string help() const {
@@ -126,7 +146,7 @@ class Args {
     char* end = nullptr;
     const double d = std::strtod(v.c_str(), &end);
     if (v.empty() || end != v.c_str() + v.size() || errno == ERANGE || !std::isfinite(d))
-      throw UsageError("--" + name + " expects a finite number, got '" + v + "'");
+      throw UsageError("--" + name + ": expects a finite number, got '" + v + "'");
     return d;
   }
   static long long to_int(const std::string& name, const std::string& v) {
@@ -134,7 +154,7 @@ class Args {
     char* end = nullptr;
     const long long i = std::strtoll(v.c_str(), &end, 10);
     if (v.empty() || end != v.c_str() + v.size() || errno == ERANGE)
-      throw UsageError("--" + name + " expects an integer, got '" + v + "'");
+      throw UsageError("--" + name + ": expects an integer, got '" + v + "'");
     return i;
   }
 
@@ -142,6 +162,39 @@ class Args {
   std::map<std::string, std::string> values_;
   std::vector<std::string> positionals_;
 };
+
+// The shortest decimal text that reads back as exactly `v` (for flag defaults taken from the
+// library's option structs: 0.6 -> "0.6", 1e-4 -> "0.0001").
+inline std::string format_number(double v) {
+  char buf[40];
+  for (int p = 1; p <= 17; ++p) {
+    std::snprintf(buf, sizeof buf, "%.*g", p, v);
+    if (std::strtod(buf, nullptr) == v) break;
+  }
+  return buf;
+}
+inline std::string format_number(float v) { return format_number(static_cast<double>(v)); }
+inline std::string format_number(int v) { return std::to_string(v); }
+
+// Escapes control characters (bytes < 0x20 and 0x7f) as \n, \r, \t or \xHH, so that an echoed
+// path or flag value cannot break the one-line error format.
+inline std::string escape_line(const std::string& s) {
+  std::string out;
+  for (const char c : s) {
+    const auto u = static_cast<unsigned char>(c);
+    if (c == '\n') out += "\\n";
+    else if (c == '\r') out += "\\r";
+    else if (c == '\t') out += "\\t";
+    else if (u < 0x20 || u == 0x7f) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\x%02x", u);
+      out += buf;
+    } else {
+      out += c;
+    }
+  }
+  return out;
+}
 
 // Creates `dir` (and its parents) and proves it writable by writing and removing a probe file,
 // so a program can refuse before doing any work. Throws UsageError with a one-line message.

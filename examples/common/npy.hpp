@@ -7,15 +7,22 @@
 // npy::Error whose message names the file and the problem.
 #pragma once
 
+#include <algorithm>
+#include <cerrno>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
 #include <vector>
+
+#include <fcntl.h>
+#include <unistd.h>
 
 namespace npy {
 
@@ -71,11 +78,8 @@ struct Array {
   std::vector<std::int64_t> shape;
   std::vector<unsigned char> bytes;
 
-  std::int64_t size() const {
-    std::int64_t n = 1;
-    for (auto s : shape) n *= s;
-    return n;
-  }
+  // Element count; throws npy::Error on a negative dimension or an overflowing product.
+  std::int64_t size() const;
   // Converted copy. Float arrays convert to float or double; integer and bool arrays to any
   // integer type (or to float/double); a float array never silently becomes an integer one.
   template <class T>
@@ -83,14 +87,40 @@ struct Array {
     constexpr bool want_float = std::is_floating_point_v<T>;
     if (!want_float && is_float(dtype))
       throw Error(what + ": dtype " + dtype_name(dtype) + " where an integer or bool array is expected");
-    std::vector<T> out(static_cast<std::size_t>(size()));
+    const std::int64_t n = size();
+    if (static_cast<std::uint64_t>(n) > bytes.size() / dtype_size(dtype))
+      throw Error(what + ": " + std::to_string(bytes.size()) + " data bytes for shape " +
+                  shape_string(shape));
+    std::vector<T> out(static_cast<std::size_t>(n));
     const unsigned char* p = bytes.data();
     for (std::size_t k = 0; k < out.size(); ++k) {
       switch (dtype) {
         case DType::f32: { float v; std::memcpy(&v, p + 4 * k, 4); out[k] = static_cast<T>(v); break; }
         case DType::f64: { double v; std::memcpy(&v, p + 8 * k, 8); out[k] = static_cast<T>(v); break; }
-        case DType::i32: { std::int32_t v; std::memcpy(&v, p + 4 * k, 4); out[k] = static_cast<T>(v); break; }
-        case DType::i64: { std::int64_t v; std::memcpy(&v, p + 8 * k, 8); out[k] = static_cast<T>(v); break; }
+        case DType::i32: {
+          std::int32_t v;
+          std::memcpy(&v, p + 4 * k, 4);
+          if constexpr (std::is_integral_v<T> && sizeof(T) < 4) {
+            if (v < static_cast<std::int32_t>(std::numeric_limits<T>::min()) ||
+                v > static_cast<std::int32_t>(std::numeric_limits<T>::max()))
+              throw Error(what + ": value " + std::to_string(v) + " at flat index " + std::to_string(k) +
+                          " does not fit in the target integer type");
+          }
+          out[k] = static_cast<T>(v);
+          break;
+        }
+        case DType::i64: {
+          std::int64_t v;
+          std::memcpy(&v, p + 8 * k, 8);
+          if constexpr (std::is_integral_v<T>) {
+            if (v < static_cast<std::int64_t>(std::numeric_limits<T>::min()) ||
+                (v > 0 && static_cast<std::uint64_t>(v) > static_cast<std::uint64_t>(std::numeric_limits<T>::max())))
+              throw Error(what + ": value " + std::to_string(v) + " at flat index " + std::to_string(k) +
+                          " does not fit in " + (sizeof(T) == 4 ? "int32" : "the target integer type"));
+          }
+          out[k] = static_cast<T>(v);
+          break;
+        }
         case DType::u8: case DType::b1: out[k] = static_cast<T>(p[k]); break;
       }
     }
@@ -99,6 +129,30 @@ struct Array {
 };
 
 namespace detail {
+// a * b into out; false on overflow of std::uint64_t.
+inline bool mul_u64(std::uint64_t a, std::uint64_t b, std::uint64_t& out) {
+  if (a != 0 && b > std::numeric_limits<std::uint64_t>::max() / a) return false;
+  out = a * b;
+  return true;
+}
+// Element count of `shape`, checked: every dimension >= 0 and the product (and the product
+// times `elem_size`) representable in int64 (and in size_t). Throws Error("<what>: ...").
+inline std::int64_t checked_count(const std::vector<std::int64_t>& shape, std::size_t elem_size,
+                                  const std::string& what) {
+  const std::uint64_t limit = std::min<std::uint64_t>(
+      static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max()),
+      static_cast<std::uint64_t>(std::numeric_limits<std::size_t>::max()));
+  std::uint64_t n = 1;
+  for (const auto d : shape) {
+    if (d < 0) throw Error(what + ": negative dimension in shape " + shape_string(shape));
+    if (!mul_u64(n, static_cast<std::uint64_t>(d), n) || n > limit)
+      throw Error(what + ": shape " + shape_string(shape) + " overflows the element count");
+  }
+  std::uint64_t bytes = 0;
+  if (!mul_u64(n, elem_size == 0 ? 1 : elem_size, bytes) || bytes > limit)
+    throw Error(what + ": shape " + shape_string(shape) + " overflows the byte count");
+  return static_cast<std::int64_t>(n);
+}
 inline bool host_is_little_endian() {
   const std::uint16_t one = 1;
   unsigned char c;
@@ -155,6 +209,7 @@ inline std::vector<std::int64_t> parse_shape(const std::string& v, const std::st
   while (std::getline(ss, item, ',')) {
     item = trim(item);
     if (item.empty()) continue;
+    if (item[0] == '-') throw Error(path + ": negative dimension in shape " + v);
     for (char c : item)
       if (c < '0' || c > '9') throw Error(path + ": corrupt header (shape " + v + ")");
     if (item.size() > 15) throw Error(path + ": corrupt header (shape dimension too large)");
@@ -164,9 +219,22 @@ inline std::vector<std::int64_t> parse_shape(const std::string& v, const std::st
 }
 }  // namespace detail
 
-// Reads a whole .npy file. Throws npy::Error("<path>: <problem>").
-inline Array read(const std::string& path) {
+inline std::int64_t Array::size() const { return detail::checked_count(shape, dtype_size(dtype), "array"); }
+
+// Reads a whole .npy file. Throws npy::Error("<path>: <problem>"). Only regular files are read
+// (a FIFO, device or directory is refused before it is opened, so nothing can block). Every size
+// (header length, element count, byte count) is checked for overflow and against the file size
+// before anything is allocated. max_bytes > 0: an array whose data exceeds it is refused (the
+// caller's memory limit) before it is read.
+inline Array read(const std::string& path, std::uint64_t max_bytes = 0) {
   if (!detail::host_is_little_endian()) throw Error(path + ": this reader needs a little-endian host");
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st)) throw Error(path + ": cannot open");
+  if (!fs::is_regular_file(st)) throw Error(path + ": not a regular file");
+  const std::uint64_t file_size = fs::file_size(path, ec);
+  if (ec) throw Error(path + ": cannot read the file size");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw Error(path + ": cannot open");
   unsigned char magic[8];
@@ -186,6 +254,8 @@ inline Array read(const std::string& path) {
   } else {
     throw Error(path + ": unsupported npy version " + std::to_string(major));
   }
+  const std::uint64_t preamble = major == 1 ? 10 : 12;
+  if (preamble + header_len > file_size) throw Error(path + ": truncated header");
   std::string header(header_len, '\0');
   if (!f.read(header.data(), header_len)) throw Error(path + ": truncated header");
   if (header.find('{') == std::string::npos || header.find('}') == std::string::npos)
@@ -198,19 +268,19 @@ inline Array read(const std::string& path) {
   if (fo != "False") throw Error(path + ": corrupt header (fortran_order " + fo + ")");
   a.shape = detail::parse_shape(detail::dict_value(header, "shape", path), path);
 
-  const std::int64_t count = a.size();
+  const std::int64_t count = detail::checked_count(a.shape, dtype_size(a.dtype), path);
   const std::uint64_t nbytes = static_cast<std::uint64_t>(count) * dtype_size(a.dtype);
-  const std::streampos data_start = f.tellg();
-  f.seekg(0, std::ios::end);
-  const std::uint64_t available = static_cast<std::uint64_t>(f.tellg() - data_start);
+  const std::uint64_t data_start = preamble + header_len;
+  const std::uint64_t available = file_size - data_start;
   if (available < nbytes)
     throw Error(path + ": truncated data (" + std::to_string(available) + " of " +
                 std::to_string(nbytes) + " bytes for shape " + shape_string(a.shape) + ")");
   if (available > nbytes)
     throw Error(path + ": corrupt file (" + std::to_string(available - nbytes) +
                 " bytes after the data of shape " + shape_string(a.shape) + ")");
-  f.seekg(data_start);
-  a.bytes.resize(nbytes);
+  if (max_bytes > 0 && nbytes > max_bytes)
+    throw Error(path + ": " + std::to_string(nbytes) + " bytes of data exceed the memory limit (--max-memory-gb)");
+  a.bytes.resize(static_cast<std::size_t>(nbytes));
   if (nbytes > 0 && !f.read(reinterpret_cast<char*>(a.bytes.data()), static_cast<std::streamsize>(nbytes)))
     throw Error(path + ": read error");
   if (a.dtype == DType::b1)
@@ -219,43 +289,78 @@ inline Array read(const std::string& path) {
   return a;
 }
 
-// Writes data (count = product(shape)) as a version 1.0 .npy file, C order, little-endian.
-// T: float, double, int32_t, int64_t, uint8_t or bool.
+namespace detail {
+// Preamble + header of a version 1.0 .npy file for T and `shape`; `count` gets the element count.
 template <class T>
-void write(const std::string& path, const T* data, const std::vector<std::int64_t>& shape) {
-  if (!detail::host_is_little_endian()) throw Error(path + ": this writer needs a little-endian host");
+std::string header_bytes(const std::string& path, const std::vector<std::int64_t>& shape, std::int64_t& count) {
+  if (!host_is_little_endian()) throw Error(path + ": this writer needs a little-endian host");
   const DType d = dtype_of<T>();
   const char* descr = d == DType::f32 ? "<f4" : d == DType::f64 ? "<f8" : d == DType::i32 ? "<i4"
                     : d == DType::i64 ? "<i8" : d == DType::u8 ? "|u1" : "|b1";
+  count = checked_count(shape, sizeof(T), path);
   std::string dict = std::string("{'descr': '") + descr + "', 'fortran_order': False, 'shape': (";
-  std::int64_t count = 1;
-  for (std::size_t i = 0; i < shape.size(); ++i) {
-    if (shape[i] < 0) throw Error(path + ": negative dimension");
+  for (std::size_t i = 0; i < shape.size(); ++i)
     dict += std::to_string(shape[i]) + (shape.size() == 1 ? "," : i + 1 < shape.size() ? ", " : "");
-    count *= shape[i];
-  }
   dict += "), }";
   // Pad so that preamble (10 bytes) + header is a multiple of 64, ending in '\n'.
   const std::size_t unpadded = 10 + dict.size() + 1;
   dict.append((64 - unpadded % 64) % 64, ' ');
   dict += '\n';
+  if (dict.size() > 65535) throw Error(path + ": header too long");
+  const char pre[10] = {'\x93', 'N', 'U', 'M', 'P', 'Y', 1, 0, static_cast<char>(dict.size() & 0xff),
+                        static_cast<char>((dict.size() >> 8) & 0xff)};
+  return std::string(pre, 10) + dict;
+}
+inline void write_all(int fd, const char* p, std::size_t n, const std::string& path) {
+  while (n > 0) {
+    const ::ssize_t w = ::write(fd, p, n);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) throw Error(path + ": write error: " + std::strerror(errno));
+    p += w;
+    n -= static_cast<std::size_t>(w);
+  }
+}
+}  // namespace detail
+
+// Writes data (count = product(shape)) as a version 1.0 .npy file, C order, little-endian.
+// T: float, double, int32_t, int64_t, uint8_t or bool.
+template <class T>
+void write(const std::string& path, const T* data, const std::vector<std::int64_t>& shape) {
+  std::int64_t count = 0;
+  const std::string head = detail::header_bytes<T>(path, shape, count);
   std::ofstream f(path, std::ios::binary | std::ios::trunc);
   if (!f) throw Error(path + ": cannot open for writing");
-  const unsigned char pre[10] = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0,
-                                 static_cast<unsigned char>(dict.size() & 0xff),
-                                 static_cast<unsigned char>((dict.size() >> 8) & 0xff)};
-  f.write(reinterpret_cast<const char*>(pre), 10);
-  f.write(dict.data(), static_cast<std::streamsize>(dict.size()));
+  f.write(head.data(), static_cast<std::streamsize>(head.size()));
   if (count > 0)
-    f.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(count * sizeof(T)));
+    f.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(count * static_cast<std::int64_t>(sizeof(T))));
   f.flush();
   if (!f) throw Error(path + ": write error");
 }
 
+// Like write, but creates a new file: open(O_CREAT | O_EXCL | O_NOFOLLOW), so an existing file
+// or a planted symlink at `path` is an error instead of being followed or overwritten.
+template <class T>
+void write_new(const std::string& path, const T* data, const std::vector<std::int64_t>& shape) {
+  std::int64_t count = 0;
+  const std::string head = detail::header_bytes<T>(path, shape, count);
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0666);
+  if (fd < 0) throw Error(path + ": cannot create: " + std::strerror(errno));
+  try {
+    detail::write_all(fd, head.data(), head.size(), path);
+    if (count > 0)
+      detail::write_all(fd, reinterpret_cast<const char*>(data),
+                        static_cast<std::size_t>(count) * sizeof(T), path);
+    if (::fsync(fd) != 0 && errno != EINVAL) throw Error(path + ": write error: " + std::strerror(errno));
+  } catch (...) {
+    ::close(fd);
+    throw;
+  }
+  if (::close(fd) != 0) throw Error(path + ": write error: " + std::strerror(errno));
+}
+
 template <class T>
 void write(const std::string& path, const std::vector<T>& data, const std::vector<std::int64_t>& shape) {
-  std::int64_t count = 1;
-  for (auto s : shape) count *= s;
+  const std::int64_t count = detail::checked_count(shape, sizeof(T), path);
   if (static_cast<std::int64_t>(data.size()) != count)
     throw Error(path + ": " + std::to_string(data.size()) + " values for shape " + shape_string(shape));
   write(path, data.data(), shape);

@@ -175,19 +175,19 @@ TEST_CASE("smg_cli energies: errors are one line, exit code 2, nothing written")
   fs::remove_all(o);
   Run r = run_cli("energies " + c.string() + " " + o.string() + " --gaps 1,2 --gap-weights 1");
   CHECK(r.code == 2);
-  CHECK(r.err == "smg_cli energies: error: --gap-weights needs one weight per gap (2), got 1\n");
+  CHECK(r.err == "smg_cli energies: error: --gap-weights: needs one weight per gap (2), got 1\n");
   r = run_cli("energies " + c.string() + " " + o.string() + " --alpha 1.5");
   CHECK(r.code == 2);
-  CHECK(r.err == "smg_cli energies: error: --alpha must be in [0, 1]\n");
+  CHECK(r.err == "smg_cli energies: error: --alpha: alpha must be in [0, 1], got 1.5\n");
   r = run_cli("energies " + c.string() + " " + o.string() + " --huber-delta 0");
-  CHECK(r.err == "smg_cli energies: error: --huber-delta must be > 0\n");
+  CHECK(r.err == "smg_cli energies: error: --huber-delta: huber_delta must be finite and > 0, got 0\n");
   CHECK(!fs::exists(o));
   // A zero quaternion.
   s.q[0] = s.q[1] = s.q[2] = s.q[3] = 0;
   write_case(c, s, true, true);
   r = run_cli("energies " + c.string() + " " + o.string());
   CHECK(r.code == 2);
-  CHECK(r.err == "smg_cli energies: error: quats.npy: element [t=0][i=0] is the zero quaternion\n");
+  CHECK(r.err == "smg_cli energies: error: " + (c / "quats.npy").string() + ": element [t=0][i=0] is the zero quaternion\n");
   CHECK(r.out.empty());
   // No graph files: the graph is built from the case with the graph flags (graph module), and
   // the energies are computed on it.

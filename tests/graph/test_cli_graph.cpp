@@ -232,14 +232,14 @@ TEST_CASE("smg_cli graph: errors are one line, exit code 2, nothing written") {
     CHECK(r.err == "smg_cli graph: error: " + message + "\n");
     CHECK(!fs::exists(out));
   };
-  fails(" --k 0", "--k must be between 1 and 1048576, got 0");
-  fails(" --m 0", "--m must be between 1 and 2147483647, got 0");
-  fails(" --min-covisible -1", "--min-covisible must be between 0 and 2147483647, got -1");
-  fails(" --aggregation mean", "--aggregation must be one of paper | robust_max, got 'mean'");
-  fails(" --isolated drop", "--isolated must be one of keep_nearest | leave, got 'drop'");
-  fails(" --weighting inverse", "--weighting must be one of uniform | distance, got 'inverse'");
-  fails(" --rho 0", "--rho must be in (0, 1], got '0'");
-  fails(" --tau nan", "--tau expects a finite number, got 'nan'");
+  fails(" --k 0", "--k: must be between 1 and 2147483647, got 0");
+  fails(" --m 0", "--m: must be >= 1, got 0");
+  fails(" --min-covisible -1", "--min-covisible: must be >= 0, got -1");
+  fails(" --aggregation mean", "--aggregation: must be one of paper | robust_max, got 'mean'");
+  fails(" --isolated drop", "--isolated: must be one of keep_nearest | leave, got 'drop'");
+  fails(" --weighting inverse", "--weighting: must be one of uniform | distance, got 'inverse'");
+  fails(" --rho 0", "--rho: must be in (0, 1], got 0");
+  fails(" --tau nan", "--tau: expects a finite number, got 'nan'");
   // Bad files.
   const auto& s = c.scene;
   npy::write((c.dir / "visibility.npy").string(), std::vector<std::uint8_t>(static_cast<std::size_t>(s.N * 2), 1),

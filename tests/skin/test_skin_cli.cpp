@@ -166,32 +166,32 @@ TEST_CASE("smg_cli dqb: bad inputs give one line on stderr, exit code 2, nothing
   std::vector<std::int64_t> bad(s.anchor.begin(), s.anchor.end());
   bad[7] = 10;
   npy::write(anchor, bad, {s.P});
-  expect_error("anchor.npy: element [7] = 10 is out of range [0, N=10)");
+  expect_error(anchor + ": element [7] = 10 is out of range [0, N=10)");
   bad[7] = std::int64_t(1) << 32;  // would wrap to 0 as int32
   npy::write(anchor, bad, {s.P});
-  expect_error("anchor.npy: element [7] = 4294967296 is out of range [0, N=10)");
+  expect_error(anchor + ": element [7] = 4294967296 is out of range [0, N=10)");
   npy::write(anchor, std::vector<std::int64_t>(s.anchor.begin(), s.anchor.end()), {s.P});
 
   npy::write((c.dir / "t_query.npy").string(), std::vector<std::int32_t>{0, -1}, {2});
-  expect_error("t_query.npy: element [1] = -1 is out of range [0, T=4)");
+  expect_error((c.dir / "t_query.npy").string() + ": element [1] = -1 is out of range [0, T=4)");
   npy::write((c.dir / "t_query.npy").string(), c.t_query, {3});
 
   std::vector<std::int32_t> tr = s.t_ref;
   tr[2] = 4;
   npy::write((c.dir / "t_ref.npy").string(), tr, {s.P});
-  expect_error("t_ref.npy: element [2] = 4 is out of range [0, T=4)");
+  expect_error((c.dir / "t_ref.npy").string() + ": element [2] = 4 is out of range [0, T=4)");
   npy::write((c.dir / "t_ref.npy").string(), s.t_ref, {s.P});
 
   std::vector<double> sig = s.sigma;
   sig[1] = 0;
   npy::write((c.dir / "sigma.npy").string(), sig, {s.N});
-  expect_error("sigma.npy: element [1] = 0 is not positive");
+  expect_error((c.dir / "sigma.npy").string() + ": element [1] = 0 is not positive");
   npy::write((c.dir / "sigma.npy").string(), s.sigma, {s.N});
 
   std::vector<double> pq = s.point_quats;
   std::fill(pq.begin() + 8, pq.begin() + 12, 0.0);
   npy::write((c.dir / "point_quats.npy").string(), pq, {s.P, 4});
-  expect_error("point_quats.npy: element [2] is the zero quaternion");
+  expect_error((c.dir / "point_quats.npy").string() + ": element [2] is the zero quaternion");
   npy::write((c.dir / "point_quats.npy").string(), s.point_quats, {s.P, 4});
 
   npy::write((c.dir / "points.npy").string(),

@@ -123,22 +123,22 @@ TEST_CASE("smg_cli render: errors are one line, exit code 2, nothing written") {
   write_case(dir, scene, cam);
   CliRun r = cli("render" + std::string(" ") + dir.string() + " " + out.string());
   CHECK(r.code == 2);
-  CHECK(r.err == "smg_cli render: error: --width and --height are required, 1..65536\n");
+  CHECK(r.err == "smg_cli render: error: --width: must be between 1 and 65536, got 0\n");
   CHECK_FALSE(fs::exists(out));
 
   r = cli("render" + args + " --background 1,2");
   CHECK(r.code == 2);
-  CHECK(r.err == "smg_cli render: error: --background takes 1 or C = 3 comma-separated values\n");
+  CHECK(r.err == "smg_cli render: error: --background: takes 1 or C = 3 comma-separated values\n");
 
   r = cli("render" + args + " --tile-size 12");
   CHECK(r.code == 2);
-  CHECK(r.err == "smg_cli render: error: settings: tile_size must be 8, 16 or 32, got 12\n");
+  CHECK(r.err == "smg_cli render: error: --tile-size: tile_size must be 8, 16 or 32, got 12\n");
 
   for (int k = 0; k < 4; ++k) scene.quats[8 + std::size_t(k)] = 0;
   write_case(dir, scene, cam);
   r = cli("render" + args);
   CHECK(r.code == 2);
-  CHECK(r.err == "smg_cli render: error: quats: element [2] is the zero quaternion\n");
+  CHECK(r.err == "smg_cli render: error: " + (dir / "quats.npy").string() + ": element [2] is the zero quaternion\n");
   CHECK(r.out.empty());
   CHECK_FALSE(fs::exists(out));
 

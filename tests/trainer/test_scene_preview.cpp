@@ -50,9 +50,9 @@ TEST_CASE("scene_preview: bad flags and unwritable folders are one line on stder
   const struct {
     std::string args, message;
   } cases[] = {
-      {"--nope 1", "unknown flag --nope"},
-      {"--frames", "--frames needs a value"},
-      {"--frames abc", "--frames expects an integer"},
+      {"--nope 1", "--nope: unknown flag"},
+      {"--frames", "--frames: needs a value"},
+      {"--frames abc", "--frames: expects an integer"},
       {"--frames 1", "--frames must be in [2, 1000]"},
       {"--jitter-px -1", "jitter_px"},
       {"stray", "unexpected argument 'stray'"},
