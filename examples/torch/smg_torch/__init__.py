@@ -1,0 +1,155 @@
+"""smg_torch — smg's Semantic Motion Graph regularisers as PyTorch operators (CPU).
+
+    import smg_torch as smg
+    c = smg.node_confidences(positions, g)                        # [T, N], no grad
+    e = smg.carap(positions, quats, g, c) + smg.lrm(positions, g, c)
+    e.backward()                                                  # analytic gradients
+
+Shapes and meanings: docs/interop.md. Every energy returns a 0-dim tensor and is differentiable
+w.r.t. positions [T, N, 3] and the raw, unnormalised quaternions [T, N, 4] (w, x, y, z);
+confidences and graph weights are constants. The gradient is computed together with the energy
+in forward (the library's kernels produce both in one pass, cheaper than a second pass) when an
+input requires grad, and backward scales it by grad_output (energies are linear in it).
+float32 and float64; contiguous CPU tensors are read in place; non-contiguous ones are copied
+once (.contiguous()); graph indices int32 or int64 are read in place; graph weights of the
+other float dtype are converted. Errors raise ValueError with the library's one-line message.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple, Optional, Sequence, Tuple, Union
+
+import torch
+
+from . import _C  # noqa: E402  (after torch: the module links against libtorch)
+
+__all__ = ["Graph", "node_confidences", "carap", "arap", "lrm", "version"]
+
+version = _C.version
+
+_CUDA_MESSAGE = "smg_torch: CUDA tensors are not supported yet (CPU only)"
+
+
+class Graph(NamedTuple):
+    """Semantic motion graph: indices int64 [N, K] (-1 padded), weights [N, K], features [N, C],
+    distances [N, K]. Any (indices, weights) pair works where a Graph is expected."""
+
+    indices: torch.Tensor
+    weights: torch.Tensor
+    features: Optional[torch.Tensor] = None
+    distances: Optional[torch.Tensor] = None
+
+
+GraphLike = Union[Graph, Tuple[torch.Tensor, torch.Tensor]]
+
+
+def _graph(g) -> Tuple[torch.Tensor, torch.Tensor]:
+    if isinstance(g, Graph):
+        return g.indices, g.weights
+    if isinstance(g, (tuple, list)) and len(g) == 2:
+        return g[0], g[1]
+    raise ValueError("graph: expected smg_torch.Graph or a tuple (indices, weights)")
+
+
+def _tensor(x, name: str) -> torch.Tensor:
+    if not isinstance(x, torch.Tensor):
+        raise ValueError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
+    if x.is_cuda:
+        raise NotImplementedError(_CUDA_MESSAGE)
+    return x
+
+
+def _check(**tensors) -> None:
+    for name, t in tensors.items():
+        if t is not None:
+            _tensor(t, name)
+
+
+def _gap_args(gaps, gap_weights):
+    gaps = [int(d) for d in gaps]
+    gw = None if gap_weights is None else [float(w) for w in gap_weights]
+    return gaps, gw
+
+
+def node_confidences(positions: torch.Tensor, g: GraphLike, visibility: Optional[torch.Tensor] = None,
+                     *, kappa_m: float = 2.5, kappa_r: float = 2.5, lambda_m: float = 1.0,
+                     lambda_r: float = 1.0, eps: float = 1e-4) -> torch.Tensor:
+    """c_{t,i} (docs/math/energy.md E2-E6), [T, N], no gradient (a constant for the energies)."""
+    idx, w = _graph(g)
+    _check(positions=positions, indices=idx, weights=w, visibility=visibility)
+    with torch.no_grad():
+        return _C.node_confidences(positions.detach(), idx, w.detach(), visibility, float(kappa_m),
+                                   float(kappa_r), float(lambda_m), float(lambda_r), float(eps))
+
+
+def _scale(grad_output, g):
+    return None if g is None else grad_output * g
+
+
+class _CarapFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, positions, quats, idx, w, confidence, plain, alpha, lambda_c, lambda_l, gaps,
+                gap_weights, normalize):
+        need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
+        if plain:
+            e, gx, gq = _C.arap(positions.detach(), quats.detach(), idx, w.detach(), lambda_c,
+                                lambda_l, gaps, gap_weights, normalize, need_x, need_q)
+        else:
+            e, gx, gq = _C.carap(positions.detach(), quats.detach(), idx, w.detach(),
+                                 None if confidence is None else confidence.detach(), alpha,
+                                 lambda_c, lambda_l, gaps, gap_weights, normalize, need_x, need_q)
+        ctx.grads = (gx, gq)
+        return e
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_output):
+        gx, gq = ctx.grads
+        return (_scale(grad_output, gx), _scale(grad_output, gq)) + (None,) * 10
+
+
+def carap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike,
+          confidence: Optional[torch.Tensor] = None, *, alpha: float = 0.6, lambda_c: float = 1.0,
+          lambda_l: float = 1.0, gaps: Sequence[int] = (1, 2, 4),
+          gap_weights: Optional[Sequence[float]] = None, normalize: bool = False) -> torch.Tensor:
+    """Confidence-aware ARAP energy (E7-E10), 0-dim; differentiable w.r.t. positions and quats."""
+    idx, w = _graph(g)
+    _check(positions=positions, quats=quats, indices=idx, weights=w, confidence=confidence)
+    gaps, gw = _gap_args(gaps, gap_weights)
+    return _CarapFunction.apply(positions, quats, idx, w, confidence, False, float(alpha),
+                                float(lambda_c), float(lambda_l), gaps, gw, bool(normalize))
+
+
+def arap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike, *, lambda_c: float = 1.0,
+         lambda_l: float = 1.0, gaps: Sequence[int] = (1, 2, 4),
+         gap_weights: Optional[Sequence[float]] = None, normalize: bool = False) -> torch.Tensor:
+    """Plain ARAP energy (E9 with c = 1, alpha = 1), 0-dim; differentiable like carap."""
+    idx, w = _graph(g)
+    _check(positions=positions, quats=quats, indices=idx, weights=w)
+    gaps, gw = _gap_args(gaps, gap_weights)
+    return _CarapFunction.apply(positions, quats, idx, w, None, True, 1.0, float(lambda_c),
+                                float(lambda_l), gaps, gw, bool(normalize))
+
+
+class _LrmFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, positions, idx, w, confidence, alpha, huber_delta, detach_omega, normalize):
+        e, gx = _C.lrm(positions.detach(), idx, w.detach(),
+                       None if confidence is None else confidence.detach(), alpha, huber_delta,
+                       detach_omega, normalize, ctx.needs_input_grad[0])
+        ctx.grad = gx
+        return e
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_output):
+        return (_scale(grad_output, ctx.grad),) + (None,) * 7
+
+
+def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor] = None, *,
+        alpha: float = 0.6, huber_delta: float = 0.01, detach_omega: bool = False,
+        normalize: bool = False) -> torch.Tensor:
+    """Local rigid-motion energy (E11-E16), 0-dim; differentiable w.r.t. positions."""
+    idx, w = _graph(g)
+    _check(positions=positions, indices=idx, weights=w, confidence=confidence)
+    return _LrmFunction.apply(positions, idx, w, confidence, float(alpha), float(huber_delta),
+                              bool(detach_omega), bool(normalize))
