@@ -14,7 +14,7 @@ cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Debug -DCMAKE_EXPORT_COMPILE_COMMANDS=
 echo "== cppcheck"
 cppcheck --quiet --error-exitcode=1 --std=c++17 --language=c++ --inline-suppr \
   --enable=warning,performance,portability --suppress=missingIncludeSystem \
-  --suppress=unknownMacro -I include -I examples/common \
+  --suppress=unknownMacro -I include -I examples/common -i examples/torch \
   include examples
 
 echo "== clang-tidy"
