@@ -149,3 +149,80 @@ def lrm(x, indices, weights, confidence=None, alpha=0.6, huber_delta=0.01, detac
         count = T * int(mask.sum().item())
         E = E / count if count > 0 else E * 0
     return E
+
+
+# ---- skinning: docs/math/skin.md (S1)-(S13) -------------------------------------------------------
+
+def qmul(a, b):
+    """Hamilton product of [..., 4] (w, x, y, z)."""
+    aw, ax, ay, az = a.unbind(-1)
+    bw, bx, by, bz = b.unbind(-1)
+    return torch.stack([aw * bw - ax * bx - ay * by - az * bz,
+                        aw * bx + ax * bw + ay * bz - az * by,
+                        aw * by - ax * bz + ay * bw + az * bx,
+                        aw * bz + ax * by - ay * bx + az * bw], -1)
+
+
+def qconj(q):
+    return torch.cat([q[..., :1], -q[..., 1:]], -1)
+
+
+def pure(v):
+    return torch.cat([torch.zeros_like(v[..., :1]), v], -1)
+
+
+def skin_drivers(indices, anchor):
+    """(S1) [P, K+1]: the anchor, then its valid neighbours in graph order, -1 padded."""
+    return torch.cat([anchor.long()[:, None], indices.long()[anchor.long()]], 1)
+
+
+def skinning_weights(node_positions, drivers, t_ref, points, sigma):
+    """(S2)-(S3), constants (no gradient)."""
+    x = node_positions.detach()
+    valid = drivers >= 0
+    d = drivers.clamp(min=0)
+    xk = x[t_ref.long()[:, None], d]                           # [P, D, 3]
+    sg = sigma.detach()[d]
+    l = -((points.detach()[:, None] - xk) ** 2).sum(-1) / (2 * sg * sg)
+    l = torch.where(valid, l, torch.full_like(l, -float("inf")))
+    return torch.softmax(l, 1) * valid
+
+
+def dqb(node_positions, node_quats, indices, points, point_quats, anchor, t_ref, t_query, sigma,
+        lbs=False):
+    """(S6)-(S13) with autograd; returns ([Q, P, 3], [Q, P, 4])."""
+    drivers = skin_drivers(indices, anchor)
+    w = skinning_weights(node_positions, drivers, t_ref, points, sigma)  # [P, D]
+    d = drivers.clamp(min=0)
+    q = node_quats / node_quats.norm(dim=-1, keepdim=True)
+    qp = (torch.tensor([1.0, 0, 0, 0], dtype=points.dtype).expand(points.shape[0], 4)
+          if point_quats is None else point_quats / point_quats.norm(dim=-1, keepdim=True))
+    tr = t_ref.long()[:, None]
+    x_ref, q_ref = node_positions[tr, d], q[tr, d]                        # [P, D, ...]
+    outs_x, outs_q = [], []
+    for t in t_query.long().tolist():
+        x_t, q_t = node_positions[t][d], q[t][d]
+        r = qmul(q_t, qconj(q_ref))                                      # (S6)
+        s = 0.5 * (qmul(pure(x_t), r) - qmul(r, pure(x_ref)))            # (S7)
+        # (S8) signs relative to the pivot (largest weight, first on ties) in canonical sign
+        with torch.no_grad():
+            piv = w.argmax(1)
+            rp = r[torch.arange(r.shape[0]), piv]
+            sign_p = torch.where(rp[:, 0] != 0, rp[:, 0].sign(), torch.zeros_like(rp[:, 0]))
+            for c in (1, 2, 3):
+                sign_p = torch.where(sign_p == 0, rp[:, c].sign(), sign_p)
+            rt = rp * sign_p[:, None]
+            sk = torch.where((r * rt[:, None]).sum(-1) >= 0, 1.0, -1.0).to(r.dtype)
+        a = (w * sk)[..., None]
+        br, bs = (a * r).sum(1), (a * s).sum(1)                         # (S9)
+        n = br.norm(dim=-1, keepdim=True)
+        c0, ce = br / n, bs / n                                          # (S10)
+        R0 = rotation_matrices(c0)
+        if lbs:                                                          # (S13)
+            Rk = rotation_matrices(r)
+            px = (w[..., None] * (torch.einsum("pdab,pdb->pda", Rk, points[:, None] - x_ref) + x_t)).sum(1)
+        else:                                                            # (S11)
+            px = torch.einsum("pab,pb->pa", R0, points) + 2 * qmul(ce, qconj(c0))[..., 1:]
+        outs_x.append(px)
+        outs_q.append(qmul(c0, qp))                                      # (S12)
+    return torch.stack(outs_x), torch.stack(outs_q)

@@ -22,7 +22,7 @@ import torch
 
 from . import _C  # noqa: E402  (after torch: the module links against libtorch)
 
-__all__ = ["Graph", "node_confidences", "carap", "arap", "lrm", "version"]
+__all__ = ["Graph", "node_confidences", "carap", "arap", "lrm", "dqb", "version"]
 
 version = _C.version
 
@@ -153,3 +153,42 @@ def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor
     _check(positions=positions, indices=idx, weights=w, confidence=confidence)
     return _LrmFunction.apply(positions, idx, w, confidence, float(alpha), float(huber_delta),
                               bool(detach_omega), bool(normalize))
+
+
+class _DqbFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, node_positions, node_quats, points, point_quats, idx, w, anchor, t_ref, t_query,
+                sigma, lbs):
+        xs, qs, ps = node_positions.detach(), node_quats.detach(), points.detach()
+        pqs = None if point_quats is None else point_quats.detach()
+        out_x, out_q, drivers, weights = _C.dqb_forward(xs, qs, idx, w.detach(), ps, pqs, anchor,
+                                                        t_ref, t_query, sigma.detach(), lbs)
+        # The backward recomputes the blend (as cheap as reading a cache, per the library).
+        ctx.inputs = (xs, qs, ps, pqs, t_ref, t_query, drivers, weights, lbs)
+        return out_x, out_q
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_x, grad_q):
+        xs, qs, ps, pqs, t_ref, t_query, drivers, weights, lbs = ctx.inputs
+        nx, nq, np_, npq = ctx.needs_input_grad[:4]
+        gx, gq, gp, gpq = _C.dqb_backward(xs, qs, ps, pqs, t_ref, t_query, drivers, weights, grad_x,
+                                          grad_q, lbs, nx, nq, np_, npq and pqs is not None)
+        return (gx, gq, gp, gpq) + (None,) * 7
+
+
+def dqb(node_positions: torch.Tensor, node_quats: torch.Tensor, g: GraphLike, points: torch.Tensor,
+        point_quats: Optional[torch.Tensor], anchor: torch.Tensor, t_ref: torch.Tensor,
+        t_query: torch.Tensor, sigma: torch.Tensor, *, lbs: bool = False):
+    """Dual-quaternion blending (docs/math/skin.md S1-S18; LBS with lbs=True) of points [P, 3]
+    (reference poses at frames t_ref [P], rotations point_quats [P, 4] or None = identity), each
+    driven by its anchor node [P] and the anchor's graph neighbours with distance-aware weights
+    (sigma [N]; the weights are constants for the gradient), to the frames t_query [Q].
+    Returns positions [Q, P, 3] and unit quaternions [Q, P, 4]; differentiable w.r.t.
+    node_positions, the raw node_quats, points and the raw point_quats."""
+    idx, w = _graph(g)
+    _check(node_positions=node_positions, node_quats=node_quats, points=points,
+           point_quats=point_quats, indices=idx, weights=w, anchor=anchor, t_ref=t_ref,
+           t_query=t_query, sigma=sigma)
+    return _DqbFunction.apply(node_positions, node_quats, points, point_quats, idx, w, anchor, t_ref,
+                              t_query, sigma, bool(lbs))
