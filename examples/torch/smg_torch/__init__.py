@@ -22,7 +22,7 @@ import torch
 
 from . import _C  # noqa: E402  (after torch: the module links against libtorch)
 
-__all__ = ["Graph", "node_confidences", "carap", "arap", "lrm", "dqb", "version"]
+__all__ = ["Graph", "node_confidences", "carap", "arap", "lrm", "dqb", "render", "version"]
 
 version = _C.version
 
@@ -192,3 +192,45 @@ def dqb(node_positions: torch.Tensor, node_quats: torch.Tensor, g: GraphLike, po
            t_query=t_query, sigma=sigma)
     return _DqbFunction.apply(node_positions, node_quats, points, point_quats, idx, w, anchor, t_ref,
                               t_query, sigma, bool(lbs))
+
+
+class _RenderFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, means, quats, log_scales, opacity_logits, colors, viewmat, K, width, height,
+                background, near, far, tile_size, radius_sigmas, eps2d, alpha_max):
+        params = tuple(t.detach() for t in (means, quats, log_scales, opacity_logits, colors))
+        img, alpha, depth, radii, state = _C.render_forward(
+            *params, viewmat.detach(), K.detach(), width, height,
+            None if background is None else background.detach(), near, far, tile_size,
+            radius_sigmas, eps2d, alpha_max)
+        # The forward's workspace (projections, tile lists, transmittances) is kept for backward.
+        ctx.state, ctx.params = state, params
+        ctx.radii = radii
+        return img, alpha, depth
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_image, grad_alpha, grad_depth):
+        grads = _C.render_backward(ctx.state, *ctx.params, grad_image, grad_alpha, grad_depth)
+        return tuple(grads) + (None,) * 11
+
+
+def render(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
+           opacity_logits: torch.Tensor, colors: torch.Tensor, viewmat: torch.Tensor,
+           K: torch.Tensor, width: int, height: int, *, background=None, near: float = 0.01,
+           far: float = 1e10, tile_size: int = 16, radius_sigmas: float = 3.0, eps2d: float = 0.3,
+           alpha_max: float = 0.99):
+    """The reference CPU splatter (docs/math/splat.md; gsplat's maths): means [G, 3], raw quats
+    [G, 4], log_scales [G, 3], opacity_logits [G], colors [G, C] or SH coefficients [G, K, C],
+    viewmat [4, 4] (world -> camera, OpenCV axes), K [3, 3]. Returns image [H, W, C], alpha
+    [H, W] and expected depth [H, W]; differentiable w.r.t. every Gaussian parameter (viewmat, K
+    and background are constants)."""
+    _check(means=means, quats=quats, log_scales=log_scales, opacity_logits=opacity_logits,
+           colors=colors, viewmat=viewmat, K=K)
+    if background is not None and not isinstance(background, torch.Tensor):
+        background = torch.tensor(background, dtype=torch.float64).reshape(-1)
+    _check(background=background)
+    return _RenderFunction.apply(means, quats, log_scales, opacity_logits, colors, viewmat, K,
+                                 int(width), int(height), background, float(near), float(far),
+                                 int(tile_size), float(radius_sigmas), float(eps2d),
+                                 float(alpha_max))
