@@ -22,7 +22,7 @@ import torch
 
 from . import _C  # noqa: E402  (after torch: the module links against libtorch)
 
-__all__ = ["Graph", "node_confidences", "carap", "arap", "lrm", "dqb", "render", "version"]
+__all__ = ["Graph", "build_graph", "node_confidences", "carap", "arap", "lrm", "dqb", "render", "version"]
 
 version = _C.version
 
@@ -68,6 +68,28 @@ def _gap_args(gaps, gap_weights):
     gaps = [int(d) for d in gaps]
     gw = None if gap_weights is None else [float(w) for w in gap_weights]
     return gaps, gw
+
+
+def build_graph(positions: torch.Tensor, visibility: Optional[torch.Tensor] = None,
+                feature_samples: Optional[torch.Tensor] = None,
+                features: Optional[torch.Tensor] = None, *, k: int = 16, tau: float = 0.75,
+                aggregation: str = "paper", m: int = 3, rho: float = 0.5, min_covisible: int = 1,
+                isolated: str = "keep_nearest", weighting: str = "uniform",
+                gate: bool = True) -> Graph:
+    """The semantic motion graph (docs/math/graph.md): exact trajectory KNN over positions
+    [T, N, 3] (visibility [T, N] or None = all visible), gated by cos(f_i, f_j) >= tau when
+    features [N, C] (or feature_samples [T, N, C], reduced to descriptors with rho) are given
+    and gate is True. Returns Graph(indices int64 [N, k] -1 padded, weights [N, k],
+    features [N, C] or None, distances [N, k]). No gradient."""
+    _check(positions=positions, visibility=visibility, feature_samples=feature_samples,
+           features=features)
+    with torch.no_grad():
+        idx, w, f, d = _C.build_graph(
+            positions.detach(), visibility,
+            None if feature_samples is None else feature_samples.detach(),
+            None if features is None else features.detach(), int(k), float(tau), str(aggregation),
+            int(m), float(rho), int(min_covisible), str(isolated), str(weighting), bool(gate))
+    return Graph(idx, w, f, d)
 
 
 def node_confidences(positions: torch.Tensor, g: GraphLike, visibility: Optional[torch.Tensor] = None,
