@@ -186,13 +186,16 @@ class _DqbFunction(torch.autograd.Function):
         out_x, out_q, drivers, weights = _C.dqb_forward(xs, qs, idx, w.detach(), ps, pqs, anchor,
                                                         t_ref, t_query, sigma.detach(), lbs)
         # The backward recomputes the blend (as cheap as reading a cache, per the library).
-        ctx.inputs = (xs, qs, ps, pqs, t_ref, t_query, drivers, weights, lbs)
+        # saved through autograd, so that an in-place change before backward raises
+        ctx.save_for_backward(node_positions, node_quats, points, point_quats)
+        ctx.inputs = (t_ref, t_query, drivers, weights, lbs)
         return out_x, out_q
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, grad_x, grad_q):
-        xs, qs, ps, pqs, t_ref, t_query, drivers, weights, lbs = ctx.inputs
+        xs, qs, ps, pqs = (None if t is None else t.detach() for t in ctx.saved_tensors)
+        t_ref, t_query, drivers, weights, lbs = ctx.inputs
         nx, nq, np_, npq = ctx.needs_input_grad[:4]
         gx, gq, gp, gpq = _C.dqb_backward(xs, qs, ps, pqs, t_ref, t_query, drivers, weights, grad_x,
                                           grad_q, lbs, nx, nq, np_, npq and pqs is not None)
@@ -226,14 +229,16 @@ class _RenderFunction(torch.autograd.Function):
             None if background is None else background.detach(), near, far, tile_size,
             radius_sigmas, eps2d, alpha_max)
         # The forward's workspace (projections, tile lists, transmittances) is kept for backward.
-        ctx.state, ctx.params = state, params
+        ctx.state = state
+        ctx.save_for_backward(means, quats, log_scales, opacity_logits, colors)
         ctx.radii = radii
         return img, alpha, depth
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, grad_image, grad_alpha, grad_depth):
-        grads = _C.render_backward(ctx.state, *ctx.params, grad_image, grad_alpha, grad_depth)
+        params = tuple(t.detach() for t in ctx.saved_tensors)
+        grads = _C.render_backward(ctx.state, *params, grad_image, grad_alpha, grad_depth)
         return tuple(grads) + (None,) * 11
 
 
