@@ -24,7 +24,11 @@ import os
 import sys
 import time
 
-import torch
+# Before torch starts its OpenMP pool: on a shared, loaded machine, spinning OpenMP threads make
+# every 2-thread timing (PyTorch's and smg's alike) erratic by 10-25x.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import torch  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))

@@ -124,6 +124,10 @@ def test_dqb_errors_leave_inputs_untouched():
     cases = [
         (lambda: smg.dqb(x[..., :2], q, g, pts, pq, anchor, t_ref, t_query, sigma), "node_positions"),
         (lambda: smg.dqb(x, q.float(), g, pts, pq, anchor, t_ref, t_query, sigma), "node_quats"),
+        (lambda: smg.dqb(x, q[:, :4], g, pts, pq, anchor, t_ref, t_query, sigma), "node_quats"),
+        (lambda: smg.dqb(x, q, g, pts, pq, anchor, t_ref, t_query, sigma[:3]), "sigma"),
+        (lambda: smg.dqb(x, q, g, pts, pq, anchor, t_ref[:2], t_query, sigma), "t_ref"),
+        (lambda: smg.dqb(x, q, (idx, w[:, :1]), pts, pq, anchor, t_ref, t_query, sigma), "graph"),
         (lambda: smg.dqb(x, q, g, pts[:, :2], pq, anchor, t_ref, t_query, sigma), "points"),
         (lambda: smg.dqb(x, q, g, pts, pq[:3], anchor, t_ref, t_query, sigma), "point_quats"),
         (lambda: smg.dqb(x, q, g, pts, pq, anchor + 100, t_ref, t_query, sigma), "anchor"),
