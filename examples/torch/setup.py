@@ -22,7 +22,7 @@ setup(
     name="smg_torch",
     version="0.1.0",
     packages=["smg_torch"],
-    package_dir={"smg_torch": os.path.join(HERE, "smg_torch")},
+    package_dir={"smg_torch": "smg_torch"},  # relative to this file (pip runs setup.py here)
     ext_modules=[CppExtension(
         "smg_torch._C", sources,
         include_dirs=[os.path.join(ROOT, "include"), HERE,
