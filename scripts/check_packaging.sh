@@ -10,7 +10,8 @@ root=$(pwd)
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
-cmake -S . -B "$work/build" -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_EXAMPLES=OFF -DSMG_BUILD_BENCH=OFF >/dev/null
+cmake -S . -B "$work/build" -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_EXAMPLES=OFF -DSMG_BUILD_BENCH=OFF \
+      -DSMG_BUILD_TORCH=OFF >/dev/null
 cmake --install "$work/build" --prefix "$work/prefix" >/dev/null
 cmake -S tests/consumer -B "$work/consumer-installed" -DCMAKE_PREFIX_PATH="$work/prefix" >/dev/null
 cmake --build "$work/consumer-installed" >/dev/null

@@ -5,6 +5,10 @@
 #   scripts/test.sh              Release build in build/release, run all tests
 #   scripts/test.sh --sanitize   AddressSanitizer + UndefinedBehaviorSanitizer build in
 #                                build/asan (tests and examples only), run all tests
+#
+# The Release mode also builds the PyTorch extension (examples/torch) and runs tests/torch with
+# Debian's /usr/bin/python3 when libtorch-dev, pybind11-dev, python3-torch and python3-pytest
+# are installed (one line says so when they are not); the sanitizer build never builds it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mode=release
@@ -19,12 +23,36 @@ jobs=$(nproc)
 if [ "$mode" = asan ]; then
   build=${SMG_BUILD_DIR:-build/asan}
   cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSMG_WERROR=ON -DSMG_SANITIZE=ON \
-        -DSMG_BUILD_BENCH=OFF
+        -DSMG_BUILD_BENCH=OFF -DSMG_BUILD_TORCH=OFF
   export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1}
   export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 else
   build=${SMG_BUILD_DIR:-build/release}
-  cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_WERROR=ON
+  # PyTorch extension: only with Debian's python3 + torch + pytest (the python3 first on PATH may
+  # lack torch). CMake turns SMG_BUILD_TORCH on by itself when libtorch-dev and pybind11 exist.
+  torch_py=/usr/bin/python3
+  torch_ok=0
+  if [ -x "$torch_py" ] && "$torch_py" -c "import torch, pytest" >/dev/null 2>&1; then
+    torch_ok=1
+  fi
+  if [ "$torch_ok" = 1 ]; then
+    cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_WERROR=ON -DPython3_EXECUTABLE="$torch_py"
+  else
+    cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_WERROR=ON -DSMG_BUILD_TORCH=OFF
+  fi
 fi
 cmake --build "$build" -j"$jobs"
 ctest --test-dir "$build" -j"$jobs" --output-on-failure
+if [ "$mode" = release ]; then
+  if [ "$torch_ok" = 1 ] && [ -f "$build/python/smg_torch/__init__.py" ] &&
+     ls "$build"/python/smg_torch/_C*.so >/dev/null 2>&1; then
+    echo "smg: tests/torch (PyTorch extension, $torch_py -m pytest)"
+    rc=0
+    case "$build" in /*) pybuild=$build ;; *) pybuild=$PWD/$build ;; esac
+    PYTHONPATH="$pybuild/python${PYTHONPATH:+:$PYTHONPATH}" "$torch_py" -m pytest -q -p no:cacheprovider tests/torch || rc=$?
+    # 5: no tests collected — not a failure.
+    if [ "$rc" -ne 0 ] && [ "$rc" -ne 5 ]; then exit "$rc"; fi
+  else
+    echo "smg: tests/torch skipped (needs /usr/bin/python3 with torch and pytest, libtorch-dev, pybind11-dev)"
+  fi
+fi

@@ -1,0 +1,33 @@
+"""The torch.utils.cpp_extension route (pip-installed torch, no CMake): builds smg_torch._C
+from examples/torch/*.cpp over smg's headers and Eigen, and installs the smg_torch package.
+
+    cd examples/torch && pip install .            # or: python setup.py build_ext --inplace
+    EIGEN3_INCLUDE_DIR=/path/to/eigen3 pip install .   # when Eigen is not in /usr/include/eigen3
+
+The CMake route (README "From PyTorch") builds the same module into <build>/python/smg_torch/.
+"""
+import glob
+import os
+
+from setuptools import setup
+from torch.utils.cpp_extension import BuildExtension, CppExtension
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.abspath(os.path.join(HERE, "..", ".."))
+sources = sorted(glob.glob(os.path.join(HERE, "smg_torch_*.cpp")))
+parts = [os.path.basename(s)[len("smg_torch_"):-4] for s in sources]
+macros = [("SMG_TORCH_" + p.upper(), None) for p in parts if p in ("skin", "splat", "graph")]
+
+setup(
+    name="smg_torch",
+    version="0.1.0",
+    packages=["smg_torch"],
+    package_dir={"smg_torch": "smg_torch"},  # relative to this file (pip runs setup.py here)
+    ext_modules=[CppExtension(
+        "smg_torch._C", sources,
+        include_dirs=[os.path.join(ROOT, "include"), HERE,
+                      os.environ.get("EIGEN3_INCLUDE_DIR", "/usr/include/eigen3")],
+        define_macros=macros,
+        extra_compile_args=["-O3", "-std=c++17"])],
+    cmdclass={"build_ext": BuildExtension},
+)

@@ -1,0 +1,263 @@
+"""smg_torch — smg's Semantic Motion Graph regularisers as PyTorch operators (CPU).
+
+    import smg_torch as smg
+    c = smg.node_confidences(positions, g)                        # [T, N], no grad
+    e = smg.carap(positions, quats, g, c) + smg.lrm(positions, g, c)
+    e.backward()                                                  # analytic gradients
+
+Shapes and meanings: docs/interop.md. Every energy returns a 0-dim tensor and is differentiable
+w.r.t. positions [T, N, 3] and the raw, unnormalised quaternions [T, N, 4] (w, x, y, z);
+confidences and graph weights are constants. The gradient is computed together with the energy
+in forward (the library's kernels produce both in one pass, cheaper than a second pass) when an
+input requires grad, and backward scales it by grad_output (energies are linear in it).
+float32 and float64; contiguous CPU tensors are read in place; non-contiguous ones are copied
+once (.contiguous()); graph indices int32 or int64 are read in place; graph weights of the
+other float dtype are converted. Errors raise ValueError with the library's one-line message.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple, Optional, Sequence, Tuple, Union
+
+import torch
+
+from . import _C  # noqa: E402  (after torch: the module links against libtorch)
+
+__all__ = ["Graph", "build_graph", "node_confidences", "carap", "arap", "lrm", "dqb", "render", "version"]
+
+version = _C.version
+
+_CUDA_MESSAGE = "smg_torch: CUDA tensors are not supported yet (CPU only)"
+
+
+class Graph(NamedTuple):
+    """Semantic motion graph: indices int64 [N, K] (-1 padded), weights [N, K], features [N, C],
+    distances [N, K]. Any (indices, weights) pair works where a Graph is expected."""
+
+    indices: torch.Tensor
+    weights: torch.Tensor
+    features: Optional[torch.Tensor] = None
+    distances: Optional[torch.Tensor] = None
+
+
+GraphLike = Union[Graph, Tuple[torch.Tensor, torch.Tensor]]
+
+
+def _graph(g) -> Tuple[torch.Tensor, torch.Tensor]:
+    if isinstance(g, Graph):
+        return g.indices, g.weights
+    if isinstance(g, (tuple, list)) and len(g) == 2:
+        return g[0], g[1]
+    raise ValueError("graph: expected smg_torch.Graph or a tuple (indices, weights)")
+
+
+def _tensor(x, name: str) -> torch.Tensor:
+    if not isinstance(x, torch.Tensor):
+        raise ValueError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
+    if x.is_cuda:
+        raise NotImplementedError(_CUDA_MESSAGE)
+    return x
+
+
+def _check(**tensors) -> None:
+    for name, t in tensors.items():
+        if t is not None:
+            _tensor(t, name)
+
+
+def _gap_args(gaps, gap_weights):
+    gaps = [int(d) for d in gaps]
+    gw = None if gap_weights is None else [float(w) for w in gap_weights]
+    return gaps, gw
+
+
+def build_graph(positions: torch.Tensor, visibility: Optional[torch.Tensor] = None,
+                feature_samples: Optional[torch.Tensor] = None,
+                features: Optional[torch.Tensor] = None, *, k: int = 16, tau: float = 0.75,
+                aggregation: str = "paper", m: int = 3, rho: float = 0.5, min_covisible: int = 1,
+                isolated: str = "keep_nearest", weighting: str = "uniform",
+                gate: bool = True) -> Graph:
+    """The semantic motion graph (docs/math/graph.md): exact trajectory KNN over positions
+    [T, N, 3] (visibility [T, N] or None = all visible), gated by cos(f_i, f_j) >= tau when
+    features [N, C] (or feature_samples [T, N, C], reduced to descriptors with rho) are given
+    and gate is True. Returns Graph(indices int64 [N, k] -1 padded, weights [N, k],
+    features [N, C] or None, distances [N, k]). No gradient."""
+    _check(positions=positions, visibility=visibility, feature_samples=feature_samples,
+           features=features)
+    with torch.no_grad():
+        idx, w, f, d = _C.build_graph(
+            positions.detach(), visibility,
+            None if feature_samples is None else feature_samples.detach(),
+            None if features is None else features.detach(), int(k), float(tau), str(aggregation),
+            int(m), float(rho), int(min_covisible), str(isolated), str(weighting), bool(gate))
+    return Graph(idx, w, f, d)
+
+
+def node_confidences(positions: torch.Tensor, g: GraphLike, visibility: Optional[torch.Tensor] = None,
+                     *, kappa_m: float = 2.5, kappa_r: float = 2.5, lambda_m: float = 1.0,
+                     lambda_r: float = 1.0, eps: float = 1e-4) -> torch.Tensor:
+    """c_{t,i} (docs/math/energy.md E2-E6), [T, N], no gradient (a constant for the energies)."""
+    idx, w = _graph(g)
+    _check(positions=positions, indices=idx, weights=w, visibility=visibility)
+    with torch.no_grad():
+        return _C.node_confidences(positions.detach(), idx, w.detach(), visibility, float(kappa_m),
+                                   float(kappa_r), float(lambda_m), float(lambda_r), float(eps))
+
+
+def _scale(grad_output, g):
+    return None if g is None else grad_output * g
+
+
+class _CarapFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, positions, quats, idx, w, confidence, plain, alpha, lambda_c, lambda_l, gaps,
+                gap_weights, normalize):
+        need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
+        if plain:
+            e, gx, gq = _C.arap(positions.detach(), quats.detach(), idx, w.detach(), lambda_c,
+                                lambda_l, gaps, gap_weights, normalize, need_x, need_q)
+        else:
+            e, gx, gq = _C.carap(positions.detach(), quats.detach(), idx, w.detach(),
+                                 None if confidence is None else confidence.detach(), alpha,
+                                 lambda_c, lambda_l, gaps, gap_weights, normalize, need_x, need_q)
+        ctx.grads = (gx, gq)
+        return e
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_output):
+        gx, gq = ctx.grads
+        return (_scale(grad_output, gx), _scale(grad_output, gq)) + (None,) * 10
+
+
+def carap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike,
+          confidence: Optional[torch.Tensor] = None, *, alpha: float = 0.6, lambda_c: float = 1.0,
+          lambda_l: float = 1.0, gaps: Sequence[int] = (1, 2, 4),
+          gap_weights: Optional[Sequence[float]] = None, normalize: bool = False) -> torch.Tensor:
+    """Confidence-aware ARAP energy (E7-E10), 0-dim; differentiable w.r.t. positions and quats."""
+    idx, w = _graph(g)
+    _check(positions=positions, quats=quats, indices=idx, weights=w, confidence=confidence)
+    gaps, gw = _gap_args(gaps, gap_weights)
+    return _CarapFunction.apply(positions, quats, idx, w, confidence, False, float(alpha),
+                                float(lambda_c), float(lambda_l), gaps, gw, bool(normalize))
+
+
+def arap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike, *, lambda_c: float = 1.0,
+         lambda_l: float = 1.0, gaps: Sequence[int] = (1, 2, 4),
+         gap_weights: Optional[Sequence[float]] = None, normalize: bool = False) -> torch.Tensor:
+    """Plain ARAP energy (E9 with c = 1, alpha = 1), 0-dim; differentiable like carap."""
+    idx, w = _graph(g)
+    _check(positions=positions, quats=quats, indices=idx, weights=w)
+    gaps, gw = _gap_args(gaps, gap_weights)
+    return _CarapFunction.apply(positions, quats, idx, w, None, True, 1.0, float(lambda_c),
+                                float(lambda_l), gaps, gw, bool(normalize))
+
+
+class _LrmFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, positions, idx, w, confidence, alpha, huber_delta, detach_omega, normalize):
+        e, gx = _C.lrm(positions.detach(), idx, w.detach(),
+                       None if confidence is None else confidence.detach(), alpha, huber_delta,
+                       detach_omega, normalize, ctx.needs_input_grad[0])
+        ctx.grad = gx
+        return e
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_output):
+        return (_scale(grad_output, ctx.grad),) + (None,) * 7
+
+
+def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor] = None, *,
+        alpha: float = 0.6, huber_delta: float = 0.01, detach_omega: bool = False,
+        normalize: bool = False) -> torch.Tensor:
+    """Local rigid-motion energy (E11-E16), 0-dim; differentiable w.r.t. positions."""
+    idx, w = _graph(g)
+    _check(positions=positions, indices=idx, weights=w, confidence=confidence)
+    return _LrmFunction.apply(positions, idx, w, confidence, float(alpha), float(huber_delta),
+                              bool(detach_omega), bool(normalize))
+
+
+class _DqbFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, node_positions, node_quats, points, point_quats, idx, w, anchor, t_ref, t_query,
+                sigma, lbs):
+        xs, qs, ps = node_positions.detach(), node_quats.detach(), points.detach()
+        pqs = None if point_quats is None else point_quats.detach()
+        out_x, out_q, drivers, weights = _C.dqb_forward(xs, qs, idx, w.detach(), ps, pqs, anchor,
+                                                        t_ref, t_query, sigma.detach(), lbs)
+        # The backward recomputes the blend (as cheap as reading a cache, per the library).
+        # saved through autograd, so that an in-place change before backward raises
+        ctx.save_for_backward(node_positions, node_quats, points, point_quats)
+        ctx.inputs = (t_ref, t_query, drivers, weights, lbs)
+        return out_x, out_q
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_x, grad_q):
+        xs, qs, ps, pqs = (None if t is None else t.detach() for t in ctx.saved_tensors)
+        t_ref, t_query, drivers, weights, lbs = ctx.inputs
+        nx, nq, np_, npq = ctx.needs_input_grad[:4]
+        gx, gq, gp, gpq = _C.dqb_backward(xs, qs, ps, pqs, t_ref, t_query, drivers, weights, grad_x,
+                                          grad_q, lbs, nx, nq, np_, npq and pqs is not None)
+        return (gx, gq, gp, gpq) + (None,) * 7
+
+
+def dqb(node_positions: torch.Tensor, node_quats: torch.Tensor, g: GraphLike, points: torch.Tensor,
+        point_quats: Optional[torch.Tensor], anchor: torch.Tensor, t_ref: torch.Tensor,
+        t_query: torch.Tensor, sigma: torch.Tensor, *, lbs: bool = False):
+    """Dual-quaternion blending (docs/math/skin.md S1-S18; LBS with lbs=True) of points [P, 3]
+    (reference poses at frames t_ref [P], rotations point_quats [P, 4] or None = identity), each
+    driven by its anchor node [P] and the anchor's graph neighbours with distance-aware weights
+    (sigma [N]; the weights are constants for the gradient), to the frames t_query [Q].
+    Returns positions [Q, P, 3] and unit quaternions [Q, P, 4]; differentiable w.r.t.
+    node_positions, the raw node_quats, points and the raw point_quats."""
+    idx, w = _graph(g)
+    _check(node_positions=node_positions, node_quats=node_quats, points=points,
+           point_quats=point_quats, indices=idx, weights=w, anchor=anchor, t_ref=t_ref,
+           t_query=t_query, sigma=sigma)
+    return _DqbFunction.apply(node_positions, node_quats, points, point_quats, idx, w, anchor, t_ref,
+                              t_query, sigma, bool(lbs))
+
+
+class _RenderFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, means, quats, log_scales, opacity_logits, colors, viewmat, K, width, height,
+                background, near, far, tile_size, radius_sigmas, eps2d, alpha_max):
+        params = tuple(t.detach() for t in (means, quats, log_scales, opacity_logits, colors))
+        img, alpha, depth, radii, state = _C.render_forward(
+            *params, viewmat.detach(), K.detach(), width, height,
+            None if background is None else background.detach(), near, far, tile_size,
+            radius_sigmas, eps2d, alpha_max)
+        # The forward's workspace (projections, tile lists, transmittances) is kept for backward.
+        ctx.state = state
+        ctx.save_for_backward(means, quats, log_scales, opacity_logits, colors)
+        ctx.radii = radii
+        return img, alpha, depth
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_image, grad_alpha, grad_depth):
+        params = tuple(t.detach() for t in ctx.saved_tensors)
+        grads = _C.render_backward(ctx.state, *params, grad_image, grad_alpha, grad_depth)
+        return tuple(grads) + (None,) * 11
+
+
+def render(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
+           opacity_logits: torch.Tensor, colors: torch.Tensor, viewmat: torch.Tensor,
+           K: torch.Tensor, width: int, height: int, *, background=None, near: float = 0.01,
+           far: float = 1e10, tile_size: int = 16, radius_sigmas: float = 3.0, eps2d: float = 0.3,
+           alpha_max: float = 0.99):
+    """The reference CPU splatter (docs/math/splat.md; gsplat's maths): means [G, 3], raw quats
+    [G, 4], log_scales [G, 3], opacity_logits [G], colors [G, C] or SH coefficients [G, K, C],
+    viewmat [4, 4] (world -> camera, OpenCV axes), K [3, 3]. Returns image [H, W, C], alpha
+    [H, W] and expected depth [H, W]; differentiable w.r.t. every Gaussian parameter (viewmat, K
+    and background are constants)."""
+    _check(means=means, quats=quats, log_scales=log_scales, opacity_logits=opacity_logits,
+           colors=colors, viewmat=viewmat, K=K)
+    if background is not None and not isinstance(background, torch.Tensor):
+        background = torch.tensor(background, dtype=torch.float64).reshape(-1)
+    _check(background=background)
+    return _RenderFunction.apply(means, quats, log_scales, opacity_logits, colors, viewmat, K,
+                                 int(width), int(height), background, float(near), float(far),
+                                 int(tile_size), float(radius_sigmas), float(eps2d),
+                                 float(alpha_max))

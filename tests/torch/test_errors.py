@@ -1,0 +1,80 @@
+"""smg_torch errors: ValueError with the library's one-line message, inputs untouched."""
+import pytest
+import torch
+
+import smg_torch as smg
+from scenes import random_scene
+
+
+def snapshot(*ts):
+    return [t.clone() for t in ts]
+
+
+def untouched(before, after):
+    return all(a.dtype == b.dtype and a.shape == b.shape and
+               (torch.equal(a, b) if not a.is_floating_point() else
+                torch.allclose(a, b, rtol=0, atol=0, equal_nan=True)) for a, b in zip(before, after))
+
+
+def energies(x, q, idx, w, c):
+    g = (idx, w)
+    return [lambda: smg.carap(x, q, g, c), lambda: smg.arap(x, q, g), lambda: smg.lrm(x, g, c),
+            lambda: smg.node_confidences(x, g)]
+
+
+CASES = {
+    "positions shape": (lambda x, q, idx, w, c: (x[..., :2], q, idx, w, c), "positions", (0, 2, 3)),
+    "positions dtype": (lambda x, q, idx, w, c: ((x * 100).long(), q, idx, w, c), "positions", (0, 1, 2, 3)),
+    "quats shape": (lambda x, q, idx, w, c: (x, q[:, :5], idx, w, c), "rotations", (0, 1)),
+    "quats dtype": (lambda x, q, idx, w, c: (x, q.float(), idx, w, c), "quats", (0, 1)),
+    "nan position": (lambda x, q, idx, w, c: (x.index_put((torch.tensor(2), torch.tensor(3)), torch.tensor([float("nan")] * 3)), q, idx, w, c), "positions", (0, 1, 2, 3)),
+    "inf quaternion": (lambda x, q, idx, w, c: (x, q.index_put((torch.tensor(1), torch.tensor(1)), torch.tensor([float("inf")] * 4)), idx, w, c), "rotations", (0, 1)),
+    "zero quaternion": (lambda x, q, idx, w, c: (x, q.index_put((torch.tensor(1), torch.tensor(4)), torch.zeros(4)), idx, w, c), "zero quaternion", (0, 1)),
+    "index out of range": (lambda x, q, idx, w, c: (x, q, idx.index_put((torch.tensor(2), torch.tensor(1)), torch.tensor(99)), w, c), "out of range", (0, 1, 2, 3)),
+    "index dtype": (lambda x, q, idx, w, c: (x, q, idx.double(), w, c), "graph.indices", (0, 1, 2, 3)),
+    "weights shape": (lambda x, q, idx, w, c: (x, q, idx, w[:, :2], c), "graph.weights", (0, 1, 2, 3)),
+    "negative weight": (lambda x, q, idx, w, c: (x, q, idx, -w, c), "weight", (0, 1, 2, 3)),
+    "confidence shape": (lambda x, q, idx, w, c: (x, q, idx, w, c[:3]), "confidence", (0, 2)),
+    "confidence > 1": (lambda x, q, idx, w, c: (x, q, idx, w, c + 1.5), "confidence", (0, 2)),
+}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_value_errors_leave_inputs_untouched(name):
+    make, needle, which = CASES[name]
+    x, q, idx, w, c = random_scene()
+    bx, bq, bidx, bw, bc = make(x, q, idx, w, c)
+    args = [t.requires_grad_() if t.is_floating_point() and t is not bidx and t is not bw and t is not bc else t
+            for t in (bx, bq, bidx, bw, bc)]
+    before = snapshot(*args)
+    fns = energies(*args)
+    for k in which:
+        with pytest.raises(ValueError) as info:
+            fns[k]()
+        msg = str(info.value)
+        assert needle in msg and "\n" not in msg, msg
+    assert untouched(before, args)
+    for t in args:
+        assert t.grad is None
+
+
+def test_option_errors():
+    x, q, idx, w, c = random_scene()
+    g = (idx, w)
+    bad = [lambda: smg.carap(x, q, g, c, alpha=1.5), lambda: smg.carap(x, q, g, gaps=()),
+           lambda: smg.carap(x, q, g, gaps=(1, 2), gap_weights=(1.0,)),
+           lambda: smg.arap(x, q, g, gaps=(0,)), lambda: smg.arap(x, q, g, lambda_c=-1),
+           lambda: smg.lrm(x, g, huber_delta=0), lambda: smg.node_confidences(x, g, kappa_m=0),
+           lambda: smg.node_confidences(x, g, eps=-1), lambda: smg.carap(x, q, "graph"),
+           lambda: smg.node_confidences(x, g, visibility=torch.ones(3, 3))]
+    for f in bad:
+        with pytest.raises(ValueError):
+            f()
+
+
+def test_cuda_not_implemented():
+    if not torch.cuda.is_available():
+        pytest.skip("no CUDA device")
+    x, q, idx, w, c = random_scene()
+    with pytest.raises(NotImplementedError, match="CPU only"):
+        smg.carap(x.cuda(), q.cuda(), (idx.cuda(), w.cuda()), c.cuda())
