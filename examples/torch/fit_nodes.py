@@ -27,8 +27,12 @@ import os
 import sys
 import time
 
-import numpy as np
-import torch
+# Before torch starts its OpenMP pool (as bench/torch/bench_torch.py): spinning OpenMP threads
+# on a shared, loaded machine make 2-thread runs erratic.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
 
 # This folder holds the package's sources (examples/torch/smg_torch, without the compiled _C):
 # import the built package from PYTHONPATH instead.
