@@ -2,7 +2,7 @@
 """smg_torch against pure-PyTorch autograd (CPU): forward + backward, best of --repeat runs.
 
 usage: PYTHONPATH=<build>/python /usr/bin/python3 bench/torch/bench_torch.py [--repeat 5]
-           [--json bench/results/torch.json] [--quick]
+           [--json bench/results/torch.json] [--quick] [--overhead-only]
 
 Energies: N = 5000 nodes, T = 100 frames, K = 16, gaps 1,2,4, float32: node confidences + C-ARAP
 + LRM + ARAP, loss = sum of the three energies, backward to positions and raw quaternions, at 1
@@ -13,6 +13,10 @@ Gaussians at 320x240 through smg_torch; the dense pure-PyTorch reference
 (tests/reference/gsplat_reference.py, every pixel against every Gaussian) is timed at a size it
 fits in memory (2000 Gaussians, 160x120, float64 as the reference computes), where smg_torch
 is timed too.
+Overhead: smg_torch.carap and smg_torch.lrm forward + backward (autograd leaves, constant
+confidences) against the bare C++ library call on the same tensors, timed in C++ with
+std::chrono by smg_torch._library_seconds (zeroing the gradient buffers + the call), best of
+--repeat runs taken interleaved, at 1 and 2 threads; overhead = binding / bare - 1.
 Prints a markdown table; --json writes the same rows in Google Benchmark's JSON layout so that
 bench/report.py puts them into docs/performance.md.
 """
@@ -81,6 +85,44 @@ def energies_torch(x, q, idx, w):
     return float(e), xs.grad, qs.grad
 
 
+def overhead_rows(x, q, idx, w, repeat):
+    """(name, smg_torch seconds, bare C++ seconds) for C-ARAP and LRM at 1 and 2 threads."""
+    rows = []
+    N, T, K = x.shape[1], x.shape[0], idx.shape[1]
+    for threads in (1, 2):
+        torch.set_num_threads(threads)
+        c = smg.node_confidences(x, (idx, w))
+        xs, qs = x.clone().requires_grad_(), q.clone().requires_grad_()
+
+        def carap():
+            xs.grad = qs.grad = None
+            smg.carap(xs, qs, (idx, w), c).backward()
+
+        def lrm():
+            xs.grad = None
+            smg.lrm(xs, (idx, w), c).backward()
+
+        for op, fn in (("carap", carap), ("lrm", lrm)):
+            fn()  # warm-up
+            smg._library_seconds(op, x, q, (idx, w), c, repeat=1)
+            t_bind, t_lib = float("inf"), float("inf")
+            for _ in range(repeat):  # interleaved, so that load drift hits both alike
+                t_bind = min(t_bind, best_of(fn, 1))
+                t_lib = min(t_lib, smg._library_seconds(op, x, q, (idx, w), c, repeat=1))
+            what = "C-ARAP + grad x, q" if op == "carap" else "LRM + grad x"
+            rows.append((f"{what}, N={N} T={T} K={K} float32, {threads} thread(s)", t_bind, t_lib))
+    return rows
+
+
+def print_overhead(rows, repeat):
+    print(f"Binding overhead: smg_torch forward + backward against the bare C++ call (std::chrono in C++), "
+          f"best of {repeat} interleaved, torch {torch.__version__}, {os.cpu_count()} CPUs\n")
+    print("| operation | smg_torch fwd+bwd | bare C++ call | overhead |")
+    print("|---|---:|---:|---:|")
+    for name, a, b in rows:
+        print(f"| {name} | {a * 1e3:.2f} ms | {b * 1e3:.2f} ms | {100 * (a / b - 1):+.1f} % |")
+
+
 def rel(a, b):
     return float((a.double() - b.double()).norm() / b.double().norm())
 
@@ -138,6 +180,8 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--json", default=None)
     ap.add_argument("--quick", action="store_true", help="small sizes (a smoke run)")
+    ap.add_argument("--overhead-only", action="store_true",
+                    help="only the binding-overhead rows (smg_torch against the bare C++ call)")
     args = ap.parse_args()
     N, T, K, P, G, W, H = (5000, 100, 16, 32768, 100000, 320, 240)
     gs, ws, hs = 2000, 160, 120
@@ -147,6 +191,10 @@ def main():
     rows = []  # (name, smg seconds, torch seconds or None, note)
 
     x, q, idx, w = energy_scene(N, T, K)
+    if args.overhead_only:
+        print_overhead(overhead_rows(x, q, idx, w, max(args.repeat, 5)), max(args.repeat, 5))
+        torch.set_num_threads(old_threads)
+        return 0
     for threads in (1, 2):
         torch.set_num_threads(threads)
         energies_smg(x, q, idx, w)  # warm-up
@@ -154,6 +202,7 @@ def main():
         t_ref = best_of(lambda: energies_torch(x, q, idx, w), args.repeat)
         rows.append((f"energies fwd+bwd (conf + C-ARAP + LRM + ARAP), N={N} T={T} K={K} float32, {threads} thread(s)",
                      t_smg, t_ref))
+    overhead = overhead_rows(x, q, idx, w, max(args.repeat, 5))
     e1, gx1, gq1 = energies_smg(x, q, idx, w)
     e2, gx2, gq2 = energies_torch(x, q, idx, w)
     agree = f"float32 agreement: energy {abs(e1 - e2) / abs(e2):.1e}, grad x {rel(gx1, gx2):.1e}, grad q {rel(gq1, gq2):.1e}"
@@ -183,7 +232,8 @@ def main():
     for name, a, b in rows:
         print(f"| {name} | {a * 1e3:.1f} ms | " + (f"{b * 1e3:.1f} ms | {b / a:.1f}x |" if b else
               "n/a (dense reference: H*W*G = %.1e pairs) | |" % (W * H * G)))
-    print(f"\n{agree}")
+    print(f"\n{agree}\n")
+    print_overhead(overhead, max(args.repeat, 5))
     if args.json:
         bench = []
         for name, a, b in rows:
@@ -192,6 +242,10 @@ def main():
             entry["pytorch_ms"] = b * 1e3 if b else float("nan")
             entry["speedup"] = b / a if b else float("nan")
             bench.append(entry)
+        for name, a, b in overhead:
+            bench.append({"name": "overhead: " + name, "run_type": "iteration", "iterations": max(args.repeat, 5),
+                          "real_time": a * 1e3, "cpu_time": a * 1e3, "time_unit": "ms",
+                          "library_ms": b * 1e3, "overhead_percent": 100 * (a / b - 1)})
         ctx = {"date": datetime.datetime.now().isoformat(timespec="seconds"),
                "num_cpus": os.cpu_count(), "mhz_per_cpu": "?",
                "library_build_type": "release (smg_torch extension, -O3)"}

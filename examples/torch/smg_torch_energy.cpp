@@ -1,7 +1,11 @@
 // examples/torch/smg_torch_energy.cpp — node confidences, C-ARAP, plain ARAP and LRM for
 // smg_torch: the library's validation, then the energy and its analytic gradient in one pass
 // (the Python autograd.Function keeps the gradient and scales it by grad_output in backward).
+#include <algorithm>
+#include <chrono>
+#include <limits>
 #include <optional>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -180,6 +184,66 @@ py::tuple lrm_impl(const at::Tensor& positions, const at::Tensor& indices, const
   return py::make_tuple(scalar_tensor(e, in.st), opt(gx));
 }
 
+// _library_seconds(op, positions, quats, indices, weights, confidence, repeat): the binding's
+// overhead benchmark (bench/torch/bench_torch.py). Prepares the same inputs as the operators,
+// then times, with std::chrono, best of `repeat`, the bare library call as a C++ caller would
+// make it: zero the gradient buffers, then op "carap" = smg::carap (energy + gradients w.r.t.
+// positions and raw quaternions) or "lrm" = smg::lrm (energy + position gradient), with the
+// Python wrappers' defaults (alpha 0.6, gaps 1, 2, 4, lambda_c = lambda_l = 1, huber 0.01, sum)
+// and no workspace (as the binding calls it), on torch's intra-op thread count.
+double library_seconds(const std::string& op, const at::Tensor& positions, const OptTensor& quats,
+                       const at::Tensor& indices, const at::Tensor& weights, const OptTensor& confidence,
+                       int64_t repeat) {
+  const bool carap_op = op == "carap";
+  if (!carap_op && op != "lrm") value_error("_library_seconds: op must be 'carap' or 'lrm'");
+  if (carap_op && !quats) value_error("_library_seconds: carap needs quats");
+  if (repeat < 1) value_error("_library_seconds: repeat must be >= 1");
+  Inputs in = prepare(positions, carap_op ? quats : std::nullopt, indices, weights, confidence);
+  smg::CarapOptions co;
+  co.alpha = 0.6;
+  co.gaps = smg::default_gaps();
+  smg::LrmOptions lo;
+  lo.alpha = 0.6;
+  lo.huber_delta = 0.01;
+  at::Tensor gx = at::zeros({in.T, in.N, 3}, options_of(in.st));
+  at::Tensor gq = at::zeros({in.T, in.N, 4}, options_of(in.st));
+  return dispatch(in.st, in.g.int64, [&](auto s, auto i) {
+    using S = decltype(s);
+    using I = decltype(i);
+    const smg::PositionsView<const S> xv(cptr<S>(in.x), in.T, in.N);
+    const auto gv = graph_view<S, I>(in.g);
+    const auto cv = conf_view<S>(in.c);
+    const smg::PositionsView<S> gxv(mptr<S>(gx), in.T, in.N);
+    smg::RotationGradientView<S> gqv;
+    if (carap_op) {
+      gqv = smg::QuaternionsView<S>(mptr<S>(gq), in.T, in.N);
+      ok(smg::validate_carap<S>(xv, quat_view<S>(in.q), cv, gv, co, gxv, gqv));
+    } else {
+      ok(smg::validate_lrm<S>(xv, cv, gv, lo, gxv));
+    }
+    const smg::ParallelOptions par = parallel_options();
+    S* const gxp = mptr<S>(gx);
+    S* const gqp = mptr<S>(gq);
+    const std::size_t nx = static_cast<std::size_t>(in.T * in.N * 3), nq = static_cast<std::size_t>(in.T * in.N * 4);
+    py::gil_scoped_release release;
+    double best = std::numeric_limits<double>::infinity();
+    S sink = 0;
+    for (int64_t r = 0; r < repeat; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      std::fill(gxp, gxp + nx, S(0));
+      if (carap_op) {
+        std::fill(gqp, gqp + nq, S(0));
+        sink += smg::carap<S>(xv, quat_view<S>(in.q), cv, gv, co, gxv, gqv, nullptr, par);
+      } else {
+        sink += smg::lrm<S>(xv, cv, gv, lo, gxv, nullptr, par);
+      }
+      best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+    if (!(sink == sink)) best = -best;  // keep the calls observable; a NaN energy shows as a negative time
+    return best;
+  });
+}
+
 }  // namespace
 
 void register_energy(py::module_& m) {
@@ -205,6 +269,8 @@ void register_energy(py::module_& m) {
       },
       "positions"_a, "quats"_a, "indices"_a, "weights"_a, "lambda_c"_a, "lambda_l"_a, "gaps"_a,
       "gap_weights"_a, "normalize"_a, "grad_positions"_a, "grad_quats"_a);
+  m.def("_library_seconds", &library_seconds, "op"_a, "positions"_a, "quats"_a, "indices"_a, "weights"_a,
+        "confidence"_a, "repeat"_a);
   m.def("lrm", &lrm_impl, "positions"_a, "indices"_a, "weights"_a, "confidence"_a, "alpha"_a,
         "huber_delta"_a, "detach_omega"_a, "normalize"_a, "grad_positions"_a);
 }

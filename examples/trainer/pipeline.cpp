@@ -33,8 +33,7 @@ void resolve_frames(TrainerConfig& c) {
   if (c.init.dynamic_frames.empty()) c.init.dynamic_frames = spread_frames(T, 8);
 }
 
-TrainerResult run_trainer(const TrainerConfig& config_in, const Progress& progress) {
-  const auto start = std::chrono::steady_clock::now();
+TrainerResult run_stage0(const TrainerConfig& config_in, const Progress& progress) {
   TrainerConfig config = config_in;
   resolve_frames(config);
   const smg::ParallelOptions par{config.threads, 0};
@@ -65,6 +64,16 @@ TrainerResult run_trainer(const TrainerConfig& config_in, const Progress& progre
                                    static_cast<long long>(gs.isolated_nodes), r.seconds_stage0));
   }
   r.tracks_lifted = track_metrics(scene, r.nodes);
+  return r;
+}
+
+TrainerResult run_trainer(const TrainerConfig& config_in, const Progress& progress) {
+  const auto start = std::chrono::steady_clock::now();
+  TrainerConfig config = config_in;
+  resolve_frames(config);
+  const smg::ParallelOptions par{config.threads, 0};
+  TrainerResult r = run_stage0(config, progress);
+  const Scene& scene = r.data.scene;
 
   // Stage 1.
   NodeObjective objective(config.variant, config.node_loss, par);
@@ -75,7 +84,7 @@ TrainerResult run_trainer(const TrainerConfig& config_in, const Progress& progre
                                  r.tracks_stage1.box.epe, r.tracks_stage1.hidden.epe));
 
   // Stage 2.
-  t0 = std::chrono::steady_clock::now();
+  auto t0 = std::chrono::steady_clock::now();
   r.model = init_model<float>(r.data, r.nodes, config.init, par);
   progress.line("stage2", format("init: %d Gaussians (%d static, %d dynamic, %d drivers each) in %.2fs", r.model.count(),
                                  r.model.fixed, r.model.dynamic(), r.model.skin.width, seconds_since(t0)));

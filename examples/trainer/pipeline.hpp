@@ -53,6 +53,11 @@ struct TrainerResult {
   double seconds_dataset = 0, seconds_stage0 = 0, seconds_total = 0;
 };
 
+// The dataset and stage 0 only (lifting, node selection, graph, initial rotations): fills
+// data, lifted, nodes (the stage-1 starting point), tracks_lifted, seconds_dataset and
+// seconds_stage0 of the result; run_trainer starts with it. Throws like run_trainer.
+TrainerResult run_stage0(const TrainerConfig& config, const Progress& progress);
+
 // Runs everything. Throws std::invalid_argument on a bad configuration (the dataset's
 // validation), std::runtime_error if the optimisation fails.
 TrainerResult run_trainer(const TrainerConfig& config, const Progress& progress);

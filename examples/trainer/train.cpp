@@ -7,15 +7,23 @@
 // also written to OUT/metrics.json, next to the pictures (pictures.hpp). Bad flags or an
 // output folder that cannot be written: one line on stderr and exit code 2, before any work.
 // A failure during training: one line on stderr and exit code 1.
+//
+// --export-case DIR stops after stage 0 (lifting, node selection, graph, initial rotations) and
+// writes stage 1's problem as .npy files and case.json into DIR instead of training
+// (docs/trainer.md, "Exporting the stage-1 problem"; examples/torch/fit_nodes.py reads it).
+#include <array>
+#include <cstdint>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "json_line.hpp"
+#include "npy.hpp"
 #include "trainer/flags.hpp"
 #include "trainer/pictures.hpp"
 #include "trainer/pipeline.hpp"
@@ -45,6 +53,8 @@ std::vector<cli::FlagSpec> flags() {
           {"w-data", "", "weight of the node data term (default 1)"},
           {"w-rigidity", "", "weight of the rigidity term, ARAP or C-ARAP (default 0.1)"},
           {"w-lrm", "", "weight of the LRM term (default 0.1)"},
+          {"export-case", "", "write the stage-1 problem (lifted node tracks, visibility, ground truth, rotations, "
+                              "graph: .npy + case.json) into this folder and exit without training"},
           {"no-pictures", "", "skip the PNG output", true},
           {"quiet", "", "no progress lines", true},
           {"help", "", "print this help", true}};
@@ -72,11 +82,78 @@ void add_tracks(cli::JsonLine& j, const std::string& suffix, const trainer::Trac
       .add("epe_box_hidden" + suffix, m.box_hidden.epe);
 }
 
+// The variant's stage-1 problem, as run_trainer hands it to fit_nodes (docs/trainer.md).
+std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, const trainer::TrainerResult& r) {
+  const trainer::Nodes& n = r.nodes;
+  const std::int64_t T = n.frames, N = n.count, K = n.graph.k;
+  const auto file = [&](const char* name) { return (dir / name).string(); };
+  npy::write(file("lifted.npy"), n.positions.data(), {T, N, 3});
+  npy::write(file("visibility.npy"), n.visible.data(), {T, N});
+  npy::write(file("gt_positions.npy"), n.truth.data(), {T, N, 3});
+  npy::write(file("quats.npy"), n.rotations.data(), {T, N, 4});
+  const std::vector<std::int64_t> indices(n.graph.indices.begin(), n.graph.indices.end());
+  npy::write(file("graph_indices.npy"), indices.data(), {N, K});
+  npy::write(file("graph_weights.npy"), n.graph.weights.data(), {N, K});
+
+  const trainer::NodeLossOptions& l = cfg.node_loss;
+  const trainer::Stage1Options& s = cfg.stage1;
+  const trainer::VariantSpec& v = cfg.variant;
+  std::string gaps = "[", gap_weights = "[";
+  for (const smg::Gap& g : l.gaps) {
+    gaps += (gaps.size() > 1 ? "," : "") + std::to_string(g.delta);
+    std::array<char, 32> w{};
+    std::snprintf(w.data(), w.size(), "%.10g", g.weight);
+    gap_weights += (gap_weights.size() > 1 ? "," : "") + std::string(w.data());
+  }
+  cli::JsonLine j;
+  j.add("program", "smg_trainer")
+      .add("kind", "stage1_case")
+      .add("seed", static_cast<long long>(cfg.dataset.scene.seed))
+      .add("T", static_cast<long long>(T))
+      .add("N", static_cast<long long>(N))
+      .add("K", static_cast<long long>(K))
+      .add("variant", trainer::to_string(v.variant))
+      .add("semantic_graph", v.semantic_graph)
+      .add("rigidity", v.rigidity == trainer::Rigidity::carap ? "carap"
+                       : v.rigidity == trainer::Rigidity::arap ? "arap" : "none")
+      .add("lrm", v.lrm)
+      .add("quats_order", "wxyz")
+      .add("w_data", l.data_weight)
+      .add("data_huber", l.data_huber)
+      .add("w_rigidity", l.rigidity_weight)
+      .add("w_lrm", l.lrm_weight)
+      .add("lrm_huber", l.lrm_huber)
+      .add("alpha", l.alpha)
+      .add_raw("gaps", gaps + "]")
+      .add_raw("gap_weights", gap_weights + "]")
+      .add("kappa_m", l.confidence.kappa_m)
+      .add("kappa_r", l.confidence.kappa_r)
+      .add("lambda_m", l.confidence.lambda_m)
+      .add("lambda_r", l.confidence.lambda_r)
+      .add("confidence_eps", l.confidence.eps)
+      .add("iterations", s.iterations)
+      .add("lr_position", s.lr_position)
+      .add("lr_position_final", s.lr_position_final)
+      .add("lr_rotation", s.lr_rotation)
+      .add("lr_rotation_final", s.lr_rotation_final)
+      .add("confidence_every", s.confidence_every)
+      .add("extent", r.data.scene.extent)
+      .add("unit", n.unit)
+      .add("epe_lifted", r.tracks_lifted.all.epe)
+      .add("edges", static_cast<long long>(n.graph.stats.edges))
+      .add("dir", dir.string());
+  const std::string line = j.str();
+  std::ofstream f(dir / "case.json");
+  f << line << "\n";
+  if (!f) throw std::runtime_error("cannot write " + file("case.json"));
+  return line;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   trainer::TrainerConfig cfg;
-  fs::path out;
+  fs::path out, export_dir;
   bool pictures = true, quiet = false;
   try {
     cli::Args args(flags());
@@ -104,8 +181,14 @@ int main(int argc, char** argv) {
     pictures = !args.get_switch("no-pictures");
     quiet = args.get_switch("quiet");
     trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
-    out = args.get("out");
-    cli::ensure_writable_dir(out);
+    if (args.given("export-case")) {
+      export_dir = args.get("export-case");
+      if (export_dir.empty()) throw cli::UsageError("--export-case needs a folder");
+      cli::ensure_writable_dir(export_dir);
+    } else {
+      out = args.get("out");
+      cli::ensure_writable_dir(out);
+    }
   } catch (const std::exception& e) {
     std::cerr << "smg_trainer: error: " << e.what() << "\n";
     return 2;
@@ -114,6 +197,17 @@ int main(int argc, char** argv) {
   try {
     if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
     const trainer::Progress progress(stderr, quiet);
+    if (!export_dir.empty()) {
+      progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", seed " +
+                                 std::to_string(cfg.dataset.scene.seed) + ", exporting the stage-1 case to " +
+                                 export_dir.string());
+      const trainer::TrainerResult r = trainer::run_stage0(cfg, progress);
+      const std::string line = export_case(export_dir, cfg, r);
+      progress.line("done", "stage-1 case (T=" + std::to_string(r.nodes.frames) + ", N=" +
+                                std::to_string(r.nodes.count) + ") in " + export_dir.string() + "/");
+      std::cout << line << std::endl;
+      return 0;
+    }
     progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", seed " +
                                std::to_string(cfg.dataset.scene.seed) + ", output " + out.string());
     const trainer::TrainerResult r = trainer::run_trainer(cfg, progress);

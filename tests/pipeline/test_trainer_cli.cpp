@@ -4,13 +4,17 @@
 #include <doctest/doctest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include <sys/wait.h>
 
+#include "npy.hpp"
 #include "support/run_program.hpp"
 
 namespace fs = std::filesystem;
@@ -89,6 +93,75 @@ TEST_CASE("smg_trainer: a tiny run writes metrics.json and the pictures") {
   }
   CHECK_FALSE(fs::exists(out / ".smg_trainer_probe"));
   fs::remove_all(out);
+}
+TEST_CASE("smg_trainer: --export-case writes the stage-1 problem and exits without training") {
+  const fs::path dir = fs::temp_directory_path() / "smg_test_pipeline_trainer_case";
+  const fs::path out = fs::temp_directory_path() / "smg_test_pipeline_trainer_case_out";
+  fs::remove_all(dir);
+  fs::remove_all(out);
+  const Run r = run("--quick --stage1-iters 20 --stage2-iters 10 --frames 6 --width 48 --height 36 --tracks 200 "
+                    "--threads 2 --out " + out.string() + " --export-case " + dir.string());
+  CAPTURE(r.err);
+  REQUIRE(r.code == 0);
+  CHECK_FALSE(fs::exists(out));  // no training, no pictures
+  REQUIRE(fs::exists(dir / "case.json"));
+  const std::string json = slurp(dir / "case.json");
+  CHECK(lines(json) == 1);
+  for (const char* key : {"\"T\":6", "\"N\":", "\"K\":16", "\"variant\":\"full\"", "\"w_rigidity\":",
+                          "\"w_lrm\":", "\"lr_position\":", "\"iterations\":20", "\"extent\":"}) {
+    const std::string k = key;
+    CAPTURE(k);
+    CHECK(json.find(key) != std::string::npos);
+  }
+  CHECK(json.find("nan") == std::string::npos);
+
+  const npy::Array lifted = npy::read((dir / "lifted.npy").string());
+  REQUIRE(lifted.shape.size() == 3);
+  const std::int64_t T = lifted.shape[0], N = lifted.shape[1];
+  CHECK(T == 6);
+  CHECK(N > 0);
+  CHECK(json.find("\"N\":" + std::to_string(N) + ",") != std::string::npos);
+  const struct {
+    const char* name;
+    npy::DType dtype;
+    std::vector<std::int64_t> shape;
+  } files[] = {{"lifted.npy", npy::DType::f64, {T, N, 3}},     {"visibility.npy", npy::DType::u8, {T, N}},
+               {"gt_positions.npy", npy::DType::f64, {T, N, 3}}, {"quats.npy", npy::DType::f64, {T, N, 4}},
+               {"graph_indices.npy", npy::DType::i64, {N, 16}},  {"graph_weights.npy", npy::DType::f64, {N, 16}}};
+  for (const auto& f : files) {
+    const std::string name = f.name;
+    CAPTURE(name);
+    const npy::Array a = npy::read((dir / f.name).string());
+    CHECK(static_cast<int>(a.dtype) == static_cast<int>(f.dtype));
+    CHECK(a.shape == f.shape);
+    if (npy::is_float(a.dtype)) {
+      const std::vector<double> v = a.as<double>(name);
+      CHECK(std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); }));
+    }
+  }
+  const std::vector<double> x = lifted.as<double>("lifted"), gt = npy::read((dir / "gt_positions.npy").string()).as<double>("gt");
+  double diff = 0;
+  for (std::size_t s = 0; s < x.size(); ++s) diff = std::max(diff, std::abs(x[s] - gt[s]));
+  CHECK(diff > 1e-3);  // the lifted tracks are noisy
+  const std::vector<std::int64_t> idx = npy::read((dir / "graph_indices.npy").string()).as<std::int64_t>("indices");
+  CHECK(std::all_of(idx.begin(), idx.end(), [N](std::int64_t i) { return i >= -1 && i < N; }));
+  CHECK(idx[0] >= 0);
+  const std::vector<std::uint8_t> vis = npy::read((dir / "visibility.npy").string()).as<std::uint8_t>("visibility");
+  CHECK(std::any_of(vis.begin(), vis.end(), [](std::uint8_t v) { return v != 0; }));
+  // stdout's last line is case.json's line.
+  REQUIRE(!r.out.empty());
+  const std::size_t last = r.out.rfind('\n', r.out.size() - 2);
+  CHECK(r.out.substr(last == std::string::npos ? 0 : last + 1) == json);
+  fs::remove_all(dir);
+}
+
+TEST_CASE("smg_trainer: --export-case into a folder that cannot be created is a usage error") {
+  const Run r = run("--quick --export-case /proc/forbidden_case_dir");
+  CAPTURE(r.err);
+  CHECK(r.code == 2);
+  CHECK(r.out.empty());
+  CHECK(lines(r.err) == 1);
+  CHECK(r.err.find("/proc/forbidden_case_dir") != std::string::npos);
 }
 #else
 TEST_CASE("smg_trainer: skipped (the examples are not built)") {

@@ -235,3 +235,19 @@ def test_no_grad_inputs():
     e = smg.carap(xs, q, (idx, w), c)  # gradient for the positions only
     e.backward()
     assert xs.grad is not None and q.grad is None
+
+
+# ---- the benchmark helper behind bench_torch.py's overhead rows ------------------------------
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_library_seconds_times_the_bare_call(dtype):
+    x, q, idx, w, c = random_scene(dtype=dtype)
+    for op in ("carap", "lrm"):
+        s = smg._library_seconds(op, x, q, (idx, w), c, repeat=3)
+        assert isinstance(s, float) and 0 < s < 10
+    with pytest.raises(ValueError, match="op must be"):
+        smg._library_seconds("arap", x, q, (idx, w), c)
+    with pytest.raises(ValueError, match="repeat"):
+        smg._library_seconds("lrm", x, q, (idx, w), c, repeat=0)
+    with pytest.raises(ValueError, match="quats"):
+        smg._library_seconds("carap", x, None, (idx, w), c)

@@ -177,6 +177,20 @@ def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor
                               bool(detach_omega), bool(normalize))
 
 
+def _library_seconds(op: str, positions: torch.Tensor, quats: Optional[torch.Tensor], g: GraphLike,
+                     confidence: Optional[torch.Tensor] = None, *, repeat: int = 5) -> float:
+    """Benchmark helper (bench/torch/bench_torch.py), not API: best of `repeat` wall seconds of
+    the bare C++ library call behind op "carap" (energy + position and quaternion gradients) or
+    "lrm" (energy + position gradient) on these tensors, with the wrappers' defaults, timed in C++
+    (std::chrono) on torch's intra-op thread count; the gradient buffers are zeroed inside the
+    timed region."""
+    idx, w = _graph(g)
+    _check(positions=positions, quats=quats, indices=idx, weights=w, confidence=confidence)
+    return _C._library_seconds(str(op), positions.detach(), None if quats is None else quats.detach(),
+                               idx, w.detach(), None if confidence is None else confidence.detach(),
+                               int(repeat))
+
+
 class _DqbFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx, node_positions, node_quats, points, point_quats, idx, w, anchor, t_ref, t_query,
