@@ -121,15 +121,4 @@ class RotationGradientView {
   QuaternionsView<S> raw_;
 };
 
-namespace detail {
-// A parameter type that does not take part in template argument deduction, so that a
-// TangentsView or QuaternionsView converts to RotationGradientView<S> with S deduced elsewhere.
-template <class T>
-struct NonDeduced {
-  using type = T;
-};
-template <class T>
-using NonDeducedT = typename NonDeduced<T>::type;
-}  // namespace detail
-
 }  // namespace smg

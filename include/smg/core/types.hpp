@@ -29,4 +29,16 @@ template <class S> using Matrix8 = Eigen::Matrix<S, 8, 8>;
 // Convert only at the boundary (quaternion.hpp: from_wxyz / to_wxyz).
 template <class S> using Quaternion = Eigen::Quaternion<S>;
 
+namespace detail {
+// A parameter type that does not take part in template argument deduction: the argument then
+// converts to it (a TangentsView to a RotationGradientView<S>, nullptr to an output pointer)
+// with S deduced from the other parameters.
+template <class T>
+struct NonDeduced {
+  using type = T;
+};
+template <class T>
+using NonDeducedT = typename NonDeduced<T>::type;
+}  // namespace detail
+
 }  // namespace smg

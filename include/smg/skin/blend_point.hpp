@@ -65,13 +65,8 @@ template <class S> using SkinPointJacobian = Eigen::Matrix<S, 6, 6, Eigen::RowMa
 
 namespace detail {
 
-// Output pointers are non-deduced (so that callers may pass nullptr for any of them).
-template <class T>
-struct skin_identity {
-  using type = T;
-};
-template <class T>
-using skin_nd = typename skin_identity<T>::type;
+// Output pointers are non-deduced (NonDeducedT, smg/core/types.hpp), so that callers may pass
+// nullptr for any of them.
 
 template <class S>
 inline Quaternion<S> skin_pure(const Vector3<S>& v) {
@@ -301,11 +296,11 @@ inline void skin_blend_jacobian_rows(SkinMethod method, const SkinDriver<S>* d, 
 // invariant; DQB is).
 template <class S>
 inline void skin_point(SkinMethod method, const SkinDriver<S>* drivers, Index D,
-                       const detail::skin_nd<Vector3<S>>& p,
-                       const detail::skin_nd<Quaternion<S>>& q_p,
-                       detail::skin_nd<Vector3<S>>* p_out, detail::skin_nd<Quaternion<S>>* q_out,
-                       detail::skin_nd<SkinDriverJacobian<S>>* J_out_drivers = nullptr,
-                       detail::skin_nd<SkinPointJacobian<S>>* J_out_point = nullptr) {
+                       const detail::NonDeducedT<Vector3<S>>& p,
+                       const detail::NonDeducedT<Quaternion<S>>& q_p,
+                       detail::NonDeducedT<Vector3<S>>* p_out, detail::NonDeducedT<Quaternion<S>>* q_out,
+                       detail::NonDeducedT<SkinDriverJacobian<S>>* J_out_drivers = nullptr,
+                       detail::NonDeducedT<SkinPointJacobian<S>>* J_out_point = nullptr) {
   detail::SkinBlendState<S> st;
   detail::skin_blend_forward(method, drivers, D, p, q_p, st);
   if (p_out) *p_out = st.position;
@@ -335,12 +330,12 @@ inline void skin_point(SkinMethod method, const SkinDriver<S>* drivers, Index D,
 // about the forward; call skin_point for the values. Same preconditions as skin_point.
 template <class S>
 inline void skin_point_vjp(SkinMethod method, const SkinDriver<S>* drivers, Index D,
-                           const detail::skin_nd<Vector3<S>>& p,
-                           const detail::skin_nd<Quaternion<S>>& q_p,
-                           const detail::skin_nd<Vector3<S>>& g_position,
-                           const detail::skin_nd<Vector3<S>>& g_rotation,
-                           detail::skin_nd<SkinDriverGradient<S>>* g_drivers,
-                           detail::skin_nd<Vector3<S>>* g_p, detail::skin_nd<Vector3<S>>* g_phi_p) {
+                           const detail::NonDeducedT<Vector3<S>>& p,
+                           const detail::NonDeducedT<Quaternion<S>>& q_p,
+                           const detail::NonDeducedT<Vector3<S>>& g_position,
+                           const detail::NonDeducedT<Vector3<S>>& g_rotation,
+                           detail::NonDeducedT<SkinDriverGradient<S>>* g_drivers,
+                           detail::NonDeducedT<Vector3<S>>* g_p, detail::NonDeducedT<Vector3<S>>* g_phi_p) {
   detail::SkinBlendState<S> st;
   detail::skin_blend_forward(method, drivers, D, p, q_p, st);
   Vector3<S> gp, gphi;

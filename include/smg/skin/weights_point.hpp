@@ -31,11 +31,11 @@ namespace smg {
 // (S5): dw_j/dl_k = w_j (δ_jk − w_k), dl_k/dp = −(p − x_k)/σ_k², dl_k/dx_k = (p − x_k)/σ_k²,
 // dl_k/dσ_k = ‖p − x_k‖²/σ_k³.  Precondition: D >= 1.
 template <class S>
-inline bool skinning_weights_point(const detail::skin_nd<Vector3<S>>& p, Index D, const Vector3<S>* x,
+inline bool skinning_weights_point(const detail::NonDeducedT<Vector3<S>>& p, Index D, const Vector3<S>* x,
                                    const S* sigma, S* w,
-                                   detail::skin_nd<Vector3<S>>* J_w_p = nullptr,
-                                   detail::skin_nd<Vector3<S>>* J_w_x = nullptr,
-                                   detail::skin_nd<S>* J_w_sigma = nullptr) {
+                                   detail::NonDeducedT<Vector3<S>>* J_w_p = nullptr,
+                                   detail::NonDeducedT<Vector3<S>>* J_w_x = nullptr,
+                                   detail::NonDeducedT<S>* J_w_sigma = nullptr) {
   using std::exp;
   using L = Literal<S>;
   const L neg_inf = -std::numeric_limits<L>::infinity();
@@ -96,11 +96,11 @@ inline bool skinning_weights_point(const detail::skin_nd<Vector3<S>>& p, Index D
 // (any of the three may be null). (S19): g_l_k = w_k (g_w_k − Σ_j w_j g_w_j). A driver with
 // weight 0 receives 0; after the fallback every gradient is 0.
 template <class S>
-inline void skinning_weights_point_vjp(const detail::skin_nd<Vector3<S>>& p, Index D, const Vector3<S>* x,
+inline void skinning_weights_point_vjp(const detail::NonDeducedT<Vector3<S>>& p, Index D, const Vector3<S>* x,
                                        const S* sigma, const S* w, const S* g_w,
-                                       detail::skin_nd<Vector3<S>>* g_p,
-                                       detail::skin_nd<Vector3<S>>* g_x,
-                                       detail::skin_nd<S>* g_sigma) {
+                                       detail::NonDeducedT<Vector3<S>>* g_p,
+                                       detail::NonDeducedT<Vector3<S>>* g_x,
+                                       detail::NonDeducedT<S>* g_sigma) {
   using L = Literal<S>;
   S wbar = S(0);
   for (Index k = 0; k < D; ++k) wbar += w[k] * g_w[k];
