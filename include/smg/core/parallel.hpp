@@ -246,50 +246,40 @@ void parallel_for_chunks(Index n, F&& f, ParallelOptions options = {}) {
     return;
   }
 
-  std::atomic<Index> next{0};
+  // Runs chunk c unless an earlier chunk threw; the first exception is kept for the caller.
   std::exception_ptr error;
   std::mutex error_mutex;
-  auto worker = [&]() {
-    detail::ParallelRegionGuard guard;
-    for (;;) {
-      const Index c = next.fetch_add(1);
-      if (c >= chunks) return;
-      try {
-        run_chunk(c);
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(error_mutex);
-        if (!error) error = std::current_exception();
-        next = chunks;
-      }
+  std::atomic<bool> failed{false};
+  auto run_guarded = [&](Index c) {
+    if (failed.load()) return;
+    try {
+      run_chunk(c);
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
+      failed = true;
     }
   };
   const Executor ex = current_executor();
   if (ex) {
     // The caller's pool runs the chunks; the chunking above did not depend on it.
-    struct Job {
-      decltype(run_chunk)* run;
-      std::atomic<bool>* failed;
-      std::exception_ptr* error;
-      std::mutex* error_mutex;
-    };
-    std::atomic<bool> failed{false};
-    Job state{&run_chunk, &failed, &error, &error_mutex};
     auto job = [](void* ctx, Index c) {
-      auto* st = static_cast<Job*>(ctx);
-      if (st->failed->load()) return;
       detail::ParallelRegionGuard guard;
-      try {
-        (*st->run)(c);
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(*st->error_mutex);
-        if (!*st->error) *st->error = std::current_exception();
-        *st->failed = true;
-      }
+      (*static_cast<decltype(run_guarded)*>(ctx))(c);
     };
-    ex.run(ex.context, chunks, threads, job, &state);
+    ex.run(ex.context, chunks, threads, job, &run_guarded);
     if (error) std::rethrow_exception(error);
     return;
   }
+  std::atomic<Index> next{0};
+  auto worker = [&]() {
+    detail::ParallelRegionGuard guard;
+    for (;;) {
+      const Index c = next.fetch_add(1);
+      if (c >= chunks || failed.load()) return;
+      run_guarded(c);
+    }
+  };
   const std::function<void()> job = worker;
   if (!detail::ThreadPool::instance().try_run(threads - 1, job)) {
     // The pool serves another caller's loop: start threads for this call.
