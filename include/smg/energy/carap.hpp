@@ -91,7 +91,7 @@ namespace detail {
 
 // Row-major 3x3 rotation of q / |q| from (w, x, y, z), without a square root.
 template <class S>
-inline void rotation_from_wxyz(const S* q, S* R) {
+SMG_HOST_DEVICE inline void rotation_from_wxyz(const S* q, S* R) {
   using L = Literal<S>;
   const S w = q[0], x = q[1], y = q[2], z = q[3];
   const S s = L(2) / (w * w + x * x + y * y + z * z);

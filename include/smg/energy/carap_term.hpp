@@ -20,14 +20,14 @@ namespace smg {
 // factor k = γ_δ · w̃_ij^t (times the energy's overall scale):
 //   E = k (λc ‖Δd‖² + λl Δℓ²)                                                        (E9)
 template <class S, class L>
-SMG_FORCE_INLINE S carap_term_energy(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l) {
+SMG_FORCE_INLINE SMG_HOST_DEVICE S carap_term_energy(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l) {
   return k * (lambda_c * (dx * dx + dy * dy + dz * dz) + lambda_l * dl * dl);
 }
 
 // The same term and its partial derivatives (E10): P = ∂E/∂d^s = −∂E/∂d^t = 2 k λc Δd and
 // Q = ∂E/∂‖d^s‖ = −∂E/∂‖d^t‖ = 2 k λl Δℓ. Returns E.
 template <class S, class L>
-SMG_FORCE_INLINE S carap_term(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l, S& px, S& py,
+SMG_FORCE_INLINE SMG_HOST_DEVICE S carap_term(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l, S& px, S& py,
                               S& pz, S& q) {
   const S f = L(2) * lambda_c * k;
   px = f * dx;
@@ -40,7 +40,7 @@ SMG_FORCE_INLINE S carap_term(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_
 // The same term as a residual r = [√(k λc) Δd ; √(k λl) Δℓ] with ‖r‖² = E (E17); sc = √(k λc)
 // and sl = √(k λl) are returned for the Jacobians.
 template <class S, class L>
-SMG_FORCE_INLINE void carap_term_residual(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l,
+SMG_FORCE_INLINE SMG_HOST_DEVICE void carap_term_residual(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l,
                                           S* r, S& sc, S& sl) {
   using std::sqrt;
   sc = sqrt(k * lambda_c);

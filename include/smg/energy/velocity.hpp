@@ -24,7 +24,7 @@ struct VelocityFrames {
 };
 
 // The two frames whose difference is the velocity at frame t of a T-frame sequence.  (E1)
-inline VelocityFrames velocity_frames(Index t, Index frames) {
+SMG_HOST_DEVICE inline VelocityFrames velocity_frames(Index t, Index frames) {
   if (frames < 2) return {t, t, false};
   if (t < frames - 1) return {t + 1, t, true};
   return {frames - 1, frames - 2, true};
