@@ -46,54 +46,70 @@ struct CarapConstants {
   }
 };
 
+// Slot s = i·K + k of frame t: the edge i -> indices(i, k).
 template <class S, class I>
 __global__ void carap_edges_kernel(PositionsView<const S> x, QuaternionsView<const S> q,
                                    FrameScalarsView<const S> conf, NeighborsView<S, I> graph,
-                                   CarapConstants<S> c, S* edge, S* weight) {
-  const Index T = x.frames(), N = x.nodes(), K = graph.k();
-  const Index slot = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (slot >= T * N * K) return;
-  const Index t = slot / (N * K), i = (slot / K) % N, k = slot % K;
+                                   CarapConstants<S> c, Vec4<S>* edge, S* weight) {
+  const Index N = x.nodes(), NK = N * graph.k();
+  const int s = frame_item(NK);
+  if (s < 0) return;
+  const int K = static_cast<int>(graph.k()), i = s / K, k = s - i * K;
   const Index j = graph.indices(i, k);
   const S w = j >= 0 ? graph.weights(i, k) : S(0);
-  S* out = edge + slot * 4;
-  if (!(w > S(0))) {  // padding or weight 0: the edge adds exactly nothing
-    out[0] = out[1] = out[2] = out[3] = S(0);
-    weight[slot] = S(0);
-    return;
+  SMG_CUDA_FOR_FRAMES(t, x.frames()) {
+    const Index slot = t * NK + s;
+    if (!(w > S(0))) {  // padding or weight 0: the edge adds exactly nothing
+      edge[slot] = Vec4<S>{S(0), S(0), S(0), S(0)};
+      weight[slot] = S(0);
+      continue;
+    }
+    S R[9];
+    smg::detail::rotation_from_wxyz(q.ptr(t, i), R);
+    const S* xi = x.ptr(t, i);
+    const S* xj = x.ptr(t, j);
+    const S ex = xj[0] - xi[0], ey = xj[1] - xi[1], ez = xj[2] - xi[2];
+    Vec4<S> d;
+    carap_edge_vector(R, ex, ey, ez, d.x, d.y, d.z);  // (E8)
+    using std::sqrt;
+    d.w = sqrt(ex * ex + ey * ey + ez * ez);
+    edge[slot] = d;
+    weight[slot] = confidence_edge_weight(w, c.alpha, conf.data() ? conf(t, j) : S(1));  // (E7)
   }
-  S R[9];
-  smg::detail::rotation_from_wxyz(q.ptr(t, i), R);
-  const S* xi = x.ptr(t, i);
-  const S* xj = x.ptr(t, j);
-  const S ex = xj[0] - xi[0], ey = xj[1] - xi[1], ez = xj[2] - xi[2];
-  carap_edge_vector(R, ex, ey, ez, out[0], out[1], out[2]);  // (E8)
-  using std::sqrt;
-  out[3] = sqrt(ex * ex + ey * ey + ez * ez);
-  weight[slot] = confidence_edge_weight(w, c.alpha, conf.data() ? conf(t, j) : S(1));  // (E7)
 }
 
 template <class S, class I>
 __global__ void carap_terms_kernel(PositionsView<const S> x, QuaternionsView<const S> q,
                                    NeighborsView<S, I> graph, CarapConstants<S> c,
-                                   const S* edge, const S* weight, S* energy, S* f_out,
+                                   const Vec4<S>* edge, const S* weight, S* energy, S* f_out,
                                    S* r_out) {
-  const Index T = x.frames(), N = x.nodes(), K = graph.k();
+  const Index T = x.frames(), N = x.nodes(), NK = N * graph.k();
+  const int s = frame_item(NK);
+  if (s < 0) return;
+  const int K = static_cast<int>(graph.k()), i = s / K, k = s - i * K;
   Literal<S> gamma[GapList::kCapacity];
   for (int g = 0; g < c.n_gaps; ++g) gamma[g] = c.gamma(g);
-  const Index slot = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (slot >= T * N * K) return;
-  const Index t = slot / (N * K), NK = N * K;
-  const S* d = edge + slot * 4;
-  S e(0), gx(0), gy(0), gz(0), h(0);
-  if (weight[slot] > S(0)) {  // the edge is active at every frame or at none
+  SMG_CUDA_FOR_FRAMES(t, T) {
+    const Index slot = t * NK + s;
+    const S wt = weight[slot];
+    if (!(wt > S(0))) {  // the edge is active at every frame or at none
+      energy[slot] = S(0);
+      if (f_out != nullptr) {
+        S* F = f_out + slot * 3;
+        S* Rg = r_out + slot * 3;
+        F[0] = F[1] = F[2] = Rg[0] = Rg[1] = Rg[2] = S(0);
+      }
+      continue;
+    }
+    const Vec4<S> d = edge[slot];
+    S e(0), gx(0), gy(0), gz(0), h(0);
     for (int g = 0; g < c.n_gaps; ++g) {
       const Index delta = c.delta[g];
       S px, py, pz, pq;
       if (t + delta < T) {  // pair (t, t + δ), weighted at t: its energy belongs to this slot
-        const S* ds = edge + (slot + delta * NK) * 4;
-        e += carap_term(S(gamma[g] * weight[slot]), ds[0] - d[0], ds[1] - d[1], ds[2] - d[2],
-                        ds[3] - d[3], c.lambda_c, c.lambda_l, px, py, pz, pq);  // (E9)
+        const Vec4<S> ds = edge[slot + delta * NK];
+        e += carap_term(S(gamma[g] * wt), ds.x - d.x, ds.y - d.y, ds.z - d.z, ds.w - d.w,
+                        c.lambda_c, c.lambda_l, px, py, pz, pq);  // (E9)
         gx -= px;
         gy -= py;
         gz -= pz;
@@ -101,33 +117,29 @@ __global__ void carap_terms_kernel(PositionsView<const S> x, QuaternionsView<con
       }
       if (t - delta >= 0 && f_out != nullptr) {  // pair (t − δ, t), weighted at t − δ
         const Index s0 = slot - delta * NK;
-        const S* d0 = edge + s0 * 4;
-        carap_term(S(gamma[g] * weight[s0]), d[0] - d0[0], d[1] - d0[1], d[2] - d0[2],
-                   d[3] - d0[3], c.lambda_c, c.lambda_l, px, py, pz, pq);
+        const Vec4<S> d0 = edge[s0];
+        carap_term(S(gamma[g] * weight[s0]), d.x - d0.x, d.y - d0.y, d.z - d0.z, d.w - d0.w,
+                   c.lambda_c, c.lambda_l, px, py, pz, pq);
         gx += px;
         gy += py;
         gz += pz;
         h += pq;
       }
     }
+    energy[slot] = e;
+    if (f_out == nullptr) continue;
+    S* F = f_out + slot * 3;
+    S* Rg = r_out + slot * 3;
+    const Index j = graph.indices(i, k);
+    S R[9];
+    smg::detail::rotation_from_wxyz(q.ptr(t, i), R);
+    const S* xi = x.ptr(t, i);
+    const S* xj = x.ptr(t, j);
+    const S ex = xj[0] - xi[0], ey = xj[1] - xi[1], ez = xj[2] - xi[2];
+    const S inv_len = d.w > S(0) ? S(1) / d.w : S(0);
+    carap_edge_backprop(R, gx, gy, gz, h, inv_len, ex, ey, ez, d.x, d.y, d.z, F[0], F[1], F[2],
+                        Rg[0], Rg[1], Rg[2]);  // (E10)
   }
-  energy[slot] = e;
-  if (f_out == nullptr) return;
-  S* F = f_out + slot * 3;
-  S* Rg = r_out + slot * 3;
-  if (!(weight[slot] > S(0))) {
-    F[0] = F[1] = F[2] = Rg[0] = Rg[1] = Rg[2] = S(0);
-    return;
-  }
-  const Index i = (slot / K) % N, j = graph.indices(i, slot % K);
-  S R[9];
-  smg::detail::rotation_from_wxyz(q.ptr(t, i), R);
-  const S* xi = x.ptr(t, i);
-  const S* xj = x.ptr(t, j);
-  const S ex = xj[0] - xi[0], ey = xj[1] - xi[1], ez = xj[2] - xi[2];
-  const S inv_len = d[3] > S(0) ? S(1) / d[3] : S(0);
-  carap_edge_backprop(R, gx, gy, gz, h, inv_len, ex, ey, ez, d[0], d[1], d[2], F[0], F[1], F[2],
-                      Rg[0], Rg[1], Rg[2]);  // (E10)
 }
 
 template <class S>
@@ -135,36 +147,39 @@ __global__ void carap_gather_kernel(Index T, Index N, Index K, const std::int32_
                                     const std::int64_t* rev_entries, const S* f, const S* r,
                                     QuaternionsView<const S> q, S* grad_x, S* grad_tangent,
                                     S* grad_raw) {
-  const Index item = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (item >= T * N) return;
-  const Index t = item / N, n = item % N;
-  const S* f_t = f + t * N * K * 3;
-  if (grad_x != nullptr) {
-    S gx(0), gy(0), gz(0);
-    for (Index k = 0; k < K; ++k) {  // x_n as the tail of its out-edges: −F
-      const S* F = f_t + (n * K + k) * 3;
-      gx -= F[0];
-      gy -= F[1];
-      gz -= F[2];
+  const int n = frame_item(N);
+  if (n < 0) return;
+  SMG_CUDA_FOR_FRAMES(t, T) {
+    const Index item = t * N + n;
+    const S* f_t = f + t * N * K * 3;
+    if (grad_x != nullptr) {
+      S gx(0), gy(0), gz(0);
+      for (Index k = 0; k < K; ++k) {  // x_n as the tail of its out-edges: −F
+        const S* F = f_t + (n * K + k) * 3;
+        gx -= F[0];
+        gy -= F[1];
+        gz -= F[2];
+      }
+      for (std::int32_t a = rev_offsets[n]; a < rev_offsets[n + 1]; ++a) {  // as a head: +F
+        const S* F = f_t + rev_entries[a] * 3;
+        gx += F[0];
+        gy += F[1];
+        gz += F[2];
+      }
+      grad_x[item * 3 + 0] += gx;
+      grad_x[item * 3 + 1] += gy;
+      grad_x[item * 3 + 2] += gz;
     }
-    for (std::int32_t a = rev_offsets[n]; a < rev_offsets[n + 1]; ++a) {  // as a head: +F
-      const S* F = f_t + rev_entries[a] * 3;
-      gx += F[0];
-      gy += F[1];
-      gz += F[2];
+    if (grad_tangent != nullptr || grad_raw != nullptr) {
+      S g[3] = {S(0), S(0), S(0)};
+      const S* r_n = r + item * K * 3;
+      for (Index k = 0; k < K; ++k)
+        for (int c = 0; c < 3; ++c) g[c] += r_n[k * 3 + c];
+      if (grad_tangent != nullptr)
+        for (int c = 0; c < 3; ++c) grad_tangent[item * 3 + c] += g[c];
+      if (grad_raw != nullptr)
+        add_quaternion_gradient_from_tangent(q.ptr(t, n), g, grad_raw + item * 4);  // (Q5)
     }
-    grad_x[item * 3 + 0] += gx;
-    grad_x[item * 3 + 1] += gy;
-    grad_x[item * 3 + 2] += gz;
-  }
-  if (grad_tangent != nullptr || grad_raw != nullptr) {
-    S g[3] = {S(0), S(0), S(0)};
-    const S* r_n = r + (t * N + n) * K * 3;
-    for (Index k = 0; k < K; ++k)
-      for (int c = 0; c < 3; ++c) g[c] += r_n[k * 3 + c];
-    if (grad_tangent != nullptr)
-      for (int c = 0; c < 3; ++c) grad_tangent[item * 3 + c] += g[c];
-    if (grad_raw != nullptr) add_quaternion_gradient_from_tangent(q.ptr(t, n), g, grad_raw + item * 4);  // (Q5)
   }
 }
 
@@ -221,23 +236,26 @@ Status carap(PositionsView<const S> positions, QuaternionsView<const S> rotation
     SMG_CUDA_TRY(cudaMemsetAsync(energy_device, 0, sizeof(Acc), stream), "smg::cuda::carap");
     return Status::ok();
   }
+  if (Status s = check_frame_items(N * K, "graph"); !s) return s;
   const bool grad = grad_positions.data() != nullptr || !grad_rotations.empty();
-  DeviceBuffer<S> edge, weight, energy, f, r;
-  if (Status s = edge.allocate(static_cast<std::size_t>(slots * 4), stream); !s) return s;
+  DeviceBuffer<Vec4<S>> edge;
+  DeviceBuffer<S> weight, energy, f, r;
+  if (Status s = edge.allocate(static_cast<std::size_t>(slots), stream); !s) return s;
   if (Status s = weight.allocate(static_cast<std::size_t>(slots), stream); !s) return s;
   if (Status s = energy.allocate(static_cast<std::size_t>(slots), stream); !s) return s;
   if (grad) {
     if (Status s = f.allocate(static_cast<std::size_t>(slots * 3), stream); !s) return s;
     if (Status s = r.allocate(static_cast<std::size_t>(slots * 3), stream); !s) return s;
   }
-  detail::carap_edges_kernel<S, I><<<grid_for(slots), kThreads, 0, stream>>>(
+  const dim3 grid = frame_grid(N * K, T);
+  detail::carap_edges_kernel<S, I><<<grid, kThreads, 0, stream>>>(
       positions, rotations, confidence, graph, c, edge.get(), weight.get());
-  detail::carap_terms_kernel<S, I><<<grid_for(slots), kThreads, 0, stream>>>(
+  detail::carap_terms_kernel<S, I><<<grid, kThreads, 0, stream>>>(
       positions, rotations, graph, c, edge.get(), weight.get(), energy.get(), f.get(), r.get());
   SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::carap launch");
   if (Status s = deterministic_sum<S, Acc>(energy.get(), slots, energy_device, stream); !s) return s;
   if (grad) {
-    detail::carap_gather_kernel<S><<<grid_for(T * N), kThreads, 0, stream>>>(
+    detail::carap_gather_kernel<S><<<frame_grid(N, T), kThreads, 0, stream>>>(
         T, N, K, reverse.offsets.get(), reverse.entries.get(), f.get(), r.get(), rotations,
         grad_positions.data(), grad_rotations.is_raw() ? nullptr : grad_rotations.tangent().data(),
         grad_rotations.is_raw() ? grad_rotations.raw().data() : nullptr);

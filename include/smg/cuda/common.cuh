@@ -127,6 +127,37 @@ inline unsigned grid_for(Index n, int threads = kThreads) {
   return static_cast<unsigned>((n + threads - 1) / threads);
 }
 
+// Launch shape of the per-frame kernels: x over the items of one frame (nodes, or node-neighbour
+// slots; 32-bit, see check_frame_items), y over the frames. Index arithmetic inside a frame then
+// stays in 32 bits: a 64-bit division per thread costs more than the rest of a light kernel.
+inline dim3 frame_grid(Index items_per_frame, Index frames) {
+  return dim3(grid_for(items_per_frame),
+              static_cast<unsigned>(frames < 65535 ? (frames > 0 ? frames : 1) : 65535));
+}
+
+// The item of this thread within its frame (-1 past the end).
+__device__ inline int frame_item(Index items_per_frame) {
+  const Index s = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  return s < items_per_frame ? static_cast<int>(s) : -1;
+}
+
+// Frames of this thread: t = blockIdx.y, blockIdx.y + gridDim.y, ... (more than 65535 frames).
+#define SMG_CUDA_FOR_FRAMES(t, frames) \
+  for (::smg::Index t = blockIdx.y; t < (frames); t += gridDim.y)
+
+// Items per frame must fit the 32-bit in-frame index.
+inline Status check_frame_items(Index items_per_frame, const char* what) {
+  if (items_per_frame < (Index(1) << 31)) return Status::ok();
+  return Status::error(std::string(what) + ": " + std::to_string(items_per_frame) +
+                       " items per frame exceed the CUDA kernels' 32-bit index (2^31 - 1)");
+}
+
+// Four scalars loaded and stored as one aligned vector (one 16-byte access for float).
+template <class S>
+struct alignas(4 * sizeof(S)) Vec4 {
+  S x, y, z, w;
+};
+
 namespace detail {
 // Fixed decomposition of the deterministic sum: kSumBlocks blocks of kThreads threads, each
 // thread summing a fixed strided subset, then a fixed tree in shared memory; a second launch

@@ -15,18 +15,20 @@ namespace smg::cuda {
 namespace detail {
 template <class S>
 __global__ void velocities_kernel(PositionsView<const S> x, S* u) {
-  const Index item = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
   const Index T = x.frames(), N = x.nodes();
-  if (item >= T * N) return;
-  const Index t = item / N, i = item % N;
-  const VelocityFrames f = velocity_frames(t, T);  // (E1)
-  for (int c = 0; c < 3; ++c) u[item * 3 + c] = f.moving ? x.ptr(f.plus, i)[c] - x.ptr(f.minus, i)[c] : S(0);
+  const int i = frame_item(N);
+  if (i < 0) return;
+  SMG_CUDA_FOR_FRAMES(t, T) {
+    const VelocityFrames f = velocity_frames(t, T);  // (E1)
+    S* out = u + (t * N + i) * 3;
+    for (int c = 0; c < 3; ++c) out[c] = f.moving ? x.ptr(f.plus, i)[c] - x.ptr(f.minus, i)[c] : S(0);
+  }
 }
 
 template <class S, class I>
 __global__ void inverse_row_weight_kernel(NeighborsView<S, I> graph, S* inv_w) {
-  const Index i = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (i >= graph.nodes()) return;
+  const int i = frame_item(graph.nodes());
+  if (i < 0) return;
   const S W = smg::detail::row_weight(graph, i);
   inv_w[i] = W > S(0) ? S(1) / W : S(0);
 }
@@ -34,10 +36,12 @@ __global__ void inverse_row_weight_kernel(NeighborsView<S, I> graph, S* inv_w) {
 template <class S, class I>
 __global__ void edge_change_kernel(PositionsView<const S> x, NeighborsView<S, I> graph,
                                    const S* inv_w, S* edge_change) {
-  const Index item = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
   const Index N = x.nodes();
-  if (item >= x.frames() * N) return;
-  edge_change[item] = confidence_edge_change(x, graph, inv_w[item % N], item / N, item % N);
+  const int i = frame_item(N);
+  if (i < 0) return;
+  SMG_CUDA_FOR_FRAMES(t, x.frames()) {
+    edge_change[t * N + i] = confidence_edge_change(x, graph, inv_w[i], t, i);  // (E4)
+  }
 }
 
 template <class S, class I>
@@ -45,16 +49,18 @@ __global__ void confidence_kernel(const S* u, const S* edge_change, NeighborsVie
                                   const S* inv_w, Index T, ConfidenceConstants<S> p,
                                   const std::uint8_t* visibility, S* confidence, S* motion,
                                   S* rigidity) {
-  const Index item = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
   const Index N = graph.nodes();
-  if (item >= T * N) return;
-  const Index t = item / N, i = item % N;
-  S m(0), r(0);
-  const S c = confidence_node(u, edge_change, graph, inv_w[i], t, i, p, motion ? &m : nullptr,
-                              rigidity ? &r : nullptr);
-  if (motion) motion[item] = m;
-  if (rigidity) rigidity[item] = r;
-  if (confidence) confidence[item] = (visibility == nullptr || visibility[item] ? S(1) : S(0)) * c;
+  const int i = frame_item(N);
+  if (i < 0) return;
+  SMG_CUDA_FOR_FRAMES(t, T) {
+    const Index item = t * N + i;
+    S m(0), r(0);
+    const S c = confidence_node(u, edge_change, graph, inv_w[i], t, i, p, motion ? &m : nullptr,
+                                rigidity ? &r : nullptr);  // (E2)-(E5)
+    if (motion) motion[item] = m;
+    if (rigidity) rigidity[item] = r;
+    if (confidence) confidence[item] = (visibility == nullptr || visibility[item] ? S(1) : S(0)) * c;  // (E6)
+  }
 }
 }  // namespace detail
 
@@ -84,14 +90,16 @@ Status node_confidences(PositionsView<const S> positions,
   if (rigidity.data() && !shape_ok(rigidity.frames(), rigidity.nodes()))
     return Status::error("rigidity: expected shape [T][N] of positions");
   if (T == 0 || N == 0) return Status::ok();
+  if (Status s = check_frame_items(N, "positions"); !s) return s;
   DeviceBuffer<S> u, inv_w, e;
   if (Status s = u.allocate(static_cast<std::size_t>(T * N * 3), stream); !s) return s;
   if (Status s = inv_w.allocate(static_cast<std::size_t>(N), stream); !s) return s;
   if (Status s = e.allocate(static_cast<std::size_t>(T * N), stream); !s) return s;
-  detail::velocities_kernel<S><<<grid_for(T * N), kThreads, 0, stream>>>(positions, u.get());
+  const dim3 grid = frame_grid(N, T);
+  detail::velocities_kernel<S><<<grid, kThreads, 0, stream>>>(positions, u.get());
   detail::inverse_row_weight_kernel<S, I><<<grid_for(N), kThreads, 0, stream>>>(graph, inv_w.get());
-  detail::edge_change_kernel<S, I><<<grid_for(T * N), kThreads, 0, stream>>>(positions, graph, inv_w.get(), e.get());
-  detail::confidence_kernel<S, I><<<grid_for(T * N), kThreads, 0, stream>>>(
+  detail::edge_change_kernel<S, I><<<grid, kThreads, 0, stream>>>(positions, graph, inv_w.get(), e.get());
+  detail::confidence_kernel<S, I><<<grid, kThreads, 0, stream>>>(
       u.get(), e.get(), graph, inv_w.get(), T, ConfidenceConstants<S>(options), visibility.data(),
       confidence.data(), motion.data(), rigidity.data());
   SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::node_confidences launch");
