@@ -47,8 +47,10 @@ namespace smg {
 // Checks the inputs and outputs of carap(). `confidence` [T][N] may be empty (all 1), and each
 // gradient may be empty (not computed). Confidences must lie in [0, 1].
 template <class S, class I>
-Status validate_carap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-                      FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
+Status validate_carap(detail::NonDeducedT<PositionsView<const S>> positions,
+                      detail::NonDeducedT<QuaternionsView<const S>> rotations,
+                      detail::NonDeducedT<FrameScalarsView<const S>> confidence,
+                      const NeighborsView<S, I>& graph,
                       const CarapOptions& options, PositionsView<S> grad_positions = {},
                       detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
   const Index T = positions.frames(), N = positions.nodes();
@@ -556,8 +558,10 @@ struct CarapKernel {
 // (Q5). rotations [T][N][4] are normalised on entry. confidence [T][N] may be empty (all 1).
 // Precondition: validate_carap.
 template <class S, class I>
-Accumulator<S> carap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-                     FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
+Accumulator<S> carap(detail::NonDeducedT<PositionsView<const S>> positions,
+                     detail::NonDeducedT<QuaternionsView<const S>> rotations,
+                     detail::NonDeducedT<FrameScalarsView<const S>> confidence,
+                     const NeighborsView<S, I>& graph,
                      const CarapOptions& options, PositionsView<S> grad_positions = {},
                      detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {},
                      EnergyWorkspace<S>* workspace = nullptr, ParallelOptions parallel = {}) {

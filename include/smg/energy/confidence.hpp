@@ -37,7 +37,7 @@ namespace smg {
 // Checks the inputs and outputs of node_confidences. `visibility` and every output may be empty
 // views (visibility: all visible; outputs: not computed).
 template <class S, class I>
-Status validate_confidence(PositionsView<const S> positions,
+Status validate_confidence(detail::NonDeducedT<PositionsView<const S>> positions,
                            VisibilityView<const std::uint8_t> visibility,
                            const NeighborsView<S, I>& graph, const ConfidenceOptions& options,
                            FrameScalarsView<S> confidence, FrameScalarsView<S> motion = {},
@@ -160,7 +160,7 @@ SMG_HOST_DEVICE inline S confidence_node(const S* velocity, const S* edge_change
 // visibility [T][N] (0/1) may be an empty view: every node visible. Empty output views are not
 // computed. Deterministic for any thread count. Precondition: validate_confidence.
 template <class S, class I>
-void node_confidences(PositionsView<const S> positions,
+void node_confidences(detail::NonDeducedT<PositionsView<const S>> positions,
                       VisibilityView<const std::uint8_t> visibility, const NeighborsView<S, I>& graph,
                       const ConfidenceOptions& options, FrameScalarsView<S> confidence,
                       FrameScalarsView<S> motion = {}, FrameScalarsView<S> rigidity = {},

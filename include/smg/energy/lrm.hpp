@@ -49,7 +49,8 @@ namespace smg {
 // Checks the inputs and outputs of lrm(). `confidence` may be empty (all 1); the gradient and
 // omega outputs may be empty (not computed).
 template <class S, class I>
-Status validate_lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
+Status validate_lrm(detail::NonDeducedT<PositionsView<const S>> positions,
+                    detail::NonDeducedT<FrameScalarsView<const S>> confidence,
                     const NeighborsView<S, I>& graph, const LrmOptions& options,
                     PositionsView<S> grad_positions = {}, TangentsView<S> omega = {}) {
   const Index T = positions.frames(), N = positions.nodes();
@@ -296,7 +297,8 @@ inline namespace SMG_ISA_NAMESPACE {
 // are single vector loads, and gradients go to the same layout, owned by the frame block; a
 // last pass adds them to the caller's [T][N][3] rows.
 template <class S, class I>
-Accumulator<S> lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
+Accumulator<S> lrm(detail::NonDeducedT<PositionsView<const S>> positions,
+                   detail::NonDeducedT<FrameScalarsView<const S>> confidence,
                    const NeighborsView<S, I>& graph, const LrmOptions& options,
                    PositionsView<S> grad_positions = {}, EnergyWorkspace<S>* workspace = nullptr,
                    ParallelOptions parallel = {}, TangentsView<S> omega = {}) {
