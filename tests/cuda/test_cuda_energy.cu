@@ -186,6 +186,8 @@ TEST_CASE("cuda carap and arap equal the CPU's: energy, position and rotation gr
     check_carap(Scene<double, std::int32_t>(11, 50, 6, 6), 1e-12, raw, true);
     check_carap(Scene<float, std::int32_t>(11, 50, 6, 7), 1e-5, raw, false);
     check_carap(Scene<float, std::int64_t>(3, 30, 4, 8, true), 1e-5, raw, true);
+    // K = 40 in double: the gather's shared-memory tile would exceed 48 KiB, the direct path runs.
+    check_carap(Scene<double, std::int32_t>(4, 90, 40, 12), 1e-12, raw, false);
   }
 }
 

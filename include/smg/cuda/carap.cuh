@@ -142,43 +142,70 @@ __global__ void carap_terms_kernel(PositionsView<const S> x, QuaternionsView<con
   }
 }
 
+// The per-slot values of a block's nodes at frame t, [nodes of the block][K][3], copied to
+// shared memory with coalesced loads (each thread's K·3 values are contiguous but 12·K bytes
+// apart from its neighbour's, so direct reads touch a cache line per thread and value).
 template <class S>
+__device__ inline const S* carap_stage_tile(const S* src, Index n0, Index nb, Index K, S* tile) {
+  const Index count = nb * K * 3;
+  const S* from = src + n0 * K * 3;
+  for (Index a = threadIdx.x; a < count; a += blockDim.x) tile[a] = from[a];
+  __syncthreads();
+  return tile;
+}
+
+// Per node n and frame t: −Σ_k F of its out-edges plus Σ F of its in-edges (ReverseGraph order)
+// into grad_x, and Σ_k of its rotation parts into the tangent or raw gradient (E10, Q5). With
+// staged = true the out-edge values come through shared memory (blockDim.x · K · 3 scalars);
+// the sums are the same, in the same order, either way.
+template <class S, bool kStaged>
 __global__ void carap_gather_kernel(Index T, Index N, Index K, const std::int32_t* rev_offsets,
                                     const std::int64_t* rev_entries, const S* f, const S* r,
                                     QuaternionsView<const S> q, S* grad_x, S* grad_tangent,
                                     S* grad_raw) {
-  const int n = frame_item(N);
-  if (n < 0) return;
+  extern __shared__ unsigned char smg_shared[];
+  S* tile = reinterpret_cast<S*>(smg_shared);
+  const Index n0 = static_cast<Index>(blockIdx.x) * blockDim.x;
+  const Index nb = N - n0 < static_cast<Index>(blockDim.x) ? N - n0 : static_cast<Index>(blockDim.x);
+  const int n = frame_item(N);  // -1 past the end (still takes part in the block's copies)
   SMG_CUDA_FOR_FRAMES(t, T) {
     const Index item = t * N + n;
     const S* f_t = f + t * N * K * 3;
     if (grad_x != nullptr) {
-      S gx(0), gy(0), gz(0);
-      for (Index k = 0; k < K; ++k) {  // x_n as the tail of its out-edges: −F
-        const S* F = f_t + (n * K + k) * 3;
-        gx -= F[0];
-        gy -= F[1];
-        gz -= F[2];
+      const S* own = kStaged ? carap_stage_tile(f_t, n0, nb, K, tile) - n0 * K * 3 : f_t;
+      if (n >= 0) {
+        S gx(0), gy(0), gz(0);
+        for (Index k = 0; k < K; ++k) {  // x_n as the tail of its out-edges: −F
+          const S* F = own + (n * K + k) * 3;
+          gx -= F[0];
+          gy -= F[1];
+          gz -= F[2];
+        }
+        for (std::int32_t a = rev_offsets[n]; a < rev_offsets[n + 1]; ++a) {  // as a head: +F
+          const S* F = f_t + rev_entries[a] * 3;
+          gx += F[0];
+          gy += F[1];
+          gz += F[2];
+        }
+        grad_x[item * 3 + 0] += gx;
+        grad_x[item * 3 + 1] += gy;
+        grad_x[item * 3 + 2] += gz;
       }
-      for (std::int32_t a = rev_offsets[n]; a < rev_offsets[n + 1]; ++a) {  // as a head: +F
-        const S* F = f_t + rev_entries[a] * 3;
-        gx += F[0];
-        gy += F[1];
-        gz += F[2];
-      }
-      grad_x[item * 3 + 0] += gx;
-      grad_x[item * 3 + 1] += gy;
-      grad_x[item * 3 + 2] += gz;
+      if (kStaged) __syncthreads();  // the tile is reused below and at the next frame
     }
     if (grad_tangent != nullptr || grad_raw != nullptr) {
-      S g[3] = {S(0), S(0), S(0)};
-      const S* r_n = r + item * K * 3;
-      for (Index k = 0; k < K; ++k)
-        for (int c = 0; c < 3; ++c) g[c] += r_n[k * 3 + c];
-      if (grad_tangent != nullptr)
-        for (int c = 0; c < 3; ++c) grad_tangent[item * 3 + c] += g[c];
-      if (grad_raw != nullptr)
-        add_quaternion_gradient_from_tangent(q.ptr(t, n), g, grad_raw + item * 4);  // (Q5)
+      const S* r_t = r + t * N * K * 3;
+      const S* own = kStaged ? carap_stage_tile(r_t, n0, nb, K, tile) - n0 * K * 3 : r_t;
+      if (n >= 0) {
+        S g[3] = {S(0), S(0), S(0)};
+        for (Index k = 0; k < K; ++k)
+          for (int c = 0; c < 3; ++c) g[c] += own[(n * K + k) * 3 + c];
+        if (grad_tangent != nullptr)
+          for (int c = 0; c < 3; ++c) grad_tangent[item * 3 + c] += g[c];
+        if (grad_raw != nullptr)
+          add_quaternion_gradient_from_tangent(q.ptr(t, n), g, grad_raw + item * 4);  // (Q5)
+      }
+      if (kStaged) __syncthreads();
     }
   }
 }
@@ -255,10 +282,21 @@ Status carap(PositionsView<const S> positions, QuaternionsView<const S> rotation
   SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::carap launch");
   if (Status s = deterministic_sum<S, Acc>(energy.get(), slots, energy_device, stream); !s) return s;
   if (grad) {
-    detail::carap_gather_kernel<S><<<frame_grid(N, T), kThreads, 0, stream>>>(
-        T, N, K, reverse.offsets.get(), reverse.entries.get(), f.get(), r.get(), rotations,
-        grad_positions.data(), grad_rotations.is_raw() ? nullptr : grad_rotations.tangent().data(),
-        grad_rotations.is_raw() ? grad_rotations.raw().data() : nullptr);
+    // Out-edge values through shared memory when a block's tile fits the default 48 KiB.
+    constexpr int kGatherThreads = 128;
+    const std::size_t tile = static_cast<std::size_t>(kGatherThreads * K * 3) * sizeof(S);
+    S* const gt = grad_rotations.is_raw() ? nullptr : grad_rotations.tangent().data();
+    S* const graw = grad_rotations.is_raw() ? grad_rotations.raw().data() : nullptr;
+    dim3 grid = frame_grid(N, T);
+    grid.x = static_cast<unsigned>((N + kGatherThreads - 1) / kGatherThreads);
+    if (tile <= 48 * 1024)
+      detail::carap_gather_kernel<S, true><<<grid, kGatherThreads, tile, stream>>>(
+          T, N, K, reverse.offsets.get(), reverse.entries.get(), f.get(), r.get(), rotations,
+          grad_positions.data(), gt, graw);
+    else
+      detail::carap_gather_kernel<S, false><<<grid, kGatherThreads, 0, stream>>>(
+          T, N, K, reverse.offsets.get(), reverse.entries.get(), f.get(), r.get(), rotations,
+          grad_positions.data(), gt, graw);
     SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::carap gather launch");
   }
   return Status::ok();

@@ -16,6 +16,7 @@
 #include <cuda_runtime.h>
 
 #include <cstdint>
+#include <mutex>
 #include <string>
 #include <type_traits>
 
@@ -45,7 +46,8 @@ inline bool device_available() {
 }
 
 // Where smg's launchers take their scratch memory from. The default is stream-ordered
-// cudaMallocAsync / cudaFreeAsync on the launch stream (no device-wide synchronisation); a
+// allocation (cudaMallocFromPoolAsync / cudaFreeAsync on the launch stream, from a pool of smg's
+// own that keeps freed memory for the next call; no device-wide synchronisation); a
 // framework with its own caching allocator installs it with set_allocator (smg_torch installs
 // PyTorch's, so that smg's scratch is reused from torch's cache). allocate returns nullptr on
 // failure. Process-wide, like smg::set_executor; set it before launching, not during.
@@ -56,9 +58,37 @@ struct Allocator {
 };
 
 namespace detail {
+// smg's own stream-ordered memory pool of the current device, created on first use with no
+// release threshold: scratch freed at the end of one call is reused by the next instead of being
+// returned to the driver at every synchronisation (what the device's default pool does, and
+// which made a 400 MB scratch cost more than the kernels). The caller's default pool is left as
+// it is.
+inline cudaMemPool_t smg_pool() {
+  constexpr int kMaxDevices = 64;
+  static cudaMemPool_t pools[kMaxDevices] = {};
+  static std::mutex mutex;
+  int device = 0;
+  if (cudaGetDevice(&device) != cudaSuccess || device < 0 || device >= kMaxDevices) return nullptr;
+  std::lock_guard<std::mutex> lock(mutex);
+  if (pools[device] == nullptr) {
+    cudaMemPoolProps props{};
+    props.allocType = cudaMemAllocationTypePinned;
+    props.location.type = cudaMemLocationTypeDevice;
+    props.location.id = device;
+    cudaMemPool_t pool = nullptr;
+    if (cudaMemPoolCreate(&pool, &props) != cudaSuccess) return nullptr;
+    std::uint64_t keep = ~std::uint64_t(0);
+    cudaMemPoolSetAttribute(pool, cudaMemPoolAttrReleaseThreshold, &keep);
+    pools[device] = pool;
+  }
+  return pools[device];
+}
 inline void* default_allocate(std::size_t bytes, cudaStream_t stream, void*) {
   void* p = nullptr;
-  return cudaMallocAsync(&p, bytes, stream) == cudaSuccess ? p : nullptr;
+  const cudaMemPool_t pool = smg_pool();
+  const cudaError_t e = pool != nullptr ? cudaMallocFromPoolAsync(&p, bytes, pool, stream)
+                                        : cudaMallocAsync(&p, bytes, stream);
+  return e == cudaSuccess ? p : nullptr;
 }
 inline void default_deallocate(void* p, cudaStream_t stream, void*) { cudaFreeAsync(p, stream); }
 inline Allocator& allocator_slot() {
