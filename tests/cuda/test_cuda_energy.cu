@@ -201,8 +201,10 @@ TEST_CASE("cuda carap reports bad shapes and options before launching") {
   REQUIRE(smg::cuda::build_reverse_graph(di.p, s.N, s.K, nullptr, rev));
   smg::CarapOptions bad;
   bad.alpha = 2;
-  smg::Status st = smg::cuda::carap<double>({dx.p, 4, 10}, {dq.p, 4, 10}, {}, g, bad, rev, de.p, {},
-                                            {}, nullptr);
+  // Mutable views and no template arguments: S and I come from the graph.
+  smg::Status st = smg::cuda::carap(smg::PositionsView<double>(dx.p, 4, 10),
+                                    smg::QuaternionsView<double>(dq.p, 4, 10), {}, g, bad, rev, de.p,
+                                    {}, {}, nullptr);
   CHECK(!st);
   CHECK(st.message() == smg::validate_options(bad).message());
   st = smg::cuda::carap<double>({dx.p, 4, 10}, {dq.p, 3, 10}, {}, g, {}, rev, de.p, {}, {}, nullptr);

@@ -220,10 +220,10 @@ __global__ void carap_gather_kernel(Index T, Index N, Index K, const std::int32_
 // options are checked on the host before launch; contents are not read (run smg::cuda::validate_carap
 // (smg/cuda/validate.cuh) on untrusted input first). Scratch: 5 T·N·K scalars, 11 with gradients.
 template <class S, class I>
-Status carap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-             FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
+Status carap(smg::detail::NonDeducedT<PositionsView<const S>> positions, smg::detail::NonDeducedT<QuaternionsView<const S>> rotations,
+             smg::detail::NonDeducedT<FrameScalarsView<const S>> confidence, const NeighborsView<S, I>& graph,
              const CarapOptions& options, const ReverseGraph& reverse,
-             Accumulator<S>* energy_device, PositionsView<S> grad_positions,
+             Accumulator<S>* energy_device, smg::detail::NonDeducedT<PositionsView<S>> grad_positions,
              smg::detail::NonDeducedT<RotationGradientView<S>> grad_rotations,
              cudaStream_t stream) {
   using Acc = Accumulator<S>;
@@ -304,10 +304,10 @@ Status carap(PositionsView<const S> positions, QuaternionsView<const S> rotation
 
 // Plain ARAP (docs/design.md "Plain ARAP"): C-ARAP with every confidence 1 and α = 1.
 template <class S, class I>
-Status arap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
+Status arap(smg::detail::NonDeducedT<PositionsView<const S>> positions, smg::detail::NonDeducedT<QuaternionsView<const S>> rotations,
             const NeighborsView<S, I>& graph, const ArapOptions& options,
             const ReverseGraph& reverse, Accumulator<S>* energy_device,
-            PositionsView<S> grad_positions,
+            smg::detail::NonDeducedT<PositionsView<S>> grad_positions,
             smg::detail::NonDeducedT<RotationGradientView<S>> grad_rotations, cudaStream_t stream) {
   if (Status s = validate_options(options); !s) return s;
   return carap<S, I>(positions, rotations, {}, graph, carap_options_for_arap(options), reverse,

@@ -71,11 +71,11 @@ __global__ void confidence_kernel(const S* u, const S* edge_change, NeighborsVie
 // validate_confidence); the array contents are not read here: run cuda::validate_... on
 // untrusted data first (smg::cuda::validate_confidence, smg/cuda/validate.cuh). Results equal the CPU function's to round-off.
 template <class S, class I>
-Status node_confidences(PositionsView<const S> positions,
+Status node_confidences(smg::detail::NonDeducedT<PositionsView<const S>> positions,
                         VisibilityView<const std::uint8_t> visibility,
                         const NeighborsView<S, I>& graph, const ConfidenceOptions& options,
-                        FrameScalarsView<S> confidence, FrameScalarsView<S> motion,
-                        FrameScalarsView<S> rigidity, cudaStream_t stream) {
+                        smg::detail::NonDeducedT<FrameScalarsView<S>> confidence, smg::detail::NonDeducedT<FrameScalarsView<S>> motion,
+                        smg::detail::NonDeducedT<FrameScalarsView<S>> rigidity, cudaStream_t stream) {
   const Index T = positions.frames(), N = positions.nodes();
   if (Status s = validate_options(options); !s) return s;
   auto shape_ok = [&](Index t, Index n) { return t == T && n == N; };

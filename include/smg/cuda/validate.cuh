@@ -63,10 +63,10 @@ struct HostInputs {
 
 // validate_confidence on device inputs (outputs: shapes only).
 template <class S, class I>
-Status validate_confidence(PositionsView<const S> positions,
+Status validate_confidence(smg::detail::NonDeducedT<PositionsView<const S>> positions,
                            VisibilityView<const std::uint8_t> visibility,
                            const NeighborsView<S, I>& graph, const ConfidenceOptions& options,
-                           FrameScalarsView<S> confidence, cudaStream_t stream = nullptr) {
+                           smg::detail::NonDeducedT<FrameScalarsView<S>> confidence, cudaStream_t stream = nullptr) {
   detail::HostInputs<S, I> h;
   if (Status s = h.copy(positions, {}, {}, visibility, graph, stream); !s) return s;
   return smg::validate_confidence<S, I>(h.like(positions, h.x), h.like(visibility, h.vis),
@@ -75,9 +75,9 @@ Status validate_confidence(PositionsView<const S> positions,
 
 // validate_carap on device inputs (gradient outputs: shapes only).
 template <class S, class I>
-Status validate_carap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-                      FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
-                      const CarapOptions& options, PositionsView<S> grad_positions = {},
+Status validate_carap(smg::detail::NonDeducedT<PositionsView<const S>> positions, smg::detail::NonDeducedT<QuaternionsView<const S>> rotations,
+                      smg::detail::NonDeducedT<FrameScalarsView<const S>> confidence, const NeighborsView<S, I>& graph,
+                      const CarapOptions& options, smg::detail::NonDeducedT<PositionsView<S>> grad_positions = {},
                       smg::detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {},
                       cudaStream_t stream = nullptr) {
   detail::HostInputs<S, I> h;
@@ -89,9 +89,9 @@ Status validate_carap(PositionsView<const S> positions, QuaternionsView<const S>
 
 // validate_arap on device inputs.
 template <class S, class I>
-Status validate_arap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
+Status validate_arap(smg::detail::NonDeducedT<PositionsView<const S>> positions, smg::detail::NonDeducedT<QuaternionsView<const S>> rotations,
                      const NeighborsView<S, I>& graph, const ArapOptions& options,
-                     PositionsView<S> grad_positions = {},
+                     smg::detail::NonDeducedT<PositionsView<S>> grad_positions = {},
                      smg::detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {},
                      cudaStream_t stream = nullptr) {
   detail::HostInputs<S, I> h;
@@ -102,9 +102,9 @@ Status validate_arap(PositionsView<const S> positions, QuaternionsView<const S> 
 
 // validate_lrm on device inputs.
 template <class S, class I>
-Status validate_lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
+Status validate_lrm(smg::detail::NonDeducedT<PositionsView<const S>> positions, smg::detail::NonDeducedT<FrameScalarsView<const S>> confidence,
                     const NeighborsView<S, I>& graph, const LrmOptions& options,
-                    PositionsView<S> grad_positions = {}, TangentsView<S> omega = {},
+                    smg::detail::NonDeducedT<PositionsView<S>> grad_positions = {}, TangentsView<S> omega = {},
                     cudaStream_t stream = nullptr) {
   detail::HostInputs<S, I> h;
   if (Status s = h.copy(positions, {}, confidence, {}, graph, stream); !s) return s;
