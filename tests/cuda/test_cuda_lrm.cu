@@ -122,7 +122,7 @@ GpuRaw<S> run_gpu(const LrmCase& c, const std::vector<S>& grad0, bool want_grad 
   energy.resize(1);
   smg::cuda::ReverseGraph rev;
   smg::Status s = smg::cuda::build_reverse_graph(idx.get(), c.N, c.K, st.s, rev);
-  REQUIRE_MESSAGE(s.ok(), s.message());
+  REQUIRE_MESSAGE(s.is_ok(), s.message());
   smg::FrameScalarsView<const S> cv;
   if (!c.c.empty()) cv = smg::FrameScalarsView<const S>(conf.get(), c.T, c.N);
   s = smg::cuda::lrm<S, I>(smg::PositionsView<const S>(x.get(), c.T, c.N), cv,
@@ -133,7 +133,7 @@ GpuRaw<S> run_gpu(const LrmCase& c, const std::vector<S>& grad0, bool want_grad 
                            want_omega ? smg::TangentsView<S>(omega.get(), c.T, c.N)
                                       : smg::TangentsView<S>(),
                            st.s);
-  REQUIRE_MESSAGE(s.ok(), s.message());
+  REQUIRE_MESSAGE(s.is_ok(), s.message());
   st.sync();
   SMG_TEST_CUDA(cudaGetLastError());
   GpuRaw<S> r;
@@ -270,7 +270,7 @@ TEST_CASE("cuda lrm: validation before launch") {
   DeviceArray<double> x(c.x), w(c.w), grad(std::vector<double>(c.x.size(), 0.0));
   DeviceArray<std::int32_t> idx(cast_idx<std::int32_t>(c.idx));
   smg::cuda::ReverseGraph rev;
-  REQUIRE(smg::cuda::build_reverse_graph(idx.get(), c.N, c.K, st.s, rev).ok());
+  REQUIRE(smg::cuda::build_reverse_graph(idx.get(), c.N, c.K, st.s, rev).is_ok());
   const smg::PositionsView<const double> xv(x.get(), c.T, c.N);
   const smg::NeighborsView<double> g(idx.get(), w.get(), c.N, c.K);
 
@@ -278,22 +278,22 @@ TEST_CASE("cuda lrm: validation before launch") {
   bad.huber_delta = 0.0;
   smg::Status s = smg::cuda::lrm<double, std::int32_t>(xv, {}, g, bad, rev, nullptr,
                                                        smg::PositionsView<double>(grad.get(), c.T, c.N), {}, st.s);
-  CHECK_FALSE(s.ok());
+  CHECK_FALSE(s.is_ok());
   CHECK(s.message().find("huber_delta") != std::string::npos);
 
   s = smg::cuda::lrm<double, std::int32_t>(xv, {}, g, c.options, rev, nullptr,
                                            smg::PositionsView<double>(grad.get(), c.T, c.N - 1), {}, st.s);
-  CHECK_FALSE(s.ok());
+  CHECK_FALSE(s.is_ok());
   CHECK(s.message().find("grad_positions") != std::string::npos);
 
   const smg::NeighborsView<double> g_short(idx.get(), w.get(), c.N - 1, c.K);
   s = smg::cuda::lrm<double, std::int32_t>(xv, {}, g_short, c.options, rev, nullptr, {}, {}, st.s);
-  CHECK_FALSE(s.ok());
+  CHECK_FALSE(s.is_ok());
   CHECK(s.message().find("graph") != std::string::npos);
 
   smg::cuda::ReverseGraph other;  // not built for this graph
   s = smg::cuda::lrm<double, std::int32_t>(xv, {}, g, c.options, other, nullptr, {}, {}, st.s);
-  CHECK_FALSE(s.ok());
+  CHECK_FALSE(s.is_ok());
   CHECK(s.message().find("reverse") != std::string::npos);
 
   // K above the kernel's maximum.
@@ -301,10 +301,10 @@ TEST_CASE("cuda lrm: validation before launch") {
   DeviceArray<std::int32_t> big_idx(std::vector<std::int32_t>(static_cast<std::size_t>(c.N * K), -1));
   DeviceArray<double> big_w(std::vector<double>(static_cast<std::size_t>(c.N * K), 0.0));
   smg::cuda::ReverseGraph big_rev;
-  REQUIRE(smg::cuda::build_reverse_graph(big_idx.get(), c.N, K, st.s, big_rev).ok());
+  REQUIRE(smg::cuda::build_reverse_graph(big_idx.get(), c.N, K, st.s, big_rev).is_ok());
   s = smg::cuda::lrm<double, std::int32_t>(xv, {}, smg::NeighborsView<double>(big_idx.get(), big_w.get(), c.N, K),
                                            c.options, big_rev, nullptr, {}, {}, st.s);
-  CHECK_FALSE(s.ok());
+  CHECK_FALSE(s.is_ok());
   CHECK(s.message().find("graph: K=33") != std::string::npos);
   st.sync();
 }
