@@ -142,13 +142,13 @@ Status check_skin_shapes(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
   return Status::ok();
 }
 
+// Forward, element e = q·P + p (< Q·P). The kernels are thin wrappers of these host-device
+// per-element steps (which also lets a host loop run them without a GPU).
 template <class S, int DMax>
-__global__ void skin_forward_kernel(SkinNodes<S> nodes, SkinPoints<S> points,
-                                    SkinIndexView t_query, SkinBlendOutputs<S> out,
-                                    SkinMethod method) {
-  const Index Q = t_query.rows(), P = points.count(), Dmax = points.width();
-  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (e >= Q * P) return;
+SMG_HOST_DEVICE inline void skin_forward_at(Index e, const SkinNodes<S>& nodes,
+                                            const SkinPoints<S>& points, SkinIndexView t_query,
+                                            const SkinBlendOutputs<S>& out, SkinMethod method) {
+  const Index P = points.count(), Dmax = points.width();
   const Index q = e / P, p = e % P;
   SkinDriver<S> d[DMax];
   smg::detail::SkinBlendState<S> st;
@@ -190,17 +190,24 @@ __global__ void skin_forward_kernel(SkinNodes<S> nodes, SkinPoints<S> points,
       });
 }
 
+template <class S, int DMax>
+__global__ void skin_forward_kernel(SkinNodes<S> nodes, SkinPoints<S> points,
+                                    SkinIndexView t_query, SkinBlendOutputs<S> out,
+                                    SkinMethod method) {
+  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (e < t_query.rows() * points.count())
+    skin_forward_at<S, DMax>(e, nodes, points, t_query, out, method);
+}
+
 constexpr Index kSkinEdgeStride = 9;  // per edge: ∂L/∂x_t (3), ∂L/∂x_ref (3), ∂L/∂φ_t (3) = −∂L/∂φ_ref
 
-// Backward, point pass of query q (frame t): one thread per point.
+// Backward, point pass of query q (frame t), point p (< P).
 template <class S, int DMax>
-__global__ void skin_backward_point_kernel(SkinNodes<S> nodes, SkinPoints<S> points, Index q,
-                                           Index t, SkinBlendOutputGradients<S> grad_out,
-                                           SkinBlendGradients<S> grads, SkinMethod method,
-                                           S* edge_buf) {
-  const Index P = points.count(), Dmax = points.width();
-  const Index p = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (p >= P) return;
+SMG_HOST_DEVICE inline void skin_backward_point_at(
+    Index p, const SkinNodes<S>& nodes, const SkinPoints<S>& points, Index q, Index t,
+    const SkinBlendOutputGradients<S>& grad_out, const SkinBlendGradients<S>& grads,
+    SkinMethod method, S* edge_buf) {
+  const Index Dmax = points.width();
   SkinDriver<S> d[DMax];
   smg::detail::SkinBlendState<S> st;
   const Index D = smg::detail::skin_load_ref(nodes, points, p, true, d);
@@ -238,14 +245,24 @@ __global__ void skin_backward_point_kernel(SkinNodes<S> nodes, SkinPoints<S> poi
                                          grads.point_quaternions.ptr(p));
 }
 
-// Backward, node pass of query frame t: one thread per node, its edges in increasing p·D + k.
+template <class S, int DMax>
+__global__ void skin_backward_point_kernel(SkinNodes<S> nodes, SkinPoints<S> points, Index q,
+                                           Index t, SkinBlendOutputGradients<S> grad_out,
+                                           SkinBlendGradients<S> grads, SkinMethod method,
+                                           S* edge_buf) {
+  const Index p = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (p < points.count())
+    skin_backward_point_at<S, DMax>(p, nodes, points, q, t, grad_out, grads, method, edge_buf);
+}
+
+// Backward, node pass of query frame t, node n: its edges in increasing p·D + k.
 template <class S>
-__global__ void skin_backward_node_kernel(SkinNodes<S> nodes, SkinPoints<S> points, Index t,
-                                          SkinBlendGradients<S> grads, const std::int32_t* offsets,
-                                          const std::int64_t* entries, const S* edge_buf) {
-  const Index N = nodes.nodes(), Dmax = points.width();
-  const Index n = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (n >= N) return;
+SMG_HOST_DEVICE inline void skin_backward_node_at(Index n, const SkinNodes<S>& nodes,
+                                                  const SkinPoints<S>& points, Index t,
+                                                  const SkinBlendGradients<S>& grads,
+                                                  const std::int32_t* offsets,
+                                                  const std::int64_t* entries, const S* edge_buf) {
+  const Index Dmax = points.width();
   using V3 = Eigen::Map<const Vector3<S>>;
   Vector3<S> gx_t = Vector3<S>::Zero(), gphi_t = Vector3<S>::Zero();
   for (std::int32_t i = offsets[n]; i < offsets[n + 1]; ++i) {
@@ -268,6 +285,14 @@ __global__ void skin_backward_node_kernel(SkinNodes<S> nodes, SkinPoints<S> poin
   if (grads.node_quaternions.data())
     add_quaternion_gradient_from_tangent(nodes.quaternions.ptr(t, n), gphi_t.data(),
                                          grads.node_quaternions.ptr(t, n));
+}
+
+template <class S>
+__global__ void skin_backward_node_kernel(SkinNodes<S> nodes, SkinPoints<S> points, Index t,
+                                          SkinBlendGradients<S> grads, const std::int32_t* offsets,
+                                          const std::int64_t* entries, const S* edge_buf) {
+  const Index n = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (n < nodes.nodes()) skin_backward_node_at(n, nodes, points, t, grads, offsets, entries, edge_buf);
 }
 
 template <class S, int DMax>

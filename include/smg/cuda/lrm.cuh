@@ -40,15 +40,16 @@ struct LrmKernelArgs {
   Literal<S> scale;    // weight (/ number of terms with Normalization::mean)
 };
 
-// Step 1: one thread per (t, i), e = t·N + i.
+// Step 1, element e = t·N + i (< T·N). The kernels below are thin wrappers of these host-device
+// per-element steps (which also lets a host loop run them, e.g. to check the scheme on a machine
+// without a GPU).
 template <class S, class I, int KMax>
-__global__ void lrm_neighborhood_kernel(PositionsView<const S> x, FrameScalarsView<const S> conf,
-                                        NeighborsView<S, I> graph, LrmKernelArgs<S> args,
+SMG_HOST_DEVICE inline void lrm_term_at(Index e, PositionsView<const S> x,
+                                        FrameScalarsView<const S> conf,
+                                        NeighborsView<S, I> graph, const LrmKernelArgs<S>& args,
                                         Accumulator<S>* energy_terms, S* gx_edges, S* gu_edges,
                                         TangentsView<S> omega) {
   const Index T = x.frames(), N = x.nodes(), K = graph.k();
-  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (e >= T * N) return;
   const Index t = e / N, i = e % N;
   S xs[3 * KMax], us[3 * KMax], a[KMax], gx[3 * KMax], gu[3 * KMax], om[3];
   S scratch[11 * KMax];  // smg::detail::lrm_scratch_size(KMax)
@@ -86,13 +87,21 @@ __global__ void lrm_neighborhood_kernel(PositionsView<const S> x, FrameScalarsVi
   }
 }
 
-// Step 2: one thread per (t, j): the sum over the in-edges of j in increasing slot order.
-template <class S>
-__global__ void lrm_gather_kernel(Index T, Index N, Index K, const std::int32_t* offsets,
-                                  const std::int64_t* entries, const S* gx_edges,
-                                  const S* gu_edges, S* gx_nodes, S* gu_nodes) {
+template <class S, class I, int KMax>
+__global__ void lrm_neighborhood_kernel(PositionsView<const S> x, FrameScalarsView<const S> conf,
+                                        NeighborsView<S, I> graph, LrmKernelArgs<S> args,
+                                        Accumulator<S>* energy_terms, S* gx_edges, S* gu_edges,
+                                        TangentsView<S> omega) {
   const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (e >= T * N) return;
+  if (e < x.frames() * x.nodes())
+    lrm_term_at<S, I, KMax>(e, x, conf, graph, args, energy_terms, gx_edges, gu_edges, omega);
+}
+
+// Step 2, element e = t·N + j: the sum over the in-edges of j in increasing slot order.
+template <class S>
+SMG_HOST_DEVICE inline void lrm_gather_at(Index e, Index N, Index K, const std::int32_t* offsets,
+                                          const std::int64_t* entries, const S* gx_edges,
+                                          const S* gu_edges, S* gx_nodes, S* gu_nodes) {
   const Index t = e / N, j = e % N;
   S ax[3] = {S(0), S(0), S(0)}, au[3] = {S(0), S(0), S(0)};
   const S* bx = gx_edges + 3 * t * N * K;
@@ -110,13 +119,19 @@ __global__ void lrm_gather_kernel(Index T, Index N, Index K, const std::int32_t*
   }
 }
 
-// Step 3: one thread per (s, j): grad(s, j) += ∂L/∂x^s_j + the velocity parts, u^t = x^{t+1} − x^t
+template <class S>
+__global__ void lrm_gather_kernel(Index T, Index N, Index K, const std::int32_t* offsets,
+                                  const std::int64_t* entries, const S* gx_edges,
+                                  const S* gu_edges, S* gx_nodes, S* gu_nodes) {
+  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (e < T * N) lrm_gather_at(e, N, K, offsets, entries, gx_edges, gu_edges, gx_nodes, gu_nodes);
+}
+
+// Step 3, element e = s·N + j: grad(s, j) += ∂L/∂x^s_j + the velocity parts, u^t = x^{t+1} − x^t
 // (t < T − 1), u^{T−1} = x^{T−1} − x^{T−2} (E1, E16). Same operation order as the CPU pass.
 template <class S>
-__global__ void lrm_velocity_kernel(Index T, Index N, const S* gx_nodes, const S* gu_nodes,
-                                    PositionsView<S> grad) {
-  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (e >= T * N) return;
+SMG_HOST_DEVICE inline void lrm_velocity_at(Index e, Index T, Index N, const S* gx_nodes,
+                                            const S* gu_nodes, PositionsView<S> grad) {
   const Index s = e / N, j = e % N;
   S* dst = grad.ptr(s, j);
   auto gu = [&](Index t, int c) { return gu_nodes[3 * (t * N + j) + c]; };
@@ -130,6 +145,13 @@ __global__ void lrm_velocity_kernel(Index T, Index N, const S* gx_nodes, const S
     }
     dst[c] = v;
   }
+}
+
+template <class S>
+__global__ void lrm_velocity_kernel(Index T, Index N, const S* gx_nodes, const S* gu_nodes,
+                                    PositionsView<S> grad) {
+  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (e < T * N) lrm_velocity_at(e, T, N, gx_nodes, gu_nodes, grad);
 }
 
 template <class S, class I, int KMax>
