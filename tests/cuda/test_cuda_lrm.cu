@@ -196,13 +196,15 @@ TEST_CASE("cuda lrm: random cases match the CPU (sum/mean, detach, weights, K up
     Index T, N, K, min_deg;
     bool conf;
   };
-  // Degrees >= 4 (then −1 padding): neighbourhoods of 1-3 random points are (nearly) collinear,
+  // Degrees >= 5 (then −1 padding): neighbourhoods of 1-3 random points are (nearly) collinear,
   // where ω along the line is decided by rounding noise over μ = c_μ trace(A) — amplified ~1e6
   // in double — so that no two implementations (CPU lanes vs GPU with contracted FMAs) agree to
-  // 1e-12 there. Exactly degenerate neighbourhoods are tested below with exact zeros.
-  const Cfg cfgs[] = {{6, 40, 8, 4, true},  {5, 30, 6, 4, false}, {4, 50, 16, 4, true},
-                      {3, 60, 24, 6, true}, {9, 40, 32, 4, true}, {2, 20, 4, 4, true},
-                      {1, 25, 5, 4, true}};
+  // 1e-12 there; with 4 points, float ω still loses ~1e-5 now and then (a host emulation with
+  // FMA contraction measured 6e-6 worst over 100 seeds, 1.5e-6 with 5). Exactly degenerate
+  // neighbourhoods are tested below with exact zeros.
+  const Cfg cfgs[] = {{6, 40, 8, 5, true},  {5, 30, 6, 5, false}, {4, 50, 16, 5, true},
+                      {3, 60, 24, 6, true}, {9, 40, 32, 5, true}, {2, 20, 5, 5, true},
+                      {1, 25, 5, 5, true}};
   std::uint64_t seed = 1;
   for (const Cfg& f : cfgs) {
     std::ostringstream n;
@@ -223,7 +225,7 @@ TEST_CASE("cuda lrm: random cases match the CPU (sum/mean, detach, weights, K up
 
 TEST_CASE("cuda lrm: hard cases (zero-weight rows, empty rows, confidences 0, degenerate)") {
   // Zero-weight rows (valid indices, all weights 0) and rows with no neighbour at all (all −1).
-  LrmCase c = random_case("zero-weight and empty rows", 5, 30, 6, 4, 11, true);
+  LrmCase c = random_case("zero-weight and empty rows", 5, 30, 6, 5, 11, true);
   for (Index i = 0; i < c.N; i += 3)
     for (Index k = 0; k < c.K; ++k) c.w[static_cast<std::size_t>(i * c.K + k)] = 0.0;
   for (Index i = 1; i < c.N; i += 7)
@@ -234,27 +236,27 @@ TEST_CASE("cuda lrm: hard cases (zero-weight rows, empty rows, confidences 0, de
   compare_all(c);
 
   // All confidences 0 (w̃ = α w) and α = 0 (every weight 0: energy 0, gradient 0).
-  c = random_case("all confidences 0", 4, 30, 8, 4, 12, true);
+  c = random_case("all confidences 0", 4, 30, 8, 5, 12, true);
   std::fill(c.c.begin(), c.c.end(), 0.0);
   compare_all(c);
   c.options.alpha = 0.0;
   c.name = "all confidences 0, alpha 0";
   compare_all(c);
 
-  // Degenerate neighbourhoods, exactly: at even frames every node at the origin (x̃ = 0,
-  // trace(A) = 0: the ω = 0 branch) or on the x axis (A singular along it: μ decides ω_x = 0), and
-  // a plane z = 0 at every frame; odd frames are random, so the velocities are not degenerate.
-  // Exact zeros keep rounding noise out of the singular direction on both sides.
-  c = random_case("coincident at even frames", 5, 24, 5, 4, 13, true);
-  for (Index t = 0; t < c.T; t += 2)
-    for (Index k = 0; k < c.N * 3; ++k) c.x[static_cast<std::size_t>(t * c.N * 3 + k)] = 0.0;
+  // Degenerate neighbourhoods, exactly: at frame 0 every node at the origin (x̃ = 0, trace(A) = 0:
+  // the ω = 0 branch; only frame 0, since the velocity into a coincident frame is purely radial,
+  // ω = 0 up to rounding noise), at even frames every node on the x axis (A singular along it: μ
+  // decides ω_x = 0), and a plane z = 0 at every frame; the other frames are random, so the
+  // velocities are not degenerate. Exact zeros keep rounding noise out of the singular direction.
+  c = random_case("coincident at frame 0", 4, 24, 6, 5, 13, true);
+  for (Index k = 0; k < c.N * 3; ++k) c.x[static_cast<std::size_t>(k)] = 0.0;
   compare_all(c);
-  c = random_case("collinear along x at even frames", 5, 24, 5, 4, 14, true);
+  c = random_case("collinear along x at even frames", 5, 24, 6, 5, 14, true);
   for (Index t = 0; t < c.T; t += 2)
     for (Index k = 0; k < c.N * 3; ++k)
       if (k % 3 != 0) c.x[static_cast<std::size_t>(t * c.N * 3 + k)] = 0.0;
   compare_all(c);
-  c = random_case("coplanar z = 0", 4, 24, 5, 4, 15, true);
+  c = random_case("coplanar z = 0", 4, 24, 6, 5, 15, true);
   for (std::size_t k = 2; k < c.x.size(); k += 3) c.x[k] = 0.0;
   compare_all(c);
 
