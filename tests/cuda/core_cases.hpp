@@ -363,21 +363,24 @@ inline std::vector<Case> make_cases(int random_per_kind, unsigned seed = 12345u)
     return cases.back();
   };
 
-  // Rotation vectors: random angles over [0, 2π), small angles, and the branch points.
+  // Rotation vectors: random angles over [0, 2π - 0.3], small angles, and the branch points.
+  // Jr^-1 has a pole at 2π (Log never returns more than π): 0.3 short of it, float rounding of
+  // θ is amplified ~10x in coeff_d; 0.1 short, ~100x, beyond what a device-host comparison at
+  // 1e-5 can resolve.
   std::vector<std::pair<std::string, Vector3<double>>> phis;
   for (int r = 0; r < random_per_kind; ++r) {
     double angle;
     if (r % 4 == 0)
       angle = std::pow(10.0, uniform(-9.0, 0.0));
     else if (r % 4 == 3)
-      angle = uniform(pi, 2 * pi - 0.2);
+      angle = uniform(pi, 2 * pi - 0.3);
     else
       angle = uniform(0.0, pi);
     phis.emplace_back("random", angle * unit3());
   }
   for (double angle : {0.0, 1e-300, 1e-12, 1e-8, 1e-4, 0.1 * (1 - 1e-7), 0.1, 0.1 * (1 + 1e-7),
                        0.9 * (1 - 1e-7), 0.9, 0.9 * (1 + 1e-7), pi - 1e-6, pi, pi + 1e-6,
-                       2 * pi - 0.1}) {
+                       2 * pi - 0.3}) {
     char label[64];
     std::snprintf(label, sizeof label, "hard: |phi| = %.17g", angle);
     phis.emplace_back(label, angle * unit3());
@@ -605,9 +608,13 @@ inline double projection_condition(const Case& c) {
 // conic and the gradients flowing through it are only as accurate as the 2D covariance's
 // condition number κ allows (the conic's rounding error grows as ε κ, the gradients' as ε κ²:
 // they cancel a component of size 1/λmin² down to 1/(λmin λmax)), so there the tolerance is
-// max(tol, 64 ε κ) for the conic and max(tol, 64 ε κ²) for the gradients, and the rotation and
-// scale gradients share one scale (a thin axis' own gradient is cancelled to near 0); random
-// cases keep tol. The radius is ceil(k sqrt(λmax)), so a difference of 1 is
+// max(tol, 64 ε κ) for the conic and max(tol, 64 ε κ²) for the gradients; random cases keep tol.
+// In every projection case the gradients with respect to the Gaussian's shape (v_quat,
+// v_quat_tangent, v_log_scale) are measured against one common scale, that of the three
+// together (normwise: the gradient of a thin axis, or the component of v_quat left after the
+// radial part of the rotation polynomial's gradient is projected out, is a cancelled small
+// number whose own relative error says nothing). The radius is ceil(k sqrt(λmax)), so a
+// difference of 1 is
 // accepted where k sqrt(λmax) is within rounding of an integer; a cull decision that differs
 // between device and host fails, except visible / singular at a κ within a factor 8 of the
 // threshold 1 / (16 ε) (the decision rests on rounding there).
@@ -682,7 +689,7 @@ int compare(const std::vector<Case>& cases, const std::vector<S>& host,
           std::string(b.name) != "rotmat_from_unit_wxyz")
         continue;  // culled: only the cull code is defined
       double scale = b.floor, err = 0;
-      if (c.near_singular && b.conditioned == 2 && std::string(b.name) != "v_mean")
+      if (c.kind == kProjection && b.conditioned == 2 && std::string(b.name) != "v_mean")
         for (int k = 0; k < 10; ++k)  // v_quat, v_quat_tangent, v_log_scale: outputs 14..23
           if (std::isfinite(static_cast<double>(h[14 + k])))
             scale = std::max(scale, std::abs(static_cast<double>(h[14 + k])));
