@@ -18,7 +18,6 @@
 #include <cstdint>
 #include <string>
 #include <type_traits>
-#include <vector>
 
 #include "smg/core/status.hpp"
 #include "smg/core/types.hpp"
@@ -45,15 +44,46 @@ inline bool device_available() {
   return cudaGetDeviceCount(&n) == cudaSuccess && n > 0;
 }
 
-// Stream-ordered device memory (cudaMallocAsync / cudaFreeAsync on the launch stream, so that
-// scratch costs no device-wide synchronisation and is reused from the driver's pool).
+// Where smg's launchers take their scratch memory from. The default is stream-ordered
+// cudaMallocAsync / cudaFreeAsync on the launch stream (no device-wide synchronisation); a
+// framework with its own caching allocator installs it with set_allocator (smg_torch installs
+// PyTorch's, so that smg's scratch is reused from torch's cache). allocate returns nullptr on
+// failure. Process-wide, like smg::set_executor; set it before launching, not during.
+struct Allocator {
+  void* (*allocate)(std::size_t bytes, cudaStream_t stream, void* context) = nullptr;
+  void (*deallocate)(void* pointer, cudaStream_t stream, void* context) = nullptr;
+  void* context = nullptr;
+};
+
+namespace detail {
+inline void* default_allocate(std::size_t bytes, cudaStream_t stream, void*) {
+  void* p = nullptr;
+  return cudaMallocAsync(&p, bytes, stream) == cudaSuccess ? p : nullptr;
+}
+inline void default_deallocate(void* p, cudaStream_t stream, void*) { cudaFreeAsync(p, stream); }
+inline Allocator& allocator_slot() {
+  static Allocator a{&default_allocate, &default_deallocate, nullptr};
+  return a;
+}
+}  // namespace detail
+
+// Installs `a` (an Allocator with null functions restores the default).
+inline void set_allocator(const Allocator& a) {
+  detail::allocator_slot() = a.allocate && a.deallocate
+                                 ? a
+                                 : Allocator{&detail::default_allocate, &detail::default_deallocate, nullptr};
+}
+inline const Allocator& current_allocator() { return detail::allocator_slot(); }
+
+// Scratch device memory from the current Allocator, released on `stream` at scope exit.
 template <class T>
 class DeviceBuffer {
  public:
   DeviceBuffer() = default;
   DeviceBuffer(const DeviceBuffer&) = delete;
   DeviceBuffer& operator=(const DeviceBuffer&) = delete;
-  DeviceBuffer(DeviceBuffer&& o) noexcept : p_(o.p_), n_(o.n_), stream_(o.stream_) {
+  DeviceBuffer(DeviceBuffer&& o) noexcept
+      : p_(o.p_), n_(o.n_), stream_(o.stream_), alloc_(o.alloc_) {
     o.p_ = nullptr;
     o.n_ = 0;
   }
@@ -64,14 +94,19 @@ class DeviceBuffer {
     reset();
     stream_ = stream;
     if (n == 0) return Status::ok();
-    void* p = nullptr;
-    SMG_CUDA_TRY(cudaMallocAsync(&p, n * sizeof(T), stream), "smg::cuda scratch allocation");
+    alloc_ = current_allocator();
+    void* p = alloc_.allocate(n * sizeof(T), stream, alloc_.context);
+    if (p == nullptr) {
+      cudaGetLastError();  // clear a sticky-free allocation error
+      return Status::error("smg::cuda: could not allocate " + std::to_string(n * sizeof(T)) +
+                           " bytes of scratch device memory");
+    }
     p_ = static_cast<T*>(p);
     n_ = n;
     return Status::ok();
   }
   void reset() {
-    if (p_ != nullptr) cudaFreeAsync(p_, stream_);
+    if (p_ != nullptr) alloc_.deallocate(p_, stream_, alloc_.context);
     p_ = nullptr;
     n_ = 0;
   }
@@ -82,6 +117,7 @@ class DeviceBuffer {
   T* p_ = nullptr;
   std::size_t n_ = 0;
   cudaStream_t stream_ = nullptr;
+  Allocator alloc_;  // the one that allocated p_ frees it
 };
 
 // Threads per block of the element-wise kernels.
@@ -90,6 +126,37 @@ constexpr int kThreads = 256;
 inline unsigned grid_for(Index n, int threads = kThreads) {
   return static_cast<unsigned>((n + threads - 1) / threads);
 }
+
+// Launch shape of the per-frame kernels: x over the items of one frame (nodes, or node-neighbour
+// slots; 32-bit, see check_frame_items), y over the frames. Index arithmetic inside a frame then
+// stays in 32 bits: a 64-bit division per thread costs more than the rest of a light kernel.
+inline dim3 frame_grid(Index items_per_frame, Index frames) {
+  return dim3(grid_for(items_per_frame),
+              static_cast<unsigned>(frames < 65535 ? (frames > 0 ? frames : 1) : 65535));
+}
+
+// The item of this thread within its frame (-1 past the end).
+__device__ inline int frame_item(Index items_per_frame) {
+  const Index s = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  return s < items_per_frame ? static_cast<int>(s) : -1;
+}
+
+// Frames of this thread: t = blockIdx.y, blockIdx.y + gridDim.y, ... (more than 65535 frames).
+#define SMG_CUDA_FOR_FRAMES(t, frames) \
+  for (::smg::Index t = blockIdx.y; t < (frames); t += gridDim.y)
+
+// Items per frame must fit the 32-bit in-frame index.
+inline Status check_frame_items(Index items_per_frame, const char* what) {
+  if (items_per_frame < (Index(1) << 31)) return Status::ok();
+  return Status::error(std::string(what) + ": " + std::to_string(items_per_frame) +
+                       " items per frame exceed the CUDA kernels' 32-bit index (2^31 - 1)");
+}
+
+// Four scalars loaded and stored as one aligned vector (one 16-byte access for float).
+template <class S>
+struct alignas(4 * sizeof(S)) Vec4 {
+  S x, y, z, w;
+};
 
 namespace detail {
 // Fixed decomposition of the deterministic sum: kSumBlocks blocks of kThreads threads, each
@@ -146,53 +213,112 @@ Status deterministic_sum(const In* in, Index n, T* out, cudaStream_t stream, T s
 // The in-edges of every node of a graph [N][K] (row i lists the out-edges i -> j): for node j,
 // the slots e = i·K + k with indices(i, k) = j, in increasing e, at entries[offsets[j] ..
 // offsets[j+1]). Kernels use it to gather, in a fixed order, what the edges into a node
-// contribute to its gradient (instead of scattering with atomics). Build it once per graph.
+// contribute to its gradient (instead of scattering with float atomics). offsets[N] is the
+// number of valid entries Σ_i |N(i)| (edge_count of the CPU side), kept on the device.
 struct ReverseGraph {
   DeviceBuffer<std::int32_t> offsets;  // [N + 1]
-  DeviceBuffer<std::int64_t> entries;  // [number of valid entries]
+  DeviceBuffer<std::int64_t> entries;  // [N·K], the first offsets[N] used
   Index nodes = 0;
   Index k = 0;
+  const std::int32_t* edge_count() const { return offsets.get() + nodes; }
 };
 
-// Builds the reverse adjacency from device indices [N][K] (int32 or int64): copies the indices
-// to the host, counts and orders them there (deterministic), and uploads the result on `stream`
-// (synchronises that stream once). Indices must be valid (validate_neighbors).
+namespace detail {
+template <class I>
+__global__ void reverse_count_kernel(const I* indices, Index slots, Index nodes,
+                                     std::int32_t* counts) {
+  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (e >= slots) return;
+  const I j = indices[e];
+  if (j >= 0 && j < nodes) atomicAdd(counts + j, 1);  // integer: the order does not matter
+}
+
+// offsets[0] = 0, offsets[j + 1] = offsets[j] + counts[j]: one block, a fixed sequential scan
+// of per-thread partial sums (N is at most a few million; this is not the hot path). A template
+// only so that a header can define it (a __global__ function cannot be inline).
+template <int = 0>
+__global__ void reverse_scan_kernel(const std::int32_t* counts, Index nodes,
+                                           std::int32_t* offsets) {
+  __shared__ std::int32_t part[kThreads];
+  const Index per = (nodes + kThreads - 1) / kThreads;
+  const Index b = threadIdx.x * per, e = b + per < nodes ? b + per : nodes;
+  std::int32_t sum = 0;
+  for (Index j = b; j < e; ++j) sum += counts[j];
+  part[threadIdx.x] = sum;
+  __syncthreads();
+  if (threadIdx.x == 0) {
+    std::int32_t run = 0;
+    for (int t = 0; t < kThreads; ++t) {
+      const std::int32_t v = part[t];
+      part[t] = run;
+      run += v;
+    }
+    offsets[nodes] = run;
+  }
+  __syncthreads();
+  std::int32_t run = part[threadIdx.x];
+  for (Index j = b; j < e; ++j) {
+    offsets[j] = run;
+    run += counts[j];
+  }
+}
+
+template <class I>
+__global__ void reverse_fill_kernel(const I* indices, Index slots, Index nodes,
+                                    std::int32_t* cursor, std::int64_t* entries) {
+  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (e >= slots) return;
+  const I j = indices[e];
+  if (j >= 0 && j < nodes) entries[atomicAdd(cursor + j, 1)] = e;
+}
+
+// The fill order within a node depends on scheduling: sort each node's few entries, so that
+// the gathers sum in increasing slot order (deterministic).
+template <int = 0>
+__global__ void reverse_sort_kernel(const std::int32_t* offsets, Index nodes,
+                                           std::int64_t* entries) {
+  const Index j = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (j >= nodes) return;
+  for (std::int32_t a = offsets[j] + 1; a < offsets[j + 1]; ++a) {
+    const std::int64_t v = entries[a];
+    std::int32_t b = a;
+    for (; b > offsets[j] && entries[b - 1] > v; --b) entries[b] = entries[b - 1];
+    entries[b] = v;
+  }
+}
+}  // namespace detail
+
+// Builds the reverse adjacency of device indices [N][K] (int32 or int64) on `stream`, entirely
+// on the device (no synchronisation). Indices must be -1 or in [0, N) (validate_neighbors);
+// others are skipped. Build it once per graph and pass it to every energy over that graph.
 template <class I>
 Status build_reverse_graph(const I* indices_device, Index nodes, Index k, cudaStream_t stream,
                            ReverseGraph& out) {
   out.nodes = nodes;
   out.k = k;
-  std::vector<I> idx(static_cast<std::size_t>(nodes * k));
-  if (!idx.empty()) {
-    SMG_CUDA_TRY(cudaMemcpyAsync(idx.data(), indices_device, idx.size() * sizeof(I),
-                                 cudaMemcpyDeviceToHost, stream),
-                 "build_reverse_graph: copy of graph indices");
-    SMG_CUDA_TRY(cudaStreamSynchronize(stream), "build_reverse_graph: synchronise");
+  const Index slots = nodes * k;
+  DeviceBuffer<std::int32_t> counts;
+  if (Status s = out.offsets.allocate(static_cast<std::size_t>(nodes + 1), stream); !s) return s;
+  if (Status s = out.entries.allocate(static_cast<std::size_t>(slots > 0 ? slots : 1), stream); !s)
+    return s;
+  if (Status s = counts.allocate(static_cast<std::size_t>(nodes + 1), stream); !s) return s;
+  SMG_CUDA_TRY(cudaMemsetAsync(counts.get(), 0, sizeof(std::int32_t) * (nodes + 1), stream),
+               "build_reverse_graph");
+  if (slots > 0)
+    detail::reverse_count_kernel<I><<<grid_for(slots), kThreads, 0, stream>>>(indices_device, slots, nodes,
+                                                                               counts.get());
+  detail::reverse_scan_kernel<><<<1, kThreads, 0, stream>>>(counts.get(), nodes, out.offsets.get());
+  // counts becomes the fill cursor: a copy of the offsets.
+  SMG_CUDA_TRY(cudaMemcpyAsync(counts.get(), out.offsets.get(), sizeof(std::int32_t) * (nodes + 1),
+                               cudaMemcpyDeviceToDevice, stream),
+               "build_reverse_graph");
+  if (slots > 0) {
+    detail::reverse_fill_kernel<I><<<grid_for(slots), kThreads, 0, stream>>>(
+        indices_device, slots, nodes, counts.get(), out.entries.get());
+    detail::reverse_sort_kernel<><<<grid_for(nodes), kThreads, 0, stream>>>(out.offsets.get(), nodes,
+                                                                          out.entries.get());
   }
-  std::vector<std::int32_t> offsets(static_cast<std::size_t>(nodes + 1), 0);
-  for (const I j : idx)
-    if (j >= 0 && j < nodes) ++offsets[static_cast<std::size_t>(j) + 1];
-  for (Index j = 0; j < nodes; ++j)
-    offsets[static_cast<std::size_t>(j + 1)] += offsets[static_cast<std::size_t>(j)];
-  std::vector<std::int64_t> entries(static_cast<std::size_t>(offsets.back()));
-  std::vector<std::int32_t> fill(offsets.begin(), offsets.end() - 1);
-  for (std::size_t e = 0; e < idx.size(); ++e) {
-    const I j = idx[e];
-    if (j >= 0 && j < nodes) entries[static_cast<std::size_t>(fill[static_cast<std::size_t>(j)]++)] =
-        static_cast<std::int64_t>(e);
-  }
-  if (Status s = out.offsets.allocate(offsets.size(), stream); !s) return s;
-  if (Status s = out.entries.allocate(entries.size(), stream); !s) return s;
-  SMG_CUDA_TRY(cudaMemcpyAsync(out.offsets.get(), offsets.data(),
-                               offsets.size() * sizeof(std::int32_t), cudaMemcpyHostToDevice, stream),
-               "build_reverse_graph: upload");
-  if (!entries.empty())
-    SMG_CUDA_TRY(cudaMemcpyAsync(out.entries.get(), entries.data(),
-                                 entries.size() * sizeof(std::int64_t), cudaMemcpyHostToDevice,
-                                 stream),
-                 "build_reverse_graph: upload");
-  // The host vectors die at return: wait for the uploads.
-  SMG_CUDA_TRY(cudaStreamSynchronize(stream), "build_reverse_graph: synchronise");
+  SMG_CUDA_TRY(cudaGetLastError(), "build_reverse_graph launch");
   return Status::ok();
 }
 

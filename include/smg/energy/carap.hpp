@@ -146,9 +146,9 @@ inline void edge_frames(Index n, const S* SMG_RESTRICT R, const S* SMG_RESTRICT 
     ex[l] = a;
     ey[l] = b;
     ez[l] = c;
-    dx[l] = R[0 * n + l] * a + R[3 * n + l] * b + R[6 * n + l] * c;
-    dy[l] = R[1 * n + l] * a + R[4 * n + l] * b + R[7 * n + l] * c;
-    dz[l] = R[2 * n + l] * a + R[5 * n + l] * b + R[8 * n + l] * c;
+    const S Rl[9] = {R[0 * n + l], R[1 * n + l], R[2 * n + l], R[3 * n + l], R[4 * n + l],
+                     R[5 * n + l], R[6 * n + l], R[7 * n + l], R[8 * n + l]};
+    carap_edge_vector(Rl, a, b, c, dx[l], dy[l], dz[l]);
   }
 }
 
@@ -253,14 +253,14 @@ inline void backprop(Index n, const S* SMG_RESTRICT R, S* SMG_RESTRICT gx, S* SM
                      const S* SMG_RESTRICT dy, const S* SMG_RESTRICT dz, S* SMG_RESTRICT fi,
                      S* SMG_RESTRICT ri) {
   for (Index l = 0; l < n; ++l) {
-    const S s = h[l] * il[l];
-    const S g0 = gx[l], g1 = gy[l], g2 = gz[l];
-    ri[l] += g1 * dz[l] - g2 * dy[l];
-    ri[n + l] += g2 * dx[l] - g0 * dz[l];
-    ri[2 * n + l] += g0 * dy[l] - g1 * dx[l];
-    const S fx = R[0 * n + l] * g0 + R[1 * n + l] * g1 + R[2 * n + l] * g2 + s * ex[l];
-    const S fy = R[3 * n + l] * g0 + R[4 * n + l] * g1 + R[5 * n + l] * g2 + s * ey[l];
-    const S fz = R[6 * n + l] * g0 + R[7 * n + l] * g1 + R[8 * n + l] * g2 + s * ez[l];
+    const S Rl[9] = {R[0 * n + l], R[1 * n + l], R[2 * n + l], R[3 * n + l], R[4 * n + l],
+                     R[5 * n + l], R[6 * n + l], R[7 * n + l], R[8 * n + l]};
+    S fx, fy, fz, rx, ry, rz;
+    carap_edge_backprop(Rl, gx[l], gy[l], gz[l], h[l], il[l], ex[l], ey[l], ez[l], dx[l], dy[l],
+                        dz[l], fx, fy, fz, rx, ry, rz);
+    ri[l] += rx;
+    ri[n + l] += ry;
+    ri[2 * n + l] += rz;
     gx[l] = fx;
     gy[l] = fy;
     gz[l] = fz;
