@@ -174,6 +174,14 @@ __global__ void energy_usage(smg::PositionsView<const S> positions, smg::Neighbo
   S R[9];
   smg::detail::rotation_from_wxyz(velocity, R);
   out[0] += motion + rigidity + R[0];
+  S dx, dy, dz, fx, fy, fz, rx, ry, rz;
+  smg::carap_edge_vector(R, S(0.1), S(0.2), S(0.3), dx, dy, dz);
+  smg::carap_edge_backprop(R, S(1), S(2), S(3), S(0.5), S(2), S(0.1), S(0.2), S(0.3), dx, dy, dz,
+                           fx, fy, fz, rx, ry, rz);
+  out[0] += fx + fy + fz + rx + ry + rz;
+  // The view accessors the functions above do not reach themselves.
+  out[0] += positions(f.plus, i).sum() + graph.weights.row(i).sum() + S(positions.size()) +
+            S(graph.indices.size() + positions.empty() + graph.weights.empty());
 }
 
 template __global__ void core_usage<float>(const float*, float*);
