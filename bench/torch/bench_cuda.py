@@ -67,6 +67,7 @@ def main():
     N, T, K, P = (500, 20, 16, 2048) if args.quick else (5000, 100, 16, 32768)
     x, q, idx, w = (t.to(dev) for t in energy_scene(N, T, K))
     has = {op: hasattr(smg._C, "cuda_" + op) for op in ("carap", "arap", "lrm", "dqb_forward")}
+    ref_only = ["dqb"] if not has["dqb_forward"] else []
     g = (idx, w)
 
     def loss(f, xs, qs):
@@ -146,6 +147,21 @@ def main():
             run(smg)
             torch.cuda.synchronize()
         print(prof.key_averages().table(sort_by="cuda_time_total", row_limit=25))
+
+    if ref_only and not args.quick:
+        # PyTorch autograd alone (smg's DQB kernels are timed by bench/cuda/bench_cuda, without
+        # the drivers and weights, which a trainer keeps): the reference row for comparison.
+        s = [t.to(dev) for t in skin_scene(N, T, K, P)]
+        xs_, qs_, idx_, w_, pts, pq, anchor, t_ref, t_query, sigma = s
+
+        def dqb_ref():
+            leaves = [t.clone().requires_grad_() for t in (xs_, qs_, pts, pq)]
+            px, pqo = ref.dqb(leaves[0], leaves[1], idx_, leaves[2], leaves[3], anchor, t_ref,
+                              t_query, sigma)
+            (px.sum() + pqo.sum()).backward()
+        t = timed(dqb_ref, args.repeat)
+        print(f"PyTorch autograd DQB fwd+bwd (drivers, weights and blend), P={P} points x {K + 1} "
+              f"drivers, 1 query frame, float32: {t[0] * 1e3:.3f} ms ({t[1] * 1e3:.3f})")
 
     missing = [op for op, ok in has.items() if not ok]
     print(f"smg_torch CUDA vs pure-PyTorch autograd on {name}, CUDA events, best and median of "

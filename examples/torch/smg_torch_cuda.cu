@@ -1,5 +1,5 @@
 // examples/torch/smg_torch_cuda.cu — smg_torch's operators on CUDA tensors: node confidences,
-// C-ARAP and plain ARAP through smg/cuda/ (the same per-element maths as the CPU operators), on
+// C-ARAP, plain ARAP and LRM through smg/cuda/ (the same per-element maths as the CPU operators), on
 // the current stream of the tensors' device. Built when torch has CUDA and nvcc is available
 // (setup.py / CMake); smg_torch._C.has_cuda says whether it was.
 //
@@ -21,6 +21,7 @@
 
 #include "smg/cuda/carap.cuh"
 #include "smg/cuda/confidence.cuh"
+#include "smg/cuda/lrm.cuh"
 #include "smg/cuda/validate.cuh"
 
 namespace smg_torch {
@@ -218,6 +219,40 @@ py::tuple carap_cuda(bool plain, const at::Tensor& positions, const at::Tensor& 
   return py::make_tuple(energy.to(in.st), opt(gx), opt(gq));
 }
 
+py::tuple lrm_cuda(const at::Tensor& positions, const at::Tensor& indices, const at::Tensor& weights,
+                   const OptTensor& confidence, double alpha, double huber_delta, bool detach_omega,
+                   bool normalize, bool grad_x, bool validate) {
+  CudaInputs in = prepare(positions, std::nullopt, indices, weights, confidence);
+  const c10::cuda::CUDAGuard guard(in.device);
+  smg::LrmOptions o;
+  o.alpha = alpha;
+  o.huber_delta = huber_delta;
+  o.detach_omega = detach_omega;
+  o.normalization = normalize ? smg::Normalization::mean : smg::Normalization::sum;
+  at::Tensor gx;
+  if (grad_x) gx = at::zeros({in.T, in.N, 3}, in.x.options());
+  at::Tensor energy = at::empty({}, in.x.options().dtype(at::kDouble));
+  const cudaStream_t stream = c10::cuda::getCurrentCUDAStream(in.device.index()).stream();
+  dispatch(in, [&](auto s, auto i) {
+    using S = decltype(s);
+    using I = decltype(i);
+    const auto gv = graph_view<S, I>(in);
+    const smg::PositionsView<const S> xv(cptr<S>(in.x), in.T, in.N);
+    smg::FrameScalarsView<const S> cv;
+    if (in.c.defined()) cv = {cptr<S>(in.c), in.c.size(0), in.c.size(1)};
+    const smg::PositionsView<S> gxv =
+        grad_x ? smg::PositionsView<S>(mptr<S>(gx), in.T, in.N) : smg::PositionsView<S>();
+    if (validate) ok(smg::cuda::validate_lrm<S, I>(xv, cv, gv, o, gxv, {}, stream));
+    smg::cuda::ReverseGraph rev;
+    ok(smg::cuda::build_reverse_graph(cptr<I>(in.idx), in.N, in.K, stream, rev));
+    using Acc = smg::Accumulator<S>;
+    ok(smg::cuda::lrm<S, I>(xv, cv, gv, o, rev, reinterpret_cast<Acc*>(energy.data_ptr<double>()),
+                            gxv, {}, stream));
+    return 0;
+  });
+  return py::make_tuple(energy.to(in.st), gx.defined() ? py::cast(gx) : py::none());
+}
+
 // smg's scratch from PyTorch's CUDA caching allocator (stream-aware: a block freed on a stream
 // is reused on it without synchronisation).
 void* torch_allocate(std::size_t bytes, cudaStream_t stream, void*) {
@@ -260,6 +295,8 @@ void register_cuda(py::module_& m) {
       },
       "positions"_a, "quats"_a, "indices"_a, "weights"_a, "lambda_c"_a, "lambda_l"_a, "gaps"_a,
       "gap_weights"_a, "normalize"_a, "grad_positions"_a, "grad_quats"_a, "validate"_a);
+  m.def("cuda_lrm", &lrm_cuda, "positions"_a, "indices"_a, "weights"_a, "confidence"_a, "alpha"_a,
+        "huber_delta"_a, "detach_omega"_a, "normalize"_a, "grad_positions"_a, "validate"_a);
 }
 
 }  // namespace smg_torch

@@ -27,7 +27,7 @@ __all__ = ["Graph", "has_cuda", "build_graph", "node_confidences", "carap", "ara
 version = _C.version
 
 #: True when the extension was built with its CUDA operators (smg_torch_cuda.cu): then
-#: node_confidences, carap and arap also take CUDA tensors (all on one device) and run on the
+#: node_confidences, carap, arap and lrm also take CUDA tensors (all on one device) and run on the
 #: device's current stream with the same equations and gradients.
 has_cuda = bool(getattr(_C, "has_cuda", False))
 
@@ -180,27 +180,33 @@ def arap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike, *, lambda_c
 
 class _LrmFunction(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, positions, idx, w, confidence, alpha, huber_delta, detach_omega, normalize):
-        e, gx = _C.lrm(positions.detach(), idx, w.detach(),
-                       None if confidence is None else confidence.detach(), alpha, huber_delta,
-                       detach_omega, normalize, ctx.needs_input_grad[0])
+    def forward(ctx, positions, idx, w, confidence, alpha, huber_delta, detach_omega, normalize,
+                validate):
+        args = (positions.detach(), idx, w.detach(),
+                None if confidence is None else confidence.detach(), alpha, huber_delta,
+                detach_omega, normalize, ctx.needs_input_grad[0])
+        if positions.is_cuda:
+            e, gx = _C.cuda_lrm(*args, validate)
+        else:  # the CPU operators always validate
+            e, gx = _C.lrm(*args)
         ctx.grad = gx
         return e
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, grad_output):
-        return (_scale(grad_output, ctx.grad),) + (None,) * 7
+        return (_scale(grad_output, ctx.grad),) + (None,) * 8
 
 
 def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor] = None, *,
         alpha: float = 0.6, huber_delta: float = 0.01, detach_omega: bool = False,
-        normalize: bool = False) -> torch.Tensor:
-    """Local rigid-motion energy (E11-E16), 0-dim; differentiable w.r.t. positions."""
+        normalize: bool = False, validate: bool = False) -> torch.Tensor:
+    """Local rigid-motion energy (E11-E16), 0-dim; differentiable w.r.t. positions.
+    validate: as for carap (CUDA tensors only; CPU tensors are always validated)."""
     idx, w = _graph(g)
-    _check(positions=positions, indices=idx, weights=w, confidence=confidence)
+    _check_cuda_ok(positions=positions, indices=idx, weights=w, confidence=confidence)
     return _LrmFunction.apply(positions, idx, w, confidence, float(alpha), float(huber_delta),
-                              bool(detach_omega), bool(normalize))
+                              bool(detach_omega), bool(normalize), bool(validate))
 
 
 def _library_seconds(op: str, positions: torch.Tensor, quats: Optional[torch.Tensor], g: GraphLike,

@@ -217,25 +217,34 @@ __global__ void sum_partials_kernel(const In* in, Index n, T* partial) {
 }
 
 template <class T>
-__global__ void sum_final_kernel(const T* partial, int n, T scale, T* out, bool accumulate) {
+__global__ void sum_final_kernel(const T* partial, int n, double scale, T* out, bool accumulate,
+                                 const std::int32_t* count, Index count_factor) {
   __shared__ T shared[kThreads];
   T v(0);
   for (int k = threadIdx.x; k < n; k += blockDim.x) v += partial[k];
-  const T s = block_tree_sum(v, shared) * scale;
+  if (count != nullptr) {  // the mean: scale / (count_factor · *count), 0 for no terms
+    const Index terms = count_factor * static_cast<Index>(*count);
+    scale = terms > 0 ? scale / static_cast<double>(terms) : 0.0;
+  }
+  const T s = block_tree_sum(v, shared) * static_cast<T>(scale);
   if (threadIdx.x == 0) *out = accumulate ? *out + s : s;
 }
 }  // namespace detail
 
 // *out = scale · Σ_k in[k] (or *out += … with accumulate), summed in T in a fixed order (the same
-// bits on every run on a given device). `out` is device memory; nothing is synchronised.
+// bits on every run on a given device). `out` is device memory; nothing is synchronised. With
+// `count` (device memory), scale becomes scale / (count_factor · *count): a mean over a number of
+// terms known only on the device (0 when there are none).
 template <class In, class T>
 Status deterministic_sum(const In* in, Index n, T* out, cudaStream_t stream, T scale = T(1),
-                         bool accumulate = false) {
+                         bool accumulate = false, const std::int32_t* count = nullptr,
+                         Index count_factor = 1) {
   DeviceBuffer<T> partial;
   if (Status s = partial.allocate(detail::kSumBlocks, stream); !s) return s;
   detail::sum_partials_kernel<In, T><<<detail::kSumBlocks, kThreads, 0, stream>>>(in, n, partial.get());
-  detail::sum_final_kernel<T><<<1, kThreads, 0, stream>>>(partial.get(), detail::kSumBlocks, scale, out,
-                                                          accumulate);
+  detail::sum_final_kernel<T><<<1, kThreads, 0, stream>>>(partial.get(), detail::kSumBlocks,
+                                                          static_cast<double>(scale), out,
+                                                          accumulate, count, count_factor);
   SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::deterministic_sum launch");
   return Status::ok();
 }

@@ -37,7 +37,18 @@ template <class S>
 struct LrmKernelArgs {
   smg::detail::LrmParams<S> p;
   Literal<S> alpha;    // α of (E7)
-  Literal<S> scale;    // weight (/ number of terms with Normalization::mean)
+  Literal<S> scale;    // weight (/ number of terms with Normalization::mean), when known on the host
+  // Normalization::mean on the device: the number of edges is the ReverseGraph's device count,
+  // so the scale weight / (T · edges) is formed where it is used (as the CPU forms it).
+  double weight = 1.0;
+  Index frames = 0;
+  const std::int32_t* edge_count = nullptr;
+
+  SMG_HOST_DEVICE Literal<S> gradient_scale() const {
+    if (edge_count == nullptr) return scale;
+    const Index terms = frames * static_cast<Index>(*edge_count);
+    return Literal<S>(terms > 0 ? weight / static_cast<double>(terms) : 0.0);
+  }
 };
 
 // Step 1, element e = t·N + i (< T·N). The kernels below are thin wrappers of these host-device
@@ -76,13 +87,14 @@ SMG_HOST_DEVICE inline void lrm_term_at(Index e, PositionsView<const S> x,
     for (int c = 0; c < 3; ++c) o[c] = om[c];
   }
   if (!args.p.gradient) return;
+  const Literal<S> scale = args.gradient_scale();
   for (Index k = 0; k < K; ++k) {
     if (graph.indices(i, k) < 0) break;
     S* dx = gx_edges + 3 * (e * K + k);
     S* du = gu_edges + 3 * (e * K + k);
     for (int c = 0; c < 3; ++c) {
-      dx[c] = args.scale * gx[c * K + k];
-      du[c] = args.scale * gu[c * K + k];
+      dx[c] = scale * gx[c * K + k];
+      du[c] = scale * gu[c * K + k];
     }
   }
 }
@@ -233,10 +245,11 @@ Status validate_lrm_cuda(PositionsView<const S> positions, FrameScalarsView<cons
 // Deterministic: same bits on every run on a given device. Shapes and options are validated on
 // the host first (validate_lrm_cuda); CUDA errors come back as the Status.
 template <class S, class I>
-Status lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
+Status lrm(smg::detail::NonDeducedT<PositionsView<const S>> positions,
+           smg::detail::NonDeducedT<FrameScalarsView<const S>> confidence,
            NeighborsView<S, I> graph, const LrmOptions& options, const ReverseGraph& reverse,
-           Accumulator<S>* energy_device, PositionsView<S> grad_positions, TangentsView<S> omega,
-           cudaStream_t stream) {
+           Accumulator<S>* energy_device, smg::detail::NonDeducedT<PositionsView<S>> grad_positions,
+           smg::detail::NonDeducedT<TangentsView<S>> omega, cudaStream_t stream) {
   using L = Literal<S>;
   using Acc = Accumulator<S>;
   if (Status s = validate_lrm_cuda(positions, confidence, graph, options, reverse, grad_positions,
@@ -244,12 +257,8 @@ Status lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidenc
       !s)
     return s;
   const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
-  const Index edges = static_cast<Index>(reverse.entries.size());
-  double scale = options.weight;
-  if (options.normalization == Normalization::mean && T * edges > 0)
-    scale /= static_cast<double>(T * edges);
-  if (T == 0 || N == 0 || K == 0 ||
-      (options.normalization == Normalization::mean && T * edges == 0)) {
+  const bool mean = options.normalization == Normalization::mean;
+  if (T == 0 || N == 0 || K == 0) {
     // Energy 0 and no gradient, as the CPU version; omega untouched there too.
     if (energy_device)
       SMG_CUDA_TRY(cudaMemsetAsync(energy_device, 0, sizeof(Acc), stream),
@@ -262,7 +271,10 @@ Status lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidenc
   args.p.detach_omega = options.detach_omega;
   args.p.gradient = grad_positions.data() != nullptr;
   args.alpha = L(options.alpha);
-  args.scale = L(scale);
+  args.scale = L(options.weight);
+  args.weight = options.weight;
+  args.frames = T;
+  args.edge_count = mean ? reverse.edge_count() : nullptr;
 
   const Index n = T * N;
   DeviceBuffer<Acc> terms;
@@ -297,7 +309,9 @@ Status lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidenc
     SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::lrm: velocity kernel launch");
   }
   if (energy_device)
-    if (Status s = deterministic_sum(terms.get(), n, energy_device, stream, Acc(scale)); !s)
+    if (Status s = deterministic_sum(terms.get(), n, energy_device, stream, Acc(options.weight),
+                                     false, mean ? reverse.edge_count() : nullptr, T);
+        !s)
       return s;
   return Status::ok();
 }
