@@ -30,27 +30,32 @@ Status validate_skin_drivers(const NeighborsView<S, I>& graph, SkinIndexView anc
                                                                    "drivers");
 }
 
+// The driver row of one point with anchor node a: row[0..K] = (a, the valid neighbours of a in
+// graph order, −1 padding). Host-device: skin_drivers and the CUDA kernel
+// (smg/cuda/skin_weights.cuh) both build each row with it.  (S1)
+template <class S, class I>
+SMG_HOST_DEVICE inline void skin_drivers_row(const NeighborsView<S, I>& graph, std::int32_t a,
+                                             std::int32_t* row) {
+  const Index K = graph.k();
+  row[0] = a;
+  Index c = 1;
+  for (Index k = 0; k < K; ++k) {
+    const Index j = graph.indices(a, k);
+    if (j < 0) break;
+    row[c++] = static_cast<std::int32_t>(j);
+  }
+  for (; c <= K; ++c) row[c] = -1;
+}
+
 // out[p] = (anchor[p], the valid neighbours of anchor[p] in graph order, −1 padding):
 // D = K + 1 columns. A node without neighbours drives its points alone.  (S1)
 template <class S, class I>
 void skin_drivers(const NeighborsView<S, I>& graph, SkinIndexView anchor,
                   TableView<std::int32_t, Eigen::Dynamic> out, ParallelOptions options = {}) {
-  const Index K = graph.k();
   parallel_for(
       anchor.rows(),
       [&](Index begin, Index end) {
-        for (Index p = begin; p < end; ++p) {
-          const std::int32_t a = anchor(p, 0);
-          std::int32_t* row = out.ptr(p);
-          row[0] = a;
-          Index c = 1;
-          for (Index k = 0; k < K; ++k) {
-            const Index j = graph.indices(a, k);
-            if (j < 0) break;
-            row[c++] = static_cast<std::int32_t>(j);
-          }
-          for (; c <= K; ++c) row[c] = -1;
-        }
+        for (Index p = begin; p < end; ++p) skin_drivers_row(graph, anchor(p, 0), out.ptr(p));
       },
       options);
 }

@@ -51,7 +51,7 @@ inline Status check_weight_inputs(PositionsView<const S> positions, SkinDriversV
 
 // Gathers one point's driver positions (at t_ref) and sigmas; returns the driver count.
 template <class S>
-inline Index skin_load_weight_inputs(PositionsView<const S> positions, SkinDriversView drivers,
+SMG_HOST_DEVICE inline Index skin_load_weight_inputs(PositionsView<const S> positions, SkinDriversView drivers,
                                      SkinIndexView t_ref, TableView<const S, 1> sigma, Index p,
                                      Vector3<S>* x, S* sg) {
   const Index tr = t_ref(p, 0);
@@ -64,6 +64,24 @@ inline Index skin_load_weight_inputs(PositionsView<const S> positions, SkinDrive
     ++D;
   }
   return D;
+}
+
+// The weights row of point p: weights_out[p][k] = w_pk (S2)-(S4), 0 on padding; x and sg are
+// scratch of drivers.cols() entries. Returns true when the fallback (S4) was used.
+// Host-device: skinning_weights and the CUDA kernel (smg/cuda/skin_weights.cuh) both compute
+// each point with it.
+template <class S>
+SMG_HOST_DEVICE inline bool skinning_weights_row(PositionsView<const S> positions,
+                                                 SkinDriversView drivers, SkinIndexView t_ref,
+                                                 TableView<const S, 3> points,
+                                                 TableView<const S, 1> sigma,
+                                                 TableView<S, Eigen::Dynamic> weights_out, Index p,
+                                                 Vector3<S>* x, S* sg) {
+  const Index D = skin_load_weight_inputs(positions, drivers, t_ref, sigma, p, x, sg);
+  S* w = weights_out.ptr(p);
+  const bool fallback = skinning_weights_point<S>(Vector3<S>(points.row(p)), D, x, sg, w);
+  for (Index k = D; k < drivers.cols(); ++k) w[k] = S(0);
+  return fallback;
 }
 }  // namespace detail
 
@@ -110,14 +128,10 @@ Index skinning_weights(detail::NonDeducedT<PositionsView<const S>> positions,
         std::vector<Vector3<S>> x(static_cast<std::size_t>(Dmax));
         std::vector<S> sg(static_cast<std::size_t>(Dmax));
         Index fallbacks = 0;
-        for (Index p = begin; p < end; ++p) {
-          const Index D =
-              detail::skin_load_weight_inputs(positions, drivers, t_ref, sigma, p, x.data(), sg.data());
-          S* w = weights_out.ptr(p);
-          if (skinning_weights_point<S>(Vector3<S>(points.row(p)), D, x.data(), sg.data(), w))
+        for (Index p = begin; p < end; ++p)
+          if (detail::skinning_weights_row<S>(positions, drivers, t_ref, points, sigma,
+                                              weights_out, p, x.data(), sg.data()))
             ++fallbacks;
-          for (Index k = D; k < Dmax; ++k) w[k] = S(0);
-        }
         return fallbacks;
       },
       [](Index a, Index b) { return a + b; }, options);
