@@ -56,7 +56,7 @@ class Params {
       if (eq == std::string::npos) continue;
       std::string name = kv.substr(10, eq - 10);
       for (char& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-      raw_[name] = {kv.substr(eq + 1), "SMG_BENCH_" + kv.substr(10, eq - 10)};
+      env_[name] = {kv.substr(eq + 1), "SMG_BENCH_" + kv.substr(10, eq - 10)};
     }
     int out = 1;
     for (int a = 1; a < argc; ++a) {
@@ -131,8 +131,9 @@ class Params {
   }
   int repetitions() const { return reps_; }
 
-  // After every parameter was read: --smg_help prints them and exits; unknown names are errors
-  // (a typo must not silently run the default size). Records the resolved values in the context.
+  // After every parameter was read: --smg_help prints them and exits; unknown flags are errors
+  // (a typo must not silently run the default size). SMG_BENCH_* variables another binary
+  // reads (scripts/bench.sh runs several with one environment) are ignored here. Records the resolved values in the context.
   void finish() {
     if (help_) {
       std::printf("bench_%s parameters (flag --name=value, or environment SMG_BENCH_NAME=value):\n",
@@ -155,8 +156,11 @@ class Params {
  private:
   std::string take(const std::string& name, const std::string& fallback, const std::string& help) {
     used_[name] = true;
-    const auto it = raw_.find(name);
-    const std::string v = it == raw_.end() ? fallback : it->second.first;
+    std::string v = fallback;
+    if (raw_.count(name))
+      v = raw_.at(name).first;
+    else if (env_.count(name))
+      v = env_.at(name).first;
     docs_.push_back({name, fallback, help});
     values_[name] = v;
     return v;
@@ -167,7 +171,8 @@ class Params {
   }
 
   std::string module_;
-  std::map<std::string, std::pair<std::string, std::string>> raw_;  // name -> (value, where)
+  std::map<std::string, std::pair<std::string, std::string>> raw_;  // flags: name -> (value, flag)
+  std::map<std::string, std::pair<std::string, std::string>> env_;  // SMG_BENCH_*: name -> (value, variable)
   std::map<std::string, bool> used_;
   std::map<std::string, std::string> values_;
   std::vector<std::vector<std::string>> docs_;
