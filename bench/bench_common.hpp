@@ -267,8 +267,14 @@ class Json : public benchmark::JSONReporter {
 // ---- registration -----------------------------------------------------------------------------
 // The protocol every row follows: wall time, process CPU time, `reps` repetitions (aggregates
 // only: mean, median, stddev, cv and min) when reps > 1.
-inline benchmark::internal::Benchmark* protocol(benchmark::internal::Benchmark* b, int reps) {
-  b->UseRealTime()->MeasureProcessCPUTime();
+// manual_time: the row times itself (SetIterationTime) instead of the wall time of the loop.
+inline benchmark::internal::Benchmark* protocol(benchmark::internal::Benchmark* b, int reps,
+                                                bool manual_time = false) {
+  if (manual_time)
+    b->UseManualTime();
+  else
+    b->UseRealTime();
+  b->MeasureProcessCPUTime();
   if (reps > 1) {
     b->Repetitions(reps)->ReportAggregatesOnly(true)->ComputeStatistics(
         "min", [](const std::vector<double>& v) { return *std::min_element(v.begin(), v.end()); });

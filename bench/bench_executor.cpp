@@ -93,6 +93,6 @@ int main(int argc, char** argv) {
   const int reps = p.reps(1);
   p.finish();
   auto* b = benchmark::RegisterBenchmark("BM_after_openmp", BM_after_openmp)->Arg(0)->Arg(1)->Arg(2);
-  smg_bench::protocol(b, reps)->UseManualTime()->Unit(benchmark::kMillisecond);
+  smg_bench::protocol(b, reps, /*manual_time=*/true)->Unit(benchmark::kMillisecond);
   return smg_bench::run(argc, argv);
 }

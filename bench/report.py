@@ -75,10 +75,23 @@ class Result:
         self.path = path
         self.context = data.get("context", {})
         runs = data.get("benchmarks", [])
-        self.repetitions = max([b.get("repetitions", 1) for b in runs] or [1])
-        medians = [b for b in runs if b.get("aggregate_name") == "median"]
-        self.aggregated = bool(medians)
-        self.rows = medians if medians else [b for b in runs if b.get("run_type", "iteration") == "iteration"]
+        # Per row: the median aggregate when it was repeated, otherwise its single iteration run.
+        self.rows, seen = [], {}
+        for b in runs:
+            key = b.get("run_name", b["name"])
+            if b.get("run_type", "iteration") == "aggregate" and b.get("aggregate_name") != "median":
+                continue
+            if key in seen:
+                if b.get("aggregate_name") == "median":
+                    self.rows[seen[key]] = b
+                continue
+            seen[key] = len(self.rows)
+            self.rows.append(b)
+        self.aggregated = any(b.get("aggregate_name") == "median" for b in self.rows)
+        self.reps = {}
+        for b in self.rows:
+            r = b.get("repetitions", 1) if b.get("aggregate_name") == "median" else 1
+            self.reps[r] = self.reps.get(r, 0) + 1
         self.mins = {b.get("run_name", b["name"]): b for b in runs if b.get("aggregate_name") == "min"}
         for b in self.rows:
             b["clean"] = clean_name(b.get("run_name", b["name"]))
@@ -150,12 +163,15 @@ def header(res, module, raw):
     else:
         cpu = ("`cpu` is Google Benchmark's default CPU time (main thread only) — a run from before "
                "the process-CPU convention; re-run to get it")
+    counts = ", ".join(f"{n} row{'s' if n > 1 else ''} {r} repetition{'s' if r > 1 else ''}"
+                       for r, n in sorted(res.reps.items(), reverse=True))
     if res.aggregated:
-        proto = (f"*Noise protocol:* {res.repetitions} repetitions per row; times and counters "
-                 f"are the median of the repetitions, `wall min` the fastest repetition; {cpu}.")
+        proto = (f"*Noise protocol:* {counts}; a repeated row shows the median of its repetitions "
+                 f"(times and counters) and, as `wall min`, its fastest repetition; a row run once "
+                 f"is a single measurement (scripts/bench.sh --reps N repeats every row); {cpu}.")
     else:
         proto = (f"*Noise protocol:* one repetition per row (a single measurement: no median or "
-                 f"min; scripts/bench.sh --reps N repeats); {cpu}.")
+                 f"min; scripts/bench.sh --reps N repeats every row); {cpu}.")
     out.append(proto)
     return " ".join(out[:1]) + "\n\n" + "\n".join(f"- {x}" for x in out[1:]) + "\n"
 
@@ -267,7 +283,7 @@ def locality_lines(res):
             continue
         what = b["clean"].split("/")[1]
         s.append(f"Node order, `{what}` {b['clean'].split('/')[-1]}: random order {fmt(ms(b))} ms, "
-                 f"Morton order {fmt(ms(m))} ms — **{fmt(ms(b) / ms(m))}× faster** sorted "
+                 f"Morton order {fmt(ms(m))} ms: speed-up of the sorted order **{fmt(ms(b) / ms(m))}×** "
                  f"(mean |i − j| over edges {fmt(b.get('mean_edge_span'))} → "
                  f"{fmt(m.get('mean_edge_span'))}; energies equal to "
                  f"{fmt(max(b.get('energy_vs_input_order', 0), m.get('energy_vs_input_order', 0)))}).")

@@ -11,8 +11,9 @@
 #   --tag TAG                        name the results <module>-TAG.json (a second size, say)
 #   --publish                        also copy the results into bench/results/ and regenerate
 #                                    docs/performance.md from bench/results/*.json
-#   --smoke                          every row very briefly, 1 repetition, into build/bench-smoke;
-#                                    checks the report generator (CI)
+#   --smoke                          every row very briefly, 1 repetition, smaller autodiff and
+#                                    splatter problems, into build/bench-smoke; checks the
+#                                    report generator (CI)
 #
 # Problem sizes, gaps, threads and precision are the binaries' run-time parameters, passed as
 # SMG_BENCH_* environment variables (bench/README.md), e.g. C-ARAP at N = 20000, T = 50, K = 8,
@@ -23,7 +24,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 usage() {
-  sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//' >&2
+  sed -n '2,23p' "$0" | sed 's/^# \{0,1\}//' >&2
   exit 2
 }
 smoke=0 publish=0 filter='' out='' tag='' reps=''
@@ -68,6 +69,10 @@ if [ "$smoke" = 1 ]; then
   out=${out:-$build/bench-smoke}
   extra+=(--benchmark_min_time=0.001)
   export SMG_BENCH_REPS=${reps:-1}
+  # Smaller problems where the default ones take most of a minute: autodiff on 2 frames, the
+  # splatter at 10k Gaussians (the caller's SMG_BENCH_* values win).
+  export SMG_BENCH_AD_FRAMES=${SMG_BENCH_AD_FRAMES:-2}
+  export SMG_BENCH_G=${SMG_BENCH_G:-10000} SMG_BENCH_KNOB_G=${SMG_BENCH_KNOB_G:-10000}
 else
   out=${out:-build/bench-results}
   [ -z "$reps" ] || export SMG_BENCH_REPS=$reps
