@@ -140,6 +140,8 @@ def header(res, module, raw):
                    f"(the Debian package) was compiled, not smg; it does not change the measured "
                    f"code.")
         out.append(f"*Parameters:* `{c.get('smg_params', '?')}`.")
+    elif module == "torch":
+        out.append(f"*smg build:* {c.get('library_build_type', '?')} (as bench_torch.py records it).")
     else:
         out.append(f"*smg build:* not recorded (a run from before the build was recorded; "
                    f"Google Benchmark's library build type: {c.get('library_build_type', '?')}, "
@@ -156,7 +158,9 @@ def header(res, module, raw):
         load.append(f"other processes kept {fmt(min(others))}–{fmt(max(others))} of the "
                     f"{cpus} CPUs busy while the rows ran (column `others`)")
     out.append("*Load:* " + ("; ".join(load) if load else "not recorded") + ".")
-    if "smg_cpu_time" in c:
+    if module == "torch":
+        cpu = "bench_torch.py measures wall time only (no CPU column)"
+    elif "smg_cpu_time" in c:
         cpu = ("`cpu` is the process CPU time over all threads per iteration (Google Benchmark's "
                "MeasureProcessCPUTime), beside the wall time (UseRealTime); `cpu/wall` near the "
                "thread count means the threads had the CPUs to themselves")
@@ -176,7 +180,7 @@ def header(res, module, raw):
     return " ".join(out[:1]) + "\n\n" + "\n".join(f"- {x}" for x in out[1:]) + "\n"
 
 
-def table(res):
+def table(res, with_cpu=True):
     rows = res.rows
     counters = []
     for b in rows:
@@ -191,7 +195,7 @@ def table(res):
             integer[k] = False
     has_min = bool(res.mins)
     has_others = any("others_cpus" in b for b in rows)
-    head = ["benchmark", "wall"] + (["wall min"] if has_min else []) + ["cpu", "cpu/wall"]
+    head = ["benchmark", "wall"] + (["wall min"] if has_min else []) + (["cpu", "cpu/wall"] if with_cpu else [])
     head += ["others [CPUs]"] if has_others else []
     head += [f"{k} [{unit_of(k)}]" if unit_of(k) else k for k in counters]
     out = ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|"]
@@ -205,8 +209,9 @@ def table(res):
         if has_min:
             m = res.min_of(b)
             row.append(f"{fmt(m)} {u}" if m is not None else "")
-        row.append(f"{fmt(b['cpu_time'])} {u}")
-        row.append(fmt(b["cpu_time"] / b["real_time"]) if b.get("real_time") else "n/a")
+        if with_cpu:
+            row.append(f"{fmt(b['cpu_time'])} {u}")
+            row.append(fmt(b["cpu_time"] / b["real_time"]) if b.get("real_time") else "n/a")
         if has_others:
             row.append(fmt(b.get("others_cpus")) if "others_cpus" in b else "")
         row += [fmt(b.get(k), integer[k]) if k in b else "" for k in counters]
@@ -303,7 +308,19 @@ def summary_core(res):
     return s
 
 
-SUMMARIES = {"energy": summary_energy, "core": summary_core}
+def summary_torch(res):
+    s = []
+    for b in res.rows:
+        if isinstance(b.get("speedup"), (int, float)) and math.isfinite(b["speedup"]):
+            s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}, "
+                     f"PyTorch autograd {fmt(b.get('pytorch_ms'))} ms — {fmt(b['speedup'])}× faster.")
+        elif "pytorch_ms" in b:
+            s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}; "
+                     f"no PyTorch reference at this size.")
+    return s
+
+
+SUMMARIES = {"energy": summary_energy, "core": summary_core, "torch": summary_torch}
 
 
 def torch_baseline(d):
@@ -346,7 +363,7 @@ def section(module, files, d):
         if summary:
             out.append("**Summary** (generated from this run's numbers):\n\n"
                        + "\n".join(f"- {x}" for x in summary) + "\n")
-        out.append(table(res))
+        out.append(table(res, with_cpu=module != "torch"))
     if module == "energy":
         out.append(per_term_comparison(files, d))
         out.append(torch_baseline(d))
