@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# scripts/bench.sh [options] [MODULE...] — build and run the Google Benchmark suite.
+# scripts/bench.sh [options] [MODULE...] [-- ARGS...] — build and run the Google Benchmark suite.
 #
 #   scripts/bench.sh                 run every bench/bench_<module> into build/bench-results/
 #                                    (<module>.json, <module>.load, performance.md); the committed
@@ -11,6 +11,8 @@
 #   --tag TAG                        name the results <module>-TAG.json (a second size, say)
 #   --publish                        also copy the results into bench/results/ and regenerate
 #                                    docs/performance.md from bench/results/*.json
+#   -- ARGS...                       pass the remaining arguments to every binary (e.g.
+#                                    --benchmark_enable_random_interleaving=true, --n=20000)
 #   --smoke                          every row very briefly, 1 repetition, smaller autodiff and
 #                                    splatter problems, into build/bench-smoke; checks the
 #                                    report generator (CI)
@@ -24,11 +26,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 usage() {
-  sed -n '2,23p' "$0" | sed 's/^# \{0,1\}//' >&2
+  sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//' >&2
   exit 2
 }
 smoke=0 publish=0 filter='' out='' tag='' reps=''
-modules=()
+modules=() passthrough=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --smoke) smoke=1 ;;
@@ -42,6 +44,7 @@ while [ $# -gt 0 ]; do
     --reps) [ $# -ge 2 ] || usage; reps=$2; shift ;;
     --reps=*) reps=${1#--reps=} ;;
     -h|--help) usage ;;
+    --) shift; passthrough=("$@"); break ;;
     -*) echo "scripts/bench.sh: unknown option $1" >&2; usage ;;
     *) modules+=("$1") ;;
   esac
@@ -78,6 +81,7 @@ else
   [ -z "$reps" ] || export SMG_BENCH_REPS=$reps
 fi
 [ -z "$filter" ] || extra+=("--benchmark_filter=$filter")
+extra+=(${passthrough[@]+"${passthrough[@]}"})
 mkdir -p "$out"
 for m in "${modules[@]}"; do
   name=$m${tag:+-$tag}
@@ -86,7 +90,7 @@ for m in "${modules[@]}"; do
     echo "loadavg_before $(cut -d' ' -f1-3 /proc/loadavg)"
     echo "nproc $(nproc)"
   } > "$out/$name.load"
-  "$build/bench/bench_$m" "${extra[@]}" --benchmark_out="$out/$name.json" --benchmark_out_format=json
+  "$build/bench/bench_$m" ${extra[@]+"${extra[@]}"} --benchmark_out="$out/$name.json" --benchmark_out_format=json
   echo "loadavg_after $(cut -d' ' -f1-3 /proc/loadavg)" >> "$out/$name.load"
 done
 python3 bench/report.py "$out" > "$out/performance.md"
