@@ -44,6 +44,13 @@ def fmt(value, integer=False):
     return f"{value:.3g}"
 
 
+def fmt_time(value):
+    """A time: fixed point, never scientific notation."""
+    if isinstance(value, (int, float)) and math.isfinite(value) and abs(value) >= 100:
+        return f"{value:.0f}"
+    return fmt(value)
+
+
 def unit_of(counter):
     """The unit of a counter, from its name (bench/README.md lists the naming rule)."""
     if counter.startswith("ns_per") or counter.endswith("_ns"):
@@ -205,12 +212,12 @@ def table(res, with_cpu=True):
                                          + [""] * (len(head) - 2)) + " |")
             continue
         u = b.get("time_unit", "ns")
-        row = [b["clean"], f"{fmt(b['real_time'])} {u}"]
+        row = [b["clean"], f"{fmt_time(b['real_time'])} {u}"]
         if has_min:
             m = res.min_of(b)
-            row.append(f"{fmt(m)} {u}" if m is not None else "")
+            row.append(f"{fmt_time(m)} {u}" if m is not None else "")
         if with_cpu:
-            row.append(f"{fmt(b['cpu_time'])} {u}")
+            row.append(f"{fmt_time(b['cpu_time'])} {u}")
             row.append(fmt(b["cpu_time"] / b["real_time"]) if b.get("real_time") else "n/a")
         if has_others:
             row.append(fmt(b.get("others_cpus")) if "others_cpus" in b else "")
@@ -307,15 +314,25 @@ def locality_lines(res):
     return s
 
 
+def param(res, name):
+    m = re.search(rf"(?:^| ){name}=(\S+)", res.context.get("smg_params", ""))
+    return m.group(1) if m else None
+
+
 def summary_core(res):
     s = []
+    batch = float(param(res, "n") or 1024)
+    ns = {"ns": 1.0, "us": 1e3, "ms": 1e6, "s": 1e9}
     for fn in ("exp", "log", "rotate"):
         for jac in ("false", "true"):
             d = res.one(rf"^BM_{fn}<double, {jac}>")
             f = res.one(rf"^BM_{fn}<float, {jac}>")
             if d and f and "ns_per_call" in d and "ns_per_call" in f:
+                cd = d["cpu_time"] * ns[d.get("time_unit", "ns")] / batch
+                cf = f["cpu_time"] * ns[f.get("time_unit", "ns")] / batch
                 s.append(f"`{fn}`{' with Jacobians' if jac == 'true' else ''}: double "
-                         f"{fmt(d['ns_per_call'])} ns, float {fmt(f['ns_per_call'])} ns per call; "
+                         f"{fmt(d['ns_per_call'])} ns, float {fmt(f['ns_per_call'])} ns per call "
+                         f"(wall; in CPU time {fmt(cd)} and {fmt(cf)} ns); "
                          f"float error {fmt(f.get('err_vs_double'))} on identical inputs.")
     return s
 
