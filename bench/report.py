@@ -289,7 +289,7 @@ def summary_energy(res):
 
 def locality_lines(res):
     s = []
-    for b in res.find(r"^locality/.*/random/"):
+    for b in sorted(res.find(r"^locality/.*/random/"), key=lambda r: r["clean"]):
         m = res.one("^" + re.escape(b["clean"].replace("/random/", "/morton/")) + "$")
         if not m:
             continue
