@@ -403,7 +403,17 @@ def per_term_comparison(files, d):
     """Per-term cost of the same rows at every size that was run."""
     if len(files) < 2:
         return ""
-    results = [(n, Result(os.path.join(d, n + ".json"))) for n in files]
+    # One result per problem size (a rerun of some rows at the same size, such as the
+    # interleaved locality run, measures noise, not size).
+    results, sizes = [], set()
+    for n in files:
+        r = Result(os.path.join(d, n + ".json"))
+        size = tuple(param(r, k) for k in ("n", "t", "k", "gaps"))
+        if size not in sizes:
+            sizes.add(size)
+            results.append((n, r))
+    if len(results) < 2:
+        return ""
     names = []
     for _, r in results:
         for b in r.rows:
@@ -412,8 +422,14 @@ def per_term_comparison(files, d):
     names = [n for n in names if sum(1 for _, r in results if r.one("^" + re.escape(n) + "$")) > 1]
     if not names:
         return ""
+    def others(r):
+        v = sorted(b["others_cpus"] for b in r.rows if isinstance(b.get("others_cpus"), (int, float)))
+        return fmt(v[len(v) // 2]) if v else "?"
     out = ["### energy: per-term cost at each size (ns per term, median wall time / terms)\n",
-           "| row | " + " | ".join(f"`{r.context.get('smg_params', n)}`" for n, r in results) + " |",
+           "Each column is one run (`N/T/K/gaps`, and the median over its rows of the CPUs other "
+           "processes kept busy: compare columns run under similar load).\n",
+           "| row | " + " | ".join(f"`{n}.json`: {param(r, 'n')}/{param(r, 't')}/{param(r, 'k')}/"
+                                    f"{param(r, 'gaps')}, others {others(r)}" for n, r in results) + " |",
            "|---|" + "---:|" * len(results)]
     for n in names:
         cells = []
@@ -421,6 +437,20 @@ def per_term_comparison(files, d):
             b = r.one("^" + re.escape(n) + "$")
             cells.append(fmt(b["ns_per_term"]) if b and "ns_per_term" in b else "")
         out.append(f"| {n} | " + " | ".join(cells) + " |")
+    lines = []
+    (n0, r0), rest = results[0], results[1:]
+    for key in ("BM_carap<float, true>/threads:1", "BM_lrm<float, 1>/threads:1",
+                "locality/carap_grad<float>/random/threads:1", "locality/carap_grad<float>/morton/threads:1",
+                "locality/lrm_grad<float>/random/threads:1", "locality/lrm_grad<float>/morton/threads:1"):
+        b0 = r0.one("^" + re.escape(key) + "$")
+        for n1, r1 in rest:
+            b1 = r1.one("^" + re.escape(key) + "$")
+            if b0 and b1 and b0.get("ns_per_term") and b1.get("ns_per_term"):
+                lines.append(f"`{key}`: {fmt(b0['ns_per_term'])} ns per term in `{n0}.json`, "
+                             f"{fmt(b1['ns_per_term'])} ns in `{n1}.json` "
+                             f"(×{fmt(b1['ns_per_term'] / b0['ns_per_term'])}).")
+    if lines:
+        out.append("\nFrom the table:\n\n" + "\n".join(f"- {x}" for x in lines))
     return "\n".join(out) + "\n"
 
 
