@@ -178,8 +178,9 @@ double reference_error(smg::SkinMethod m) {
   return err;
 }
 
-// ns_per_point: wall time per point (a plain number); blend_rate: point x driver blends per
-// second (a rate, printed with its /s unit).
+// ns_per_point: wall time per point; blend_rate: point x driver blends per second of wall time
+// (both measured around the loop: Google Benchmark's kIsRate would divide by the process CPU
+// time of all threads).
 void rates(benchmark::State& state, const smg_bench::Stopwatch& clock, smg::Index points, smg::Index edges) {
   const double seconds = clock.seconds();
   state.counters["ns_per_point"] = smg_bench::per(state, seconds, double(points), 1e9);
