@@ -12,8 +12,15 @@ Usage: scripts/check_docs.py [REPO_ROOT]   (standard library only; exit 1 on any
 (d) every label cited in README.md, docs/**/*.md, bench/notes/*.md and code comments ("(E12)",
     "S1–S19", "(R20)-(R26)") is defined in docs/math; a range's both ends and everything between
     must exist; README's per-page ranges ("docs/math/skin.md, S1–S19") must span the page's
-    labels exactly; files under splat/ must not cite skin's S labels and files under skin/ must
+    labels exactly, one range for each prefix the page defines; files under splat/ must not cite skin's S labels and files under skin/ must
     not cite splat's R labels.
+
+(e) docs/quickstart.md shows every file of examples/quickstart/ byte for byte: a line
+    "<!-- file: examples/quickstart/X -->" is followed by a fenced block whose content is
+    exactly that file (the programs are built and run by ctest, tests/CMakeLists.txt); every
+    file there is shown once, and the command blocks that scripts/check_packaging.sh runs
+    ("<!-- run: ... -->" in docs/quickstart.md and README.md) exist.
+    `scripts/check_docs.py --sync-quickstart` rewrites the page's blocks from the files.
 
 Prints one line per problem, "path:line: message", and exits 1 if there are any.
 """
@@ -23,7 +30,9 @@ import re
 import subprocess
 import sys
 
-ROOT = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else
+SYNC = "--sync-quickstart" in sys.argv[1:]
+ARGS = [a for a in sys.argv[1:] if a != "--sync-quickstart"]
+ROOT = os.path.abspath(ARGS[0] if ARGS else
                        os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 SELF = os.path.relpath(os.path.abspath(__file__), ROOT)
 
@@ -197,8 +206,6 @@ def labels_in(span):
     return out
 
 
-PAGE_RANGE = re.compile(r"docs/math/(\w+)\.md`?[^|\n]*?\b(([%s])(\d{1,2})\s*[-–]\s*\3(\d{1,2}))"
-                        % PREFIXES)
 
 for f, text in sorted(TEXT.items()):
     for n, span in cited_spans(f, text):
@@ -212,13 +219,115 @@ for f, text in sorted(TEXT.items()):
             if "/skin/" in "/" + f and page.endswith("splat.md"):
                 problem(f, n, "skin file cites splat's label (%s)" % label)
         if f == "README.md":
-            for m in PAGE_RANGE.finditer(span):
-                page, prefix = "docs/math/%s.md" % m.group(1), m.group(3)
-                nums = sorted(int(l[1:]) for l, p in page_of.items()
-                              if p == page and l[0] == prefix)
-                if nums and (int(m.group(4)), int(m.group(5))) != (nums[0], nums[-1]):
-                    problem(f, n, "range %s does not match %s, which has %s%d–%s%d"
-                            % (m.group(2), page, prefix, nums[0], prefix, nums[-1]))
+            # Every range after a page's name on the line ("docs/math/core.md`, C1–C9, Q1–Q5,
+            # D1–D6") must span that page's labels of its prefix exactly, and every prefix the
+            # page defines must have its range there.
+            for m in re.finditer(r"docs/math/(\w+)\.md`?([^|\n]*)", span):
+                page = "docs/math/%s.md" % m.group(1)
+                prefixes = sorted({l[0] for l, p in page_of.items() if p == page})
+                ranges = list(re.finditer(r"\b([%s])(\d{1,2})\s*[-–]\s*\1(\d{1,2})\b" % PREFIXES,
+                                          m.group(2).split("docs/math/")[0]))
+                if not ranges:
+                    continue
+                seen = set()
+                for r in ranges:
+                    prefix = r.group(1)
+                    seen.add(prefix)
+                    nums = sorted(int(l[1:]) for l, p in page_of.items()
+                                  if p == page and l[0] == prefix)
+                    if not nums:
+                        problem(f, n, "range %s: %s defines no %s labels" % (r.group(0), page, prefix))
+                    elif (int(r.group(2)), int(r.group(3))) != (nums[0], nums[-1]):
+                        problem(f, n, "range %s does not match %s, which has %s%d–%s%d"
+                                % (r.group(0), page, prefix, nums[0], prefix, nums[-1]))
+                for prefix in prefixes:
+                    if prefix not in seen:
+                        problem(f, n, "%s defines %s labels; the README gives no range for them"
+                                % (page, prefix))
+
+# ---------------------------------------------------------------------------------------------
+# (e) the quick-start page shows the quick-start files byte for byte
+QS_PAGE, QS_DIR = "docs/quickstart.md", "examples/quickstart/"
+FILE_MARK = re.compile(r"^<!-- file: (\S+) -->$")
+RUN_MARKS = {QS_PAGE: ["<!-- run: find_package -->"],
+             "README.md": ["<!-- run: copied headers -->"]}
+
+
+def quickstart_blocks(text):
+    """(marker line index, path, first content line index, closing fence index) per marker."""
+    lines = text.split("\n")
+    out = []
+    for n, line in enumerate(lines):
+        m = FILE_MARK.match(line)
+        if not m:
+            continue
+        if n + 1 >= len(lines) or not lines[n + 1].startswith("```"):
+            out.append((n, m.group(1), None, None))
+            continue
+        end = n + 2
+        while end < len(lines) and lines[end] != "```":
+            end += 1
+        out.append((n, m.group(1), n + 2, end if end < len(lines) else None))
+    return lines, out
+
+
+qs_text = read_text(QS_PAGE)
+if qs_text is None:
+    problem(QS_PAGE, 1, "missing: the quick-start page")
+else:
+    lines, blocks = quickstart_blocks(qs_text)
+    shown = {}
+    for n, path, first, end in blocks:
+        if first is None or end is None:
+            problem(QS_PAGE, n + 1, "%s: the marker must be followed by a closed ``` block" % path)
+            continue
+        if path in shown:
+            problem(QS_PAGE, n + 1, "%s shown twice (first at line %d)" % (path, shown[path]))
+        shown[path] = n + 1
+        content = read_text(path)
+        if content is None:
+            problem(QS_PAGE, n + 1, "%s: no such file" % path)
+            continue
+        block = "\n".join(lines[first:end]) + "\n"
+        if block != content:
+            if SYNC:
+                continue  # rewritten below
+            a, b = block.split("\n"), content.split("\n")
+            k = next((i for i in range(min(len(a), len(b))) if a[i] != b[i]), min(len(a), len(b)))
+            problem(QS_PAGE, first + 1 + k,
+                    "block differs from %s at its line %d (run scripts/check_docs.py "
+                    "--sync-quickstart)" % (path, k + 1))
+    if SYNC:
+        # Replace each block with its file, last block first (earlier indices stay valid).
+        new = qs_text
+        for _ in range(2):
+            lines2, blocks2 = quickstart_blocks(new)
+            changed = False
+            for n, path, first, end in reversed(blocks2):
+                content = read_text(path)
+                if first is None or end is None or content is None:
+                    continue
+                want = content[:-1].split("\n") if content.endswith("\n") else content.split("\n")
+                if lines2[first:end] != want:
+                    lines2[first:end] = want
+                    changed = True
+            new = "\n".join(lines2)
+            if not changed:
+                break
+        with open(os.path.join(ROOT, QS_PAGE), "w", encoding="utf-8") as f:
+            f.write(new)
+        print("synced %s from %s*" % (QS_PAGE, QS_DIR))
+    on_disk = sorted(f for f in FILES if f.startswith(QS_DIR))
+    for f in on_disk:
+        if f not in shown:
+            problem(QS_PAGE, 1, "%s is not shown in the page (add a '<!-- file: %s -->' block)"
+                    % (f, f))
+for page, marks in RUN_MARKS.items():
+    text = read_text(page) or ""
+    for mark in marks:
+        if mark not in text.split("\n"):
+            problem(page, 1, "missing the command block '%s' that scripts/check_packaging.sh runs"
+                    % mark)
 
 for p in problems:
     print(p)

@@ -1,8 +1,12 @@
 #!/usr/bin/env bash
 # scripts/check_packaging.sh — prove the three ways of consuming smg:
-#   1. cmake --install, then find_package(smg) from an out-of-tree project (tests/consumer);
+#   1. cmake --install, then find_package(smg) from an out-of-tree project (tests/consumer), and
+#      docs/quickstart.md's find_package command block run as written (examples/quickstart);
 #   2. add_subdirectory(smg) from that project;
-#   3. copying include/ next to Eigen: a plain compiler call, no CMake.
+#   3. copying include/ next to Eigen: README's "Copy the headers" command block run as written
+#      on a quick-start program, and a plain compiler call on tests/consumer.
+# The command blocks are the fenced blocks after "<!-- run: NAME -->" in those pages; they run
+# in a fresh copy of the repository's tracked files (git ls-files) with HOME in a scratch folder.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh cmake make g++ libeigen3-dev
@@ -29,3 +33,32 @@ g++ -std=c++17 -Wall -Wextra -Wpedantic -Werror -I"$work/copied/include" -I/usr/
     tests/consumer/main.cpp -o "$work/copied/smg_consumer" -pthread
 "$work/copied/smg_consumer"
 echo "packaging: copied include/ + Eigen: ok"
+
+# The command block after "<!-- run: NAME -->" in a markdown page.
+run_block() {  # page name
+  awk -v mark="<!-- run: $2 -->" '
+    $0 == mark { armed = 1; next }
+    armed && /^```/ { if (inside) exit; inside = 1; next }
+    inside { print }' "$1"
+}
+# A fresh copy of the tracked files: what a new clone has.
+mkdir -p "$work/fresh/smg" "$work/home"
+git ls-files -z | (cd "$root" && xargs -0 cp --parents -t "$work/fresh/smg")
+
+block=$(run_block docs/quickstart.md find_package)
+[ -n "$block" ] || { echo "packaging: docs/quickstart.md has no find_package block" >&2; exit 1; }
+(cd "$work/fresh/smg" && HOME="$work/home" bash -euo pipefail -c "$block") >"$work/qs.log" 2>&1 ||
+  { cat "$work/qs.log"; echo "packaging: docs/quickstart.md find_package block failed" >&2; exit 1; }
+for p in views energies dqb render; do
+  "$work/fresh/smg/build/quickstart/quickstart_$p" | tail -n 1 | grep -qx "quickstart $p: ok"
+done
+echo "packaging: docs/quickstart.md find_package route (examples/quickstart, 4 programs): ok"
+
+block=$(run_block README.md "copied headers")
+[ -n "$block" ] || { echo "packaging: README.md has no copied-headers block" >&2; exit 1; }
+mkdir -p "$work/fresh/my_project"
+cp examples/quickstart/energies.cpp "$work/fresh/my_project/main.cpp"
+(cd "$work/fresh" && HOME="$work/home" bash -euo pipefail -c "$block") ||
+  { echo "packaging: README.md copied-headers block failed" >&2; exit 1; }
+"$work/fresh/my_project/main" | tail -n 1 | grep -qx "quickstart energies: ok"
+echo "packaging: README.md copied-headers route, as written: ok"

@@ -9,7 +9,7 @@ cd "$(dirname "$0")/.."
 scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev cppcheck clang-tidy
 build=${SMG_BUILD_DIR:-build/lint}
 cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Debug -DCMAKE_EXPORT_COMPILE_COMMANDS=ON -DSMG_BUILD_BENCH=OFF \
-      -DSMG_BUILD_TORCH=OFF >/dev/null
+      -DSMG_BUILD_TORCH=OFF -DSMG_BUILD_CUDA=OFF >/dev/null
 
 echo "== cppcheck"
 cppcheck --quiet --error-exitcode=1 --std=c++17 --language=c++ --inline-suppr \

@@ -6,6 +6,9 @@
 #   scripts/test.sh --sanitize   AddressSanitizer + UndefinedBehaviorSanitizer build in
 #                                build/asan (tests and examples only), run all tests
 #
+# The Release mode also compiles the CUDA tests (tests/cuda) where nvcc exists: test_cuda runs the
+# GPU kernels against the CPU on a machine with a CUDA device and prints one "skipped" line
+# without one. The sanitizer build leaves CUDA out.
 # The Release mode also builds the PyTorch extension (examples/torch) and runs tests/torch with
 # Debian's /usr/bin/python3 when libtorch-dev, pybind11-dev, python3-torch and python3-pytest
 # are installed (one line says so when they are not); the sanitizer build never builds it.
@@ -23,7 +26,7 @@ jobs=$(nproc)
 if [ "$mode" = asan ]; then
   build=${SMG_BUILD_DIR:-build/asan}
   cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSMG_WERROR=ON -DSMG_SANITIZE=ON \
-        -DSMG_BUILD_BENCH=OFF -DSMG_BUILD_TORCH=OFF
+        -DSMG_BUILD_BENCH=OFF -DSMG_BUILD_TORCH=OFF -DSMG_BUILD_CUDA=OFF
   export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1}
   export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 else

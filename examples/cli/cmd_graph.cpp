@@ -39,7 +39,7 @@ void run_graph(const Invocation& inv, JsonLine& summary) {
   out.commit(inv.out_dir);
   summary.add("N", N).add("T", g.frames).add("C", C);
   add_graph_summary(g, summary);
-  summary.add("float", inv.use_float).add("seconds", g.seconds);
+  summary.add("precision", inv.use_float ? "float32" : "float64").add("seconds", g.seconds);
 }
 
 }  // namespace

@@ -208,8 +208,8 @@ void render_case(const Invocation& inv, JsonLine& summary) {
   summary.add("G", G).add("H", H).add("W", W).add("C", C).add("sh_degree", sh_degree)
       .add("visible", static_cast<std::int64_t>(ws.n_visible))
       .add("intersections", static_cast<std::int64_t>(ws.n_isect))
-      .add("backward", backward).add("dtype", sizeof(S) == 4 ? "float32" : "float64")
-      .add("seconds_forward", t_fwd).add("seconds_backward", t_bwd);
+      .add("backward", backward).add("precision", sizeof(S) == 4 ? "float32" : "float64")
+      .add("seconds", t_fwd + t_bwd).add("seconds_forward", t_fwd).add("seconds_backward", t_bwd);
 }
 
 }  // namespace

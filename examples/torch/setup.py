@@ -10,7 +10,8 @@ import glob
 import os
 
 from setuptools import setup
-from torch.utils.cpp_extension import BuildExtension, CppExtension
+import torch
+from torch.utils.cpp_extension import CUDA_HOME, BuildExtension, CppExtension, CUDAExtension
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.abspath(os.path.join(HERE, "..", ".."))
@@ -18,16 +19,29 @@ sources = sorted(glob.glob(os.path.join(HERE, "smg_torch_*.cpp")))
 parts = [os.path.basename(s)[len("smg_torch_"):-4] for s in sources]
 macros = [("SMG_TORCH_" + p.upper(), None) for p in parts if p in ("skin", "splat", "graph")]
 
+include_dirs = [os.path.join(ROOT, "include"), HERE,
+                os.environ.get("EIGEN3_INCLUDE_DIR", "/usr/include/eigen3")]
+# The CUDA operators (smg_torch_cuda.cu) when torch has CUDA and nvcc is found (CUDA_HOME);
+# SMG_TORCH_NO_CUDA=1 builds the CPU operators only. -DNDEBUG as in CMake's Release build: smg's
+# debug assertions (SMG_ASSERT: bounds checks on every view access) stay off in the extension.
+with_cuda = (torch.version.cuda is not None and CUDA_HOME is not None
+             and os.environ.get("SMG_TORCH_NO_CUDA", "0") != "1")
+if with_cuda:
+    ext = CUDAExtension(
+        "smg_torch._C", sources + [os.path.join(HERE, "smg_torch_cuda.cu")],
+        include_dirs=include_dirs, define_macros=macros + [("SMG_TORCH_CUDA", None)],
+        extra_compile_args={"cxx": ["-O3", "-std=c++17", "-DNDEBUG"],
+                            "nvcc": ["-O3", "-std=c++17", "-DNDEBUG", "--expt-relaxed-constexpr",
+                                     "-diag-suppress=20012"]})
+else:
+    ext = CppExtension("smg_torch._C", sources, include_dirs=include_dirs, define_macros=macros,
+                       extra_compile_args=["-O3", "-std=c++17", "-DNDEBUG"])
+
 setup(
     name="smg_torch",
     version="0.1.0",
     packages=["smg_torch"],
     package_dir={"smg_torch": "smg_torch"},  # relative to this file (pip runs setup.py here)
-    ext_modules=[CppExtension(
-        "smg_torch._C", sources,
-        include_dirs=[os.path.join(ROOT, "include"), HERE,
-                      os.environ.get("EIGEN3_INCLUDE_DIR", "/usr/include/eigen3")],
-        define_macros=macros,
-        extra_compile_args=["-O3", "-std=c++17"])],
+    ext_modules=[ext],
     cmdclass={"build_ext": BuildExtension},
 )

@@ -163,5 +163,6 @@ void register_energy(py::module_& m);
 void register_skin(py::module_& m);
 void register_splat(py::module_& m);
 void register_graph(py::module_& m);
+void register_cuda(py::module_& m);
 
 }  // namespace smg_torch

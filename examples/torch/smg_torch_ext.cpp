@@ -20,4 +20,9 @@ PYBIND11_MODULE(_C, m) {
 #ifdef SMG_TORCH_GRAPH
   smg_torch::register_graph(m);
 #endif
+#ifdef SMG_TORCH_CUDA
+  smg_torch::register_cuda(m);  // smg_torch_cuda.cu: cuda_* operators, has_cuda = True
+#else
+  m.attr("has_cuda") = false;
+#endif
 }

@@ -110,7 +110,15 @@ TEST_CASE("smg_cli energies: outputs and summary match the library") {
   CHECK(json_number(r.out, "carap") == doctest::Approx(ec).epsilon(1e-9));
   CHECK(json_number(r.out, "lrm") == doctest::Approx(el).epsilon(1e-9));
   CHECK(json_number(r.out, "arap") == doctest::Approx(ea).epsilon(1e-9));
-  CHECK(json_number(r.out, "seconds") >= 0);
+  // Per-part timings (each >= 0) and their sum.
+  const double s_conf = json_number(r.out, "seconds_confidence"), s_carap = json_number(r.out, "seconds_carap"),
+               s_lrm = json_number(r.out, "seconds_lrm"), s_arap = json_number(r.out, "seconds_arap");
+  CHECK(s_conf >= 0);
+  CHECK(s_carap >= 0);
+  CHECK(s_lrm >= 0);
+  CHECK(s_arap >= 0);
+  CHECK(json_number(r.out, "seconds") == doctest::Approx(s_conf + s_carap + s_lrm + s_arap).epsilon(1e-6));
+  CHECK(r.out.find("\"precision\":\"float64\"") != std::string::npos);
   const std::vector<std::int64_t> tn = {s.T, s.N}, tn3 = {s.T, s.N, 3};
   CHECK(max_diff(load(o / "confidence.npy", npy::DType::f64, tn), conf) == 0.0);
   CHECK(max_diff(load(o / "grad_positions_carap.npy", npy::DType::f64, tn3), gxc) == 0.0);

@@ -83,7 +83,8 @@ TEST_CASE("smg_cli: summary line, errors with exit code 2") {
   Run r = run_cli("check " + dir.string());
   CHECK(r.code == 0);
   CHECK(r.err.empty());
-  CHECK(r.out.rfind("{\"subcommand\":\"check\",\"T\":3,\"N\":4,\"C\":0,\"files\":[\"positions.npy\",\"visibility.npy\"]", 0) == 0);
+  CHECK(r.out.rfind("{\"subcommand\":\"check\",\"T\":3,\"N\":4,\"C\":0,\"files\":[\"positions.npy\",\"visibility.npy\"],"
+                    "\"precision\":\"float64\",\"seconds\":", 0) == 0);
   CHECK(std::count(r.out.begin(), r.out.end(), '\n') == 1);
 
   r = run_cli("frobnicate x y");

@@ -160,7 +160,7 @@ TEST_CASE("smg_cli graph: flags reach the library; --float writes float32") {
   CHECK(has(r.out, "\"K\":5,"));
   CHECK(has(r.out, "\"aggregation\":\"robust_max\""));
   CHECK(has(r.out, "\"segment_frames\":3,"));
-  CHECK(has(r.out, "\"float\":true"));
+  CHECK(has(r.out, "\"precision\":\"float32\",\"seconds\":"));
   smg::GraphOptions o;
   o.knn.k = 5;
   o.knn.distance.aggregation = smg::Aggregation::robust_max;

@@ -117,7 +117,7 @@ TEST_CASE("smg_cli dqb writes the library's blend; --lbs, --float and --threads"
     CHECK(r.err.empty());
     CHECK(r.out.rfind("{\"subcommand\":\"dqb\",\"method\":\"" + method +
                           "\",\"T\":4,\"N\":10,\"K\":3,\"P\":25,\"Q\":3,\"graph_built\":false,"
-                          "\"weight_fallbacks\":0,\"dtype\":\"float64\",\"seconds\":",
+                          "\"weight_fallbacks\":0,\"precision\":\"float64\",\"seconds\":",
                       0) == 0);
     const npy::Array bp = npy::read((out / "blended_points.npy").string());
     const npy::Array bq = npy::read((out / "blended_quats.npy").string());
@@ -139,7 +139,7 @@ TEST_CASE("smg_cli dqb writes the library's blend; --lbs, --float and --threads"
     const fs::path outf = out.string() + "_f";
     r = run_cli("dqb " + c.dir.string() + " " + outf.string() + flag + " --float");
     REQUIRE(r.code == 0);
-    CHECK(r.out.find("\"dtype\":\"float32\"") != std::string::npos);
+    CHECK(r.out.find("\"precision\":\"float32\"") != std::string::npos);
     const npy::Array fp = npy::read((outf / "blended_points.npy").string());
     CHECK(fp.dtype == npy::DType::f32);
     CHECK(max_abs_diff(fp.as<double>(), ref.first) < 1e-5);

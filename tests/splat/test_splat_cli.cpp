@@ -72,6 +72,9 @@ TEST_CASE("smg_cli render: images and gradients match the library") {
   CHECK(r.code == 0);
   CHECK(r.err.empty());
   CHECK(r.out.rfind("{\"subcommand\":\"render\",\"G\":40,\"H\":20,\"W\":30,\"C\":3,", 0) == 0);
+  CHECK(r.out.find("\"backward\":true,\"precision\":\"float64\",\"seconds\":") != std::string::npos);
+  CHECK(r.out.find("\"seconds_forward\":") != std::string::npos);
+  CHECK(r.out.find("\"seconds_backward\":") != std::string::npos);
 
   const double bg[3] = {0.1, 0.2, 0.3};
   SplatSettings<double> set;

@@ -85,7 +85,7 @@ def carap(x, q, indices, weights, confidence=None, alpha=0.6, lambda_c=1.0, lamb
     e = x[:, j] - x[:, :, None]                                # [T, N, K, 3]
     d = torch.einsum("tnba,tnkb->tnka", R, e)                  # (E8) d = Rᵀ e
     L = safe_norm(e)                                           # ‖d‖ = ‖e‖
-    c = torch.ones(T, N, dtype=x.dtype) if confidence is None else confidence.detach()
+    c = torch.ones(T, N, dtype=x.dtype, device=x.device) if confidence is None else confidence.detach()
     wt = w[None] * (alpha + (1 - alpha) * c[:, j])             # (E7) at the earlier frame
     gw = [1.0] * len(gaps) if gap_weights is None else list(gap_weights)
     E = x.new_zeros(())
@@ -116,7 +116,7 @@ def lrm(x, indices, weights, confidence=None, alpha=0.6, huber_delta=0.01, detac
     """(E11)-(E14); autograd gives (E15)-(E16), including omega's dependence on the positions."""
     T, N = x.shape[:2]
     j, w, mask = _graph(indices, weights, x.dtype)
-    c = torch.ones(T, N, dtype=x.dtype) if confidence is None else confidence.detach()
+    c = torch.ones(T, N, dtype=x.dtype, device=x.device) if confidence is None else confidence.detach()
     wt = w[None] * (alpha + (1 - alpha) * c[:, j])             # [T, N, K]
     S = wt.sum(2, keepdim=True)
     wh = torch.where(S > 0, wt / torch.where(S > 0, S, torch.ones_like(S)), torch.zeros_like(wt))
@@ -126,7 +126,7 @@ def lrm(x, indices, weights, confidence=None, alpha=0.6, huber_delta=0.01, detac
     vbar = (wh[..., None] * uj).sum(2)
     xt = xj - g[:, :, None]                                    # (E11)
     ut = uj - vbar[:, :, None]
-    eye = torch.eye(3, dtype=x.dtype)
+    eye = torch.eye(3, dtype=x.dtype, device=x.device)
     n2 = (xt * xt).sum(-1)
     A = (wh[..., None, None] * (n2[..., None, None] * eye - xt[..., :, None] * xt[..., None, :])).sum(2)
     b = (wh[..., None] * _cross(xt, ut)).sum(2)                # (E12)
@@ -195,7 +195,7 @@ def dqb(node_positions, node_quats, indices, points, point_quats, anchor, t_ref,
     w = skinning_weights(node_positions, drivers, t_ref, points, sigma)  # [P, D]
     d = drivers.clamp(min=0)
     q = node_quats / node_quats.norm(dim=-1, keepdim=True)
-    qp = (torch.tensor([1.0, 0, 0, 0], dtype=points.dtype).expand(points.shape[0], 4)
+    qp = (torch.tensor([1.0, 0, 0, 0], dtype=points.dtype, device=points.device).expand(points.shape[0], 4)
           if point_quats is None else point_quats / point_quats.norm(dim=-1, keepdim=True))
     tr = t_ref.long()[:, None]
     x_ref, q_ref = node_positions[tr, d], q[tr, d]                        # [P, D, ...]
@@ -207,7 +207,7 @@ def dqb(node_positions, node_quats, indices, points, point_quats, anchor, t_ref,
         # (S8) signs relative to the pivot (largest weight, first on ties) in canonical sign
         with torch.no_grad():
             piv = w.argmax(1)
-            rp = r[torch.arange(r.shape[0]), piv]
+            rp = r[torch.arange(r.shape[0], device=r.device), piv]
             sign_p = torch.where(rp[:, 0] != 0, rp[:, 0].sign(), torch.zeros_like(rp[:, 0]))
             for c in (1, 2, 3):
                 sign_p = torch.where(sign_p == 0, rp[:, c].sign(), sign_p)

@@ -22,11 +22,17 @@ import torch
 
 from . import _C  # noqa: E402  (after torch: the module links against libtorch)
 
-__all__ = ["Graph", "build_graph", "node_confidences", "carap", "arap", "lrm", "dqb", "render", "version"]
+__all__ = ["Graph", "has_cuda", "build_graph", "node_confidences", "carap", "arap", "lrm", "dqb", "render", "version"]
 
 version = _C.version
 
-_CUDA_MESSAGE = "smg_torch: CUDA tensors are not supported yet (CPU only)"
+#: True when the extension was built with its CUDA operators (smg_torch_cuda.cu): then
+#: node_confidences, carap and arap also take CUDA tensors (all on one device) and run on the
+#: device's current stream with the same equations and gradients.
+has_cuda = bool(getattr(_C, "has_cuda", False))
+
+_CUDA_MESSAGE = "smg_torch: CUDA tensors are not supported by this operator (CPU only)"
+_NO_CUDA_MESSAGE = "smg_torch: CUDA tensors need smg_torch built with CUDA (smg_torch.has_cuda is False)"
 
 
 class Graph(NamedTuple):
@@ -50,11 +56,13 @@ def _graph(g) -> Tuple[torch.Tensor, torch.Tensor]:
     raise ValueError("graph: expected smg_torch.Graph or a tuple (indices, weights)")
 
 
-def _tensor(x, name: str) -> torch.Tensor:
+def _tensor(x, name: str, cuda_ok: bool = False) -> torch.Tensor:
     if not isinstance(x, torch.Tensor):
         raise ValueError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
-    if x.is_cuda:
+    if x.is_cuda and not cuda_ok:
         raise NotImplementedError(_CUDA_MESSAGE)
+    if x.is_cuda and not has_cuda:
+        raise NotImplementedError(_NO_CUDA_MESSAGE)
     return x
 
 
@@ -62,6 +70,14 @@ def _check(**tensors) -> None:
     for name, t in tensors.items():
         if t is not None:
             _tensor(t, name)
+
+
+def _check_cuda_ok(**tensors) -> None:
+    """For the operators with a CUDA implementation: CPU or CUDA tensors (the extension then
+    checks that they are all on positions' device)."""
+    for name, t in tensors.items():
+        if t is not None:
+            _tensor(t, name, cuda_ok=True)
 
 
 def _gap_args(gaps, gap_weights):
@@ -94,13 +110,17 @@ def build_graph(positions: torch.Tensor, visibility: Optional[torch.Tensor] = No
 
 def node_confidences(positions: torch.Tensor, g: GraphLike, visibility: Optional[torch.Tensor] = None,
                      *, kappa_m: float = 2.5, kappa_r: float = 2.5, lambda_m: float = 1.0,
-                     lambda_r: float = 1.0, eps: float = 1e-4) -> torch.Tensor:
-    """c_{t,i} (docs/math/energy.md E2-E6), [T, N], no gradient (a constant for the energies)."""
+                     lambda_r: float = 1.0, eps: float = 1e-4, validate: bool = False) -> torch.Tensor:
+    """c_{t,i} (docs/math/energy.md E2-E6), [T, N], no gradient (a constant for the energies).
+    validate: as for carap (CUDA tensors only; CPU tensors are always validated)."""
     idx, w = _graph(g)
-    _check(positions=positions, indices=idx, weights=w, visibility=visibility)
+    _check_cuda_ok(positions=positions, indices=idx, weights=w, visibility=visibility)
+    args = (positions.detach(), idx, w.detach(), visibility, float(kappa_m), float(kappa_r),
+            float(lambda_m), float(lambda_r), float(eps))
     with torch.no_grad():
-        return _C.node_confidences(positions.detach(), idx, w.detach(), visibility, float(kappa_m),
-                                   float(kappa_r), float(lambda_m), float(lambda_r), float(eps))
+        if positions.is_cuda:
+            return _C.cuda_node_confidences(*args, bool(validate))
+        return _C.node_confidences(*args)
 
 
 def _scale(grad_output, g):
@@ -110,15 +130,16 @@ def _scale(grad_output, g):
 class _CarapFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx, positions, quats, idx, w, confidence, plain, alpha, lambda_c, lambda_l, gaps,
-                gap_weights, normalize):
+                gap_weights, normalize, validate):
         need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
-        if plain:
-            e, gx, gq = _C.arap(positions.detach(), quats.detach(), idx, w.detach(), lambda_c,
-                                lambda_l, gaps, gap_weights, normalize, need_x, need_q)
-        else:
-            e, gx, gq = _C.carap(positions.detach(), quats.detach(), idx, w.detach(),
-                                 None if confidence is None else confidence.detach(), alpha,
-                                 lambda_c, lambda_l, gaps, gap_weights, normalize, need_x, need_q)
+        args = (positions.detach(), quats.detach(), idx, w.detach())
+        if not plain:
+            args += (None if confidence is None else confidence.detach(), alpha)
+        args += (lambda_c, lambda_l, gaps, gap_weights, normalize, need_x, need_q)
+        if positions.is_cuda:
+            e, gx, gq = (_C.cuda_arap if plain else _C.cuda_carap)(*args, validate)
+        else:  # the CPU operators always validate
+            e, gx, gq = (_C.arap if plain else _C.carap)(*args)
         ctx.grads = (gx, gq)
         return e
 
@@ -126,30 +147,35 @@ class _CarapFunction(torch.autograd.Function):
     @torch.autograd.function.once_differentiable
     def backward(ctx, grad_output):
         gx, gq = ctx.grads
-        return (_scale(grad_output, gx), _scale(grad_output, gq)) + (None,) * 10
+        return (_scale(grad_output, gx), _scale(grad_output, gq)) + (None,) * 11
 
 
 def carap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike,
           confidence: Optional[torch.Tensor] = None, *, alpha: float = 0.6, lambda_c: float = 1.0,
           lambda_l: float = 1.0, gaps: Sequence[int] = (1, 2, 4),
-          gap_weights: Optional[Sequence[float]] = None, normalize: bool = False) -> torch.Tensor:
-    """Confidence-aware ARAP energy (E7-E10), 0-dim; differentiable w.r.t. positions and quats."""
+          gap_weights: Optional[Sequence[float]] = None, normalize: bool = False,
+          validate: bool = False) -> torch.Tensor:
+    """Confidence-aware ARAP energy (E7-E10), 0-dim; differentiable w.r.t. positions and quats.
+    CPU tensors are always validated; CUDA tensors' contents only with validate=True (the CPU
+    validators on a host copy, one synchronising copy per call)."""
     idx, w = _graph(g)
-    _check(positions=positions, quats=quats, indices=idx, weights=w, confidence=confidence)
+    _check_cuda_ok(positions=positions, quats=quats, indices=idx, weights=w, confidence=confidence)
     gaps, gw = _gap_args(gaps, gap_weights)
     return _CarapFunction.apply(positions, quats, idx, w, confidence, False, float(alpha),
-                                float(lambda_c), float(lambda_l), gaps, gw, bool(normalize))
+                                float(lambda_c), float(lambda_l), gaps, gw, bool(normalize),
+                                bool(validate))
 
 
 def arap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike, *, lambda_c: float = 1.0,
          lambda_l: float = 1.0, gaps: Sequence[int] = (1, 2, 4),
-         gap_weights: Optional[Sequence[float]] = None, normalize: bool = False) -> torch.Tensor:
+         gap_weights: Optional[Sequence[float]] = None, normalize: bool = False,
+         validate: bool = False) -> torch.Tensor:
     """Plain ARAP energy (E9 with c = 1, alpha = 1), 0-dim; differentiable like carap."""
     idx, w = _graph(g)
-    _check(positions=positions, quats=quats, indices=idx, weights=w)
+    _check_cuda_ok(positions=positions, quats=quats, indices=idx, weights=w)
     gaps, gw = _gap_args(gaps, gap_weights)
     return _CarapFunction.apply(positions, quats, idx, w, None, True, 1.0, float(lambda_c),
-                                float(lambda_l), gaps, gw, bool(normalize))
+                                float(lambda_l), gaps, gw, bool(normalize), bool(validate))
 
 
 class _LrmFunction(torch.autograd.Function):

@@ -33,6 +33,18 @@
 #endif
 #endif
 
+// Functions callable from CUDA device code as well as from the host: the per-element maths
+// (rotations, dual quaternions, the energy terms, skinning, projection) and the view accessors.
+// Empty without a CUDA compiler, so host builds see plain functions. include/smg/cuda/ calls
+// them from its kernels; the CPU loops call the very same functions (one source of truth).
+#ifndef SMG_HOST_DEVICE
+#if defined(__CUDACC__)
+#define SMG_HOST_DEVICE __host__ __device__
+#else
+#define SMG_HOST_DEVICE
+#endif
+#endif
+
 // Forced inlining of the small per-element functions called inside vectorised loops (the
 // vectoriser only sees through a call it has inlined).
 #ifndef SMG_FORCE_INLINE
@@ -56,11 +68,18 @@
 #endif
 
 namespace smg::detail {
-[[noreturn]] inline void assertion_failed(const char* condition, const char* message,
-                                          const char* file, int line) {
+// In device code the message goes to the kernel's printf and the thread traps (the launch then
+// fails with cudaErrorLaunchFailure, which the launcher reports).
+SMG_HOST_DEVICE inline void assertion_failed(const char* condition, const char* message,
+                                             const char* file, int line) {
+#if defined(__CUDA_ARCH__)
+  printf("smg: assertion failed: %s (%s) at %s:%d\n", condition, message, file, line);
+  __trap();
+#else
   std::fprintf(stderr, "smg: assertion failed: %s (%s) at %s:%d\n", condition, message, file,
                line);
   std::abort();
+#endif
 }
 }  // namespace smg::detail
 

@@ -22,15 +22,15 @@ struct DualQuaternion {
   Quaternion<S> real = Quaternion<S>::Identity();                // r
   Quaternion<S> dual = Quaternion<S>(S(0), S(0), S(0), S(0));    // s
 
-  static DualQuaternion identity() { return DualQuaternion(); }
+  SMG_HOST_DEVICE static DualQuaternion identity() { return DualQuaternion(); }
 
   // (r.w, r.x, r.y, r.z, s.w, s.x, s.y, s.z).
-  Vector8<S> coeffs_wxyz() const {
+  SMG_HOST_DEVICE Vector8<S> coeffs_wxyz() const {
     Vector8<S> c;
     c << to_wxyz(real), to_wxyz(dual);
     return c;
   }
-  static DualQuaternion from_coeffs_wxyz(const Vector8<S>& c) {
+  SMG_HOST_DEVICE static DualQuaternion from_coeffs_wxyz(const Vector8<S>& c) {
     DualQuaternion d;
     d.real = from_wxyz(Vector4<S>(c.template head<4>()));
     d.dual = from_wxyz(Vector4<S>(c.template tail<4>()));
@@ -41,12 +41,12 @@ struct DualQuaternion {
 namespace detail {
 // Pure quaternion (0, v).
 template <class S>
-inline Quaternion<S> pure(const Vector3<S>& v) {
+SMG_HOST_DEVICE inline Quaternion<S> pure(const Vector3<S>& v) {
   return Quaternion<S>(S(0), v(0), v(1), v(2));
 }
 // diag(1, -1, -1, -1): d conj(q) / d q in (w, x, y, z) coordinates.
 template <class S>
-inline Matrix4<S> conj_matrix() {
+SMG_HOST_DEVICE inline Matrix4<S> conj_matrix() {
   return Vector4<S>(S(1), S(-1), S(-1), S(-1)).asDiagonal();
 }
 }  // namespace detail
@@ -54,7 +54,7 @@ inline Matrix4<S> conj_matrix() {
 // The unit dual quaternion of x -> R(q) x + t:  r = q,  s = ½ (0, t) ⊗ q.  (D1)
 // q must be unit. J_out_q: 8x3 w.r.t. the right tangent of q; J_out_t: 8x3.
 template <class S>
-inline DualQuaternion<S> dual_quaternion_from_rotation_translation(
+SMG_HOST_DEVICE inline DualQuaternion<S> dual_quaternion_from_rotation_translation(
     const Quaternion<S>& q, const Vector3<S>& t, Matrix83<S>* J_out_q = nullptr,
     Matrix83<S>* J_out_t = nullptr) {
   DualQuaternion<S> d;
@@ -77,7 +77,7 @@ inline DualQuaternion<S> dual_quaternion_from_rotation_translation(
 // q = r / |r|,  t = 2 vec(s ⊗ conj(r)) / |r|^2. (The scalar part of s ⊗ conj(r), which is
 // nonzero when r and s are not orthogonal, is ignored, as in Kavan et al. 2008.)  (D2)
 template <class S>
-inline void dual_quaternion_to_rotation_translation(const DualQuaternion<S>& d,
+SMG_HOST_DEVICE inline void dual_quaternion_to_rotation_translation(const DualQuaternion<S>& d,
                                                     Quaternion<S>* q, Vector3<S>* t) {
   using std::sqrt;
   const S n2 = d.real.coeffs().squaredNorm();
@@ -88,7 +88,7 @@ inline void dual_quaternion_to_rotation_translation(const DualQuaternion<S>& d,
 // Product a ⊗ b = (a.r ⊗ b.r) + ε (a.r ⊗ b.s + a.s ⊗ b.r): the motion "b, then a".  (D3)
 // J_out_a, J_out_b: 8x8 in raw coordinates.
 template <class S>
-inline DualQuaternion<S> dual_quaternion_product(const DualQuaternion<S>& a,
+SMG_HOST_DEVICE inline DualQuaternion<S> dual_quaternion_product(const DualQuaternion<S>& a,
                                                  const DualQuaternion<S>& b,
                                                  Matrix8<S>* J_out_a = nullptr,
                                                  Matrix8<S>* J_out_b = nullptr) {
@@ -113,7 +113,7 @@ inline DualQuaternion<S> dual_quaternion_product(const DualQuaternion<S>& a,
 // Quaternion conjugate of both parts, conj(r) + ε conj(s). For a unit dual quaternion this is
 // the inverse motion.  J_out_d = diag(1,-1,-1,-1, 1,-1,-1,-1).  (D4)
 template <class S>
-inline DualQuaternion<S> dual_quaternion_conjugate(const DualQuaternion<S>& d,
+SMG_HOST_DEVICE inline DualQuaternion<S> dual_quaternion_conjugate(const DualQuaternion<S>& d,
                                                    Matrix8<S>* J_out_d = nullptr) {
   DualQuaternion<S> out;
   out.real = d.real.conjugate();
@@ -130,7 +130,7 @@ inline DualQuaternion<S> dual_quaternion_conjugate(const DualQuaternion<S>& d,
 // re-orthogonalised, see D2).  J_out_d = I/n - c e_rᵀ / n³ with n = |r|, c the 8 coefficients
 // and e_r = (r, 0).  Precondition: |r| > 0.  (D5)
 template <class S>
-inline DualQuaternion<S> dual_quaternion_normalized(const DualQuaternion<S>& d,
+SMG_HOST_DEVICE inline DualQuaternion<S> dual_quaternion_normalized(const DualQuaternion<S>& d,
                                                     Matrix8<S>* J_out_d = nullptr) {
   using std::sqrt;
   const S n = sqrt(d.real.coeffs().squaredNorm());
@@ -150,7 +150,7 @@ inline DualQuaternion<S> dual_quaternion_normalized(const DualQuaternion<S>& d,
 // out = R(r/|r|) p + 2 vec(s ⊗ conj(r)) / |r|^2.  J_out_d: 3x8 raw coordinates; J_out_p = R.
 // This is what DQB applies after blending.  (D6)
 template <class S>
-inline Vector3<S> dual_quaternion_transform_point(const DualQuaternion<S>& d, const Vector3<S>& p,
+SMG_HOST_DEVICE inline Vector3<S> dual_quaternion_transform_point(const DualQuaternion<S>& d, const Vector3<S>& p,
                                                   Matrix38<S>* J_out_d = nullptr,
                                                   Matrix3<S>* J_out_p = nullptr) {
   using std::sqrt;

@@ -18,21 +18,22 @@ namespace smg {
 
 // q from 4 scalars in (w, x, y, z) order. No normalisation.
 template <class S>
-inline Quaternion<S> from_wxyz(const S* wxyz) {
+SMG_HOST_DEVICE inline Quaternion<S> from_wxyz(const S* wxyz) {
   return Quaternion<S>(wxyz[0], wxyz[1], wxyz[2], wxyz[3]);
 }
 template <class Derived>
+SMG_HOST_DEVICE
 inline Quaternion<typename Derived::Scalar> from_wxyz(const Eigen::MatrixBase<Derived>& wxyz) {
   EIGEN_STATIC_ASSERT_VECTOR_SPECIFIC_SIZE(Derived, 4);
   return Quaternion<typename Derived::Scalar>(wxyz(0), wxyz(1), wxyz(2), wxyz(3));
 }
 // The 4 coefficients of q in (w, x, y, z) order.
 template <class S>
-inline Vector4<S> to_wxyz(const Quaternion<S>& q) {
+SMG_HOST_DEVICE inline Vector4<S> to_wxyz(const Quaternion<S>& q) {
   return Vector4<S>(q.w(), q.x(), q.y(), q.z());
 }
 template <class S>
-inline void to_wxyz(const Quaternion<S>& q, S* out) {
+SMG_HOST_DEVICE inline void to_wxyz(const Quaternion<S>& q, S* out) {
   out[0] = q.w();
   out[1] = q.x();
   out[2] = q.y();
@@ -41,7 +42,7 @@ inline void to_wxyz(const Quaternion<S>& q, S* out) {
 
 // Left-product matrix, (w, x, y, z) coordinates: to_wxyz(p ⊗ q) = quat_left_matrix(p) * to_wxyz(q).
 template <class S>
-inline Matrix4<S> quat_left_matrix(const Quaternion<S>& p) {
+SMG_HOST_DEVICE inline Matrix4<S> quat_left_matrix(const Quaternion<S>& p) {
   Matrix4<S> L;
   L << p.w(), -p.x(), -p.y(), -p.z(),
        p.x(),  p.w(), -p.z(),  p.y(),
@@ -51,7 +52,7 @@ inline Matrix4<S> quat_left_matrix(const Quaternion<S>& p) {
 }
 // Right-product matrix: to_wxyz(p ⊗ q) = quat_right_matrix(q) * to_wxyz(p).
 template <class S>
-inline Matrix4<S> quat_right_matrix(const Quaternion<S>& q) {
+SMG_HOST_DEVICE inline Matrix4<S> quat_right_matrix(const Quaternion<S>& q) {
   Matrix4<S> R;
   R << q.w(), -q.x(), -q.y(), -q.z(),
        q.x(),  q.w(),  q.z(), -q.y(),
@@ -64,13 +65,14 @@ inline Matrix4<S> quat_right_matrix(const Quaternion<S>& q) {
 // the vector columns. Maps a right-tangent direction to a raw-coefficient direction; its
 // transpose maps a raw 4-vector gradient g to the right-tangent gradient J^T g (for unit q).
 template <class S>
-inline Matrix43<S> quat_tangent_jacobian(const Quaternion<S>& q) {
+SMG_HOST_DEVICE inline Matrix43<S> quat_tangent_jacobian(const Quaternion<S>& q) {
   return Literal<S>(0.5) * quat_left_matrix(q).template rightCols<3>();
 }
 
 // q / |q| with, optionally, its 4x4 Jacobian in (w, x, y, z) coordinates,
 // d(q/|q|)/dq = (I - q̂ q̂ᵀ) / |q|. Precondition: |q| > 0 (validate_quaternions rejects zero).
 template <class S>
+SMG_HOST_DEVICE
 inline Quaternion<S> normalized(const Quaternion<S>& q, Matrix4<S>* J_out_q = nullptr) {
   using std::sqrt;
   const S n = sqrt(q.coeffs().squaredNorm());
@@ -84,7 +86,7 @@ inline Quaternion<S> normalized(const Quaternion<S>& q, Matrix4<S>* J_out_q = nu
 
 // The representative of ±q with w >= 0 (the one whose log has angle <= pi).
 template <class S>
-inline Quaternion<S> canonical(const Quaternion<S>& q) {
+SMG_HOST_DEVICE inline Quaternion<S> canonical(const Quaternion<S>& q) {
   return q.w() < S(0) ? Quaternion<S>(-q.coeffs()) : q;
 }
 

@@ -26,14 +26,14 @@ namespace smg::quaternion_manifold {
 
 // out = q ⊗ Exp(delta), all (w, x, y, z) / rotation-vector arrays.
 template <class S>
-inline void plus(const S* q, const S* delta, S* out) {
+SMG_HOST_DEVICE inline void plus(const S* q, const S* delta, S* out) {
   const Quaternion<S> r = from_wxyz(q) * so3::exp(Vector3<S>(delta[0], delta[1], delta[2]));
   to_wxyz(r, out);
 }
 
 // out = Log(x⁻¹ ⊗ y), the right-tangent difference (angle in [0, π]).
 template <class S>
-inline void minus(const S* y, const S* x, S* out) {
+SMG_HOST_DEVICE inline void minus(const S* y, const S* x, S* out) {
   const Vector3<S> d = so3::log(Quaternion<S>(from_wxyz(x).conjugate() * from_wxyz(y)));
   out[0] = d(0);
   out[1] = d(1);
@@ -42,23 +42,23 @@ inline void minus(const S* y, const S* x, S* out) {
 
 // ∂ plus(q, δ)/∂δ at δ = 0, 4x3.
 template <class S>
-inline Matrix43<S> plus_jacobian(const Quaternion<S>& q) {
+SMG_HOST_DEVICE inline Matrix43<S> plus_jacobian(const Quaternion<S>& q) {
   return quat_tangent_jacobian(q);
 }
 // ∂ minus(y, x)/∂y at y = x, 3x4 (for unit x).
 template <class S>
-inline Matrix34<S> minus_jacobian(const Quaternion<S>& x) {
+SMG_HOST_DEVICE inline Matrix34<S> minus_jacobian(const Quaternion<S>& x) {
   return Literal<S>(2) * quat_left_matrix(x).template rightCols<3>().transpose();
 }
 
 // Row-major raw-array versions (Ceres's layout).
 template <class S>
-inline void plus_jacobian(const S* q, S* J_row_major_4x3) {
+SMG_HOST_DEVICE inline void plus_jacobian(const S* q, S* J_row_major_4x3) {
   Eigen::Map<Eigen::Matrix<S, 4, 3, Eigen::RowMajor>> J(J_row_major_4x3);
   J = plus_jacobian(from_wxyz(q));
 }
 template <class S>
-inline void minus_jacobian(const S* x, S* J_row_major_3x4) {
+SMG_HOST_DEVICE inline void minus_jacobian(const S* x, S* J_row_major_3x4) {
   Eigen::Map<Eigen::Matrix<S, 3, 4, Eigen::RowMajor>> J(J_row_major_3x4);
   J = minus_jacobian(from_wxyz(x));
 }
@@ -66,6 +66,7 @@ inline void minus_jacobian(const S* x, S* J_row_major_3x4) {
 // A cost Jacobian G (rows x 3) in the right tangent of q as an ambient (rows x 4) Jacobian
 // for a solver that chains it with plus_jacobian: G · minus_jacobian(q).
 template <class Derived>
+SMG_HOST_DEVICE
 inline Eigen::Matrix<typename Derived::Scalar, Derived::RowsAtCompileTime, 4> ambient_jacobian(
     const Eigen::MatrixBase<Derived>& G, const Quaternion<typename Derived::Scalar>& q) {
   return G * minus_jacobian(q);

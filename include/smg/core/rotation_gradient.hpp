@@ -27,6 +27,7 @@ namespace smg {
 // Adds the raw-coordinate gradient of one quaternion to g_q[4], given its right-tangent gradient
 // g_phi[3]; q[4] (w, x, y, z) need not be unit (nonzero).  (Q5)
 template <class S>
+SMG_HOST_DEVICE
 inline void add_quaternion_gradient_from_tangent(const S* q, const S* g_phi, S* g_q) {
   using L = Literal<S>;
   const S w = q[0], x = q[1], y = q[2], z = q[3];
@@ -42,6 +43,7 @@ inline void add_quaternion_gradient_from_tangent(const S* q, const S* g_phi, S* 
 // g_q[4] of the (possibly unnormalised) quaternion q[4]; the component of g_q along q is
 // ignored.  (Q3)
 template <class S>
+SMG_HOST_DEVICE
 inline void add_tangent_gradient_from_quaternion(const S* q, const S* g_q, S* g_phi) {
   using L = Literal<S>;
   const S w = q[0], x = q[1], y = q[2], z = q[3];

@@ -23,14 +23,14 @@ using Literal = typename Eigen::NumTraits<S>::Literal;
 // The series branches use theta^2 only, never sqrt, so automatic differentiation through
 // smg (Eigen::AutoDiffScalar) stays finite at theta = 0.
 template <class S>
-inline typename Eigen::NumTraits<S>::Real series_threshold() {
+SMG_HOST_DEVICE inline typename Eigen::NumTraits<S>::Real series_threshold() {
   using Real = typename Eigen::NumTraits<S>::Real;
   return Eigen::NumTraits<Real>::epsilon() > Real(1e-10) ? Real(0.9) : Real(0.1);
 }
 
 // Tolerance used when validating that a quaternion is unit: |1 - |q|| <= unit_tolerance.
 template <class S>
-inline typename Eigen::NumTraits<S>::Real unit_tolerance() {
+SMG_HOST_DEVICE inline typename Eigen::NumTraits<S>::Real unit_tolerance() {
   using Real = typename Eigen::NumTraits<S>::Real;
   return Real(1e3) * Eigen::NumTraits<Real>::epsilon();
 }

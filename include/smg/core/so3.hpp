@@ -20,7 +20,7 @@ namespace smg::so3 {
 
 // [v]x: the 3x3 skew matrix with hat(v) * u = v x u.  (C1)
 template <class Derived>
-inline Matrix3<typename Derived::Scalar> hat(const Eigen::MatrixBase<Derived>& v) {
+SMG_HOST_DEVICE inline Matrix3<typename Derived::Scalar> hat(const Eigen::MatrixBase<Derived>& v) {
   EIGEN_STATIC_ASSERT_VECTOR_SPECIFIC_SIZE(Derived, 3);
   using S = typename Derived::Scalar;
   Matrix3<S> m;
@@ -32,7 +32,7 @@ inline Matrix3<typename Derived::Scalar> hat(const Eigen::MatrixBase<Derived>& v
 
 // Inverse of hat for a skew-symmetric M: (M21, M02, M10). Only the skew part is read.
 template <class Derived>
-inline Vector3<typename Derived::Scalar> vee(const Eigen::MatrixBase<Derived>& M) {
+SMG_HOST_DEVICE inline Vector3<typename Derived::Scalar> vee(const Eigen::MatrixBase<Derived>& M) {
   EIGEN_STATIC_ASSERT_MATRIX_SPECIFIC_SIZE(Derived, 3, 3);
   using S = typename Derived::Scalar;
   using L = Literal<S>;
@@ -45,7 +45,7 @@ namespace detail {
 //   b = (1 - cos θ)/θ²,  c = (θ - sin θ)/θ³,  d = 1/θ² - (1 + cos θ)/(2 θ sin θ).
 // Series through θ^8 below series_threshold (no sqrt, so autodiff is finite at 0).
 template <class S>
-inline S coeff_b(const S& t2) {
+SMG_HOST_DEVICE inline S coeff_b(const S& t2) {
   using L = Literal<S>;
   using std::sin;
   using std::sqrt;
@@ -57,7 +57,7 @@ inline S coeff_b(const S& t2) {
   return L(2) * s * s / t2;
 }
 template <class S>
-inline S coeff_c(const S& t2) {
+SMG_HOST_DEVICE inline S coeff_c(const S& t2) {
   using L = Literal<S>;
   using std::sin;
   using std::sqrt;
@@ -70,7 +70,7 @@ inline S coeff_c(const S& t2) {
   return (t - sin(t)) / (t2 * t);
 }
 template <class S>
-inline S coeff_d(const S& t2) {
+SMG_HOST_DEVICE inline S coeff_d(const S& t2) {
   using L = Literal<S>;
   using std::cos;
   using std::sin;
@@ -88,6 +88,7 @@ inline S coeff_d(const S& t2) {
 
 // Right Jacobian Jr(phi) = I - b [phi]x + c [phi]x^2:  Exp(phi + d) ≈ Exp(phi) Exp(Jr d).  (C3)
 template <class Derived>
+SMG_HOST_DEVICE
 inline Matrix3<typename Derived::Scalar> right_jacobian(const Eigen::MatrixBase<Derived>& phi) {
   using S = typename Derived::Scalar;
   const S t2 = phi.squaredNorm();
@@ -97,7 +98,7 @@ inline Matrix3<typename Derived::Scalar> right_jacobian(const Eigen::MatrixBase<
 
 // Jr(phi)^-1 = I + ½ [phi]x + d [phi]x^2.  Valid for |phi| < 2π (Log returns |phi| <= π).  (C4)
 template <class Derived>
-inline Matrix3<typename Derived::Scalar> right_jacobian_inverse(
+SMG_HOST_DEVICE inline Matrix3<typename Derived::Scalar> right_jacobian_inverse(
     const Eigen::MatrixBase<Derived>& phi) {
   using S = typename Derived::Scalar;
   using L = Literal<S>;
@@ -108,6 +109,7 @@ inline Matrix3<typename Derived::Scalar> right_jacobian_inverse(
 
 // Left Jacobian Jl(phi) = Jr(-phi):  Exp(phi + d) ≈ Exp(Jl d) Exp(phi).
 template <class Derived>
+SMG_HOST_DEVICE
 inline Matrix3<typename Derived::Scalar> left_jacobian(const Eigen::MatrixBase<Derived>& phi) {
   return right_jacobian(-phi.eval());
 }
@@ -116,7 +118,7 @@ inline Matrix3<typename Derived::Scalar> left_jacobian(const Eigen::MatrixBase<D
 // (cos(θ/2), sin(θ/2) phi/θ).  J_out_phi = Jr(phi).  (C2)
 // With the Jacobian, the trigonometric values are shared with Jr (sin θ = 2 sin(θ/2) cos(θ/2)).
 template <class Derived>
-inline Quaternion<typename Derived::Scalar> exp(
+SMG_HOST_DEVICE inline Quaternion<typename Derived::Scalar> exp(
     const Eigen::MatrixBase<Derived>& phi,
     Matrix3<typename Derived::Scalar>* J_out_phi = nullptr) {
   EIGEN_STATIC_ASSERT_VECTOR_SPECIFIC_SIZE(Derived, 3);
@@ -153,7 +155,7 @@ inline Quaternion<typename Derived::Scalar> exp(
 // near 0 and near π and does not need |q| = 1 (the result depends only on the direction of q).
 // J_out_q = Jr(phi)^-1, the Jacobian w.r.t. the right tangent of q.  (C5)
 template <class S>
-inline Vector3<S> log(const Quaternion<S>& q, Matrix3<S>* J_out_q = nullptr) {
+SMG_HOST_DEVICE inline Vector3<S> log(const Quaternion<S>& q, Matrix3<S>* J_out_q = nullptr) {
   using L = Literal<S>;
   using std::atan2;
   using std::sqrt;
@@ -197,6 +199,7 @@ inline Vector3<S> log(const Quaternion<S>& q, Matrix3<S>* J_out_q = nullptr) {
 
 // out = R(q) v.  J_out_q = -R [v]x (right tangent), J_out_v = R.  (C6)
 template <class S, class Derived>
+SMG_HOST_DEVICE
 inline Vector3<S> rotate(const Quaternion<S>& q, const Eigen::MatrixBase<Derived>& v,
                          Matrix3<S>* J_out_q = nullptr, Matrix3<S>* J_out_v = nullptr) {
   const Matrix3<S> R = q.toRotationMatrix();
@@ -208,6 +211,7 @@ inline Vector3<S> rotate(const Quaternion<S>& q, const Eigen::MatrixBase<Derived
 
 // out = R(q)^T v.  J_out_q = [R^T v]x (right tangent), J_out_v = R^T.  (C7)
 template <class S, class Derived>
+SMG_HOST_DEVICE
 inline Vector3<S> inverse_rotate(const Quaternion<S>& q, const Eigen::MatrixBase<Derived>& v,
                                  Matrix3<S>* J_out_q = nullptr, Matrix3<S>* J_out_v = nullptr) {
   const Matrix3<S> Rt = q.toRotationMatrix().transpose();
@@ -219,6 +223,7 @@ inline Vector3<S> inverse_rotate(const Quaternion<S>& q, const Eigen::MatrixBase
 
 // out = a ⊗ b.  J_out_a = R(b)^T, J_out_b = I (both in right tangents).  (C8)
 template <class S>
+SMG_HOST_DEVICE
 inline Quaternion<S> compose(const Quaternion<S>& a, const Quaternion<S>& b,
                              Matrix3<S>* J_out_a = nullptr, Matrix3<S>* J_out_b = nullptr) {
   if (J_out_a) *J_out_a = b.toRotationMatrix().transpose();
@@ -228,6 +233,7 @@ inline Quaternion<S> compose(const Quaternion<S>& a, const Quaternion<S>& b,
 
 // out = q^-1 = conj(q) for unit q.  J_out_q = -R(q) (right tangents).  (C9)
 template <class S>
+SMG_HOST_DEVICE
 inline Quaternion<S> inverse(const Quaternion<S>& q, Matrix3<S>* J_out_q = nullptr) {
   if (J_out_q) *J_out_q = -q.toRotationMatrix();
   return q.conjugate();
@@ -236,6 +242,7 @@ inline Quaternion<S> inverse(const Quaternion<S>& q, Matrix3<S>* J_out_q = nullp
 // out = a^-1 ⊗ b, the rotation taking frame a to frame b.  J_out_a = -R(b)^T R(a),
 // J_out_b = I.  (Chain of C8 and C9.)
 template <class S>
+SMG_HOST_DEVICE
 inline Quaternion<S> between(const Quaternion<S>& a, const Quaternion<S>& b,
                              Matrix3<S>* J_out_a = nullptr, Matrix3<S>* J_out_b = nullptr) {
   if (J_out_a) *J_out_a = -b.toRotationMatrix().transpose() * a.toRotationMatrix();
@@ -246,7 +253,7 @@ inline Quaternion<S> between(const Quaternion<S>& a, const Quaternion<S>& b,
 // Geodesic angle between the rotations of a and b, in [0, π], insensitive to the signs of a and
 // b; atan2 form, accurate for small angles.
 template <class S>
-inline S angular_distance(const Quaternion<S>& a, const Quaternion<S>& b) {
+SMG_HOST_DEVICE inline S angular_distance(const Quaternion<S>& a, const Quaternion<S>& b) {
   return log(Quaternion<S>(a.conjugate() * b)).norm();
 }
 

@@ -1,8 +1,9 @@
 // smg/core/validate.hpp — one validation function per view kind.
 //
 // Each returns Status::ok() or a one-line message naming the argument and the problem:
-// wrong shape, null data, NaN/Inf (with the first offending index), zero or unnormalised
-// quaternions, visibility values other than 0/1. Entry points call these once; hot loops never
+// wrong shape, null data, NaN/Inf (with the first offending index), zero quaternions (and,
+// only with QuaternionNorm::require_unit, unnormalised ones: the default accepts any finite
+// nonzero quaternion, which the entry points normalise), visibility values other than 0/1. Entry points call these once; hot loops never
 // check. Pass -1 for an expected size that is not constrained.
 #pragma once
 
@@ -11,6 +12,7 @@
 #include <cmath>
 #include <sstream>
 #include <string>
+#include <type_traits>
 
 #include "smg/core/scalar.hpp"
 #include "smg/core/status.hpp"
@@ -166,6 +168,51 @@ Status validate_features(FeaturesView<const S> f, Index nodes, Index channels = 
         return Status::error(name + ": element " + detail::at_string(i, c, "i", "c") + " is " +
                              detail::nonfinite_kind(f(i, c)));
   return Status::ok();
+}
+
+// Mutable views: the validators above also take a view of non-const elements (the caller's
+// writable buffer) without a template argument, e.g. validate_positions(PositionsView<double>).
+// (The const overloads cannot deduce S from a mutable view; these forward to them.)
+namespace detail {
+template <class V, int Dim>
+struct IsMutableSequenceView : std::false_type {};
+template <class T, int Dim>
+struct IsMutableSequenceView<SequenceView<T, Dim>, Dim> : std::bool_constant<!std::is_const_v<T>> {};
+template <class V, int Cols>
+struct IsMutableTableView : std::false_type {};
+template <class T, int Cols>
+struct IsMutableTableView<TableView<T, Cols>, Cols> : std::bool_constant<!std::is_const_v<T>> {};
+template <class V, int Dim>
+using EnableMutableSequence = std::enable_if_t<IsMutableSequenceView<V, Dim>::value, int>;
+template <class V, int Cols>
+using EnableMutableTable = std::enable_if_t<IsMutableTableView<V, Cols>::value, int>;
+}  // namespace detail
+
+template <class View, detail::EnableMutableSequence<View, 3> = 0>
+Status validate_positions(const View& x, Index frames, Index nodes,
+                          const std::string& name = "positions") {
+  return validate_positions<typename View::Value>(x, frames, nodes, name);
+}
+template <class View, detail::EnableMutableSequence<View, 4> = 0>
+Status validate_quaternions(const View& q, Index frames, Index nodes,
+                            QuaternionNorm norm = QuaternionNorm::normalize_on_entry,
+                            const std::string& name = "quaternions") {
+  return validate_quaternions<typename View::Value>(q, frames, nodes, norm, name);
+}
+template <class View, detail::EnableMutableSequence<View, 1> = 0>
+Status validate_visibility(const View& v, Index frames, Index nodes,
+                           const std::string& name = "visibility") {
+  return validate_visibility<typename View::Value>(v, frames, nodes, name);
+}
+template <class View, detail::EnableMutableSequence<View, Eigen::Dynamic> = 0>
+Status validate_feature_samples(const View& g, Index frames, Index nodes, Index channels = -1,
+                                const std::string& name = "feature_samples") {
+  return validate_feature_samples<typename View::Value>(g, frames, nodes, channels, name);
+}
+template <class View, detail::EnableMutableTable<View, Eigen::Dynamic> = 0>
+Status validate_features(const View& f, Index nodes, Index channels = -1,
+                         const std::string& name = "features") {
+  return validate_features<typename View::Value>(f, nodes, channels, name);
 }
 
 // An output buffer (gradient [T][N][Dim]): shape and non-null only; its contents are written.

@@ -42,29 +42,29 @@ class SequenceView {
 
   SequenceView() = default;
   // Fixed channel count.
-  SequenceView(T* data, Index frames, Index nodes)
+  SMG_HOST_DEVICE SequenceView(T* data, Index frames, Index nodes)
       : data_(data), frames_(frames), nodes_(nodes), dim_(Dim == Eigen::Dynamic ? 0 : Dim) {
     static_assert(Dim != Eigen::Dynamic, "pass the channel count for a dynamic view");
   }
   // Runtime channel count (Dim == Eigen::Dynamic).
-  SequenceView(T* data, Index frames, Index nodes, Index dim)
+  SMG_HOST_DEVICE SequenceView(T* data, Index frames, Index nodes, Index dim)
       : data_(data), frames_(frames), nodes_(nodes), dim_(dim) {
     static_assert(Dim == Eigen::Dynamic, "the channel count is fixed by the type");
   }
   // Mutable -> const.
   template <class U, class = std::enable_if_t<std::is_same_v<const U, T> && !std::is_same_v<U, T>>>
-  SequenceView(const SequenceView<U, Dim>& other)  // NOLINT(google-explicit-constructor)
+  SMG_HOST_DEVICE SequenceView(const SequenceView<U, Dim>& other)  // NOLINT(google-explicit-constructor)
       : data_(other.data()), frames_(other.frames()), nodes_(other.nodes()), dim_(other.dim()) {}
 
-  T* data() const { return data_; }
-  Index frames() const { return frames_; }
-  Index nodes() const { return nodes_; }
-  Index dim() const { return dim_; }
-  Index size() const { return frames_ * nodes_ * dim_; }
-  bool empty() const { return size() == 0; }
+  SMG_HOST_DEVICE T* data() const { return data_; }
+  SMG_HOST_DEVICE Index frames() const { return frames_; }
+  SMG_HOST_DEVICE Index nodes() const { return nodes_; }
+  SMG_HOST_DEVICE Index dim() const { return dim_; }
+  SMG_HOST_DEVICE Index size() const { return frames_ * nodes_ * dim_; }
+  SMG_HOST_DEVICE bool empty() const { return size() == 0; }
 
   // Element (t, i): a Map of the Dim-vector, or a reference when Dim == 1.
-  decltype(auto) operator()(Index t, Index i) const {
+  SMG_HOST_DEVICE decltype(auto) operator()(Index t, Index i) const {
     SMG_ASSERT(t >= 0 && t < frames_ && i >= 0 && i < nodes_, "SequenceView index out of range");
     if constexpr (Dim == 1) {
       return (data_[t * nodes_ + i]);
@@ -73,7 +73,7 @@ class SequenceView {
     }
   }
   // Pointer to the first channel of element (t, i); (frames, 0) gives the end pointer.
-  T* ptr(Index t, Index i) const {
+  SMG_HOST_DEVICE T* ptr(Index t, Index i) const {
     SMG_ASSERT(t >= 0 && i >= 0 && i <= nodes_ && t * nodes_ + i <= frames_ * nodes_,
                "SequenceView::ptr out of range");
     return data_ + (t * nodes_ + i) * dim_;
@@ -95,31 +95,31 @@ class TableView {
   using Value = std::remove_const_t<T>;
 
   TableView() = default;
-  TableView(T* data, Index rows, Index cols) : data_(data), rows_(rows), cols_(cols) {}
-  TableView(T* data, Index rows) : data_(data), rows_(rows), cols_(Cols) {
+  SMG_HOST_DEVICE TableView(T* data, Index rows, Index cols) : data_(data), rows_(rows), cols_(cols) {}
+  SMG_HOST_DEVICE TableView(T* data, Index rows) : data_(data), rows_(rows), cols_(Cols) {
     static_assert(Cols != Eigen::Dynamic, "pass the column count for a dynamic view");
   }
   template <class U, class = std::enable_if_t<std::is_same_v<const U, T> && !std::is_same_v<U, T>>>
-  TableView(const TableView<U, Cols>& other)  // NOLINT(google-explicit-constructor)
+  SMG_HOST_DEVICE TableView(const TableView<U, Cols>& other)  // NOLINT(google-explicit-constructor)
       : data_(other.data()), rows_(other.rows()), cols_(other.cols()) {}
 
-  T* data() const { return data_; }
-  Index rows() const { return rows_; }
-  Index cols() const { return cols_; }
-  Index size() const { return rows_ * cols_; }
-  bool empty() const { return size() == 0; }
+  SMG_HOST_DEVICE T* data() const { return data_; }
+  SMG_HOST_DEVICE Index rows() const { return rows_; }
+  SMG_HOST_DEVICE Index cols() const { return cols_; }
+  SMG_HOST_DEVICE Index size() const { return rows_ * cols_; }
+  SMG_HOST_DEVICE bool empty() const { return size() == 0; }
 
-  T& operator()(Index r, Index c) const {
+  SMG_HOST_DEVICE T& operator()(Index r, Index c) const {
     SMG_ASSERT(r >= 0 && r < rows_ && c >= 0 && c < cols_, "TableView index out of range");
     return data_[r * cols_ + c];
   }
   // Row r as a Map of a column vector.
-  detail::VectorMap<T, Cols> row(Index r) const {
+  SMG_HOST_DEVICE detail::VectorMap<T, Cols> row(Index r) const {
     SMG_ASSERT(r >= 0 && r < rows_, "TableView row out of range");
     return detail::VectorMap<T, Cols>(data_ + r * cols_, cols_);
   }
   // Pointer to row r; rows() gives the end pointer.
-  T* ptr(Index r) const {
+  SMG_HOST_DEVICE T* ptr(Index r) const {
     SMG_ASSERT(r >= 0 && r <= rows_, "TableView::ptr out of range");
     return data_ + r * cols_;
   }

@@ -11,7 +11,8 @@ namespace smg {
 
 // Checks the inputs and outputs of arap().
 template <class S, class I>
-Status validate_arap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
+Status validate_arap(detail::NonDeducedT<PositionsView<const S>> positions,
+                     detail::NonDeducedT<QuaternionsView<const S>> rotations,
                      const NeighborsView<S, I>& graph, const ArapOptions& options,
                      PositionsView<S> grad_positions = {},
                      detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
@@ -23,7 +24,8 @@ Status validate_arap(PositionsView<const S> positions, QuaternionsView<const S> 
 // Plain ARAP energy; gradients (positions; rotations in the right tangent [T][N][3] or raw
 // quaternion coordinates [T][N][4]) are added to the given buffers like carap(). Precondition: validate_arap.
 template <class S, class I>
-Accumulator<S> arap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
+Accumulator<S> arap(detail::NonDeducedT<PositionsView<const S>> positions,
+                    detail::NonDeducedT<QuaternionsView<const S>> rotations,
                     const NeighborsView<S, I>& graph, const ArapOptions& options,
                     PositionsView<S> grad_positions = {},
                     detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {},

@@ -47,8 +47,10 @@ namespace smg {
 // Checks the inputs and outputs of carap(). `confidence` [T][N] may be empty (all 1), and each
 // gradient may be empty (not computed). Confidences must lie in [0, 1].
 template <class S, class I>
-Status validate_carap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-                      FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
+Status validate_carap(detail::NonDeducedT<PositionsView<const S>> positions,
+                      detail::NonDeducedT<QuaternionsView<const S>> rotations,
+                      detail::NonDeducedT<FrameScalarsView<const S>> confidence,
+                      const NeighborsView<S, I>& graph,
                       const CarapOptions& options, PositionsView<S> grad_positions = {},
                       detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
   const Index T = positions.frames(), N = positions.nodes();
@@ -91,7 +93,7 @@ namespace detail {
 
 // Row-major 3x3 rotation of q / |q| from (w, x, y, z), without a square root.
 template <class S>
-inline void rotation_from_wxyz(const S* q, S* R) {
+SMG_HOST_DEVICE inline void rotation_from_wxyz(const S* q, S* R) {
   using L = Literal<S>;
   const S w = q[0], x = q[1], y = q[2], z = q[3];
   const S s = L(2) / (w * w + x * x + y * y + z * z);
@@ -146,9 +148,9 @@ inline void edge_frames(Index n, const S* SMG_RESTRICT R, const S* SMG_RESTRICT 
     ex[l] = a;
     ey[l] = b;
     ez[l] = c;
-    dx[l] = R[0 * n + l] * a + R[3 * n + l] * b + R[6 * n + l] * c;
-    dy[l] = R[1 * n + l] * a + R[4 * n + l] * b + R[7 * n + l] * c;
-    dz[l] = R[2 * n + l] * a + R[5 * n + l] * b + R[8 * n + l] * c;
+    const S Rl[9] = {R[0 * n + l], R[1 * n + l], R[2 * n + l], R[3 * n + l], R[4 * n + l],
+                     R[5 * n + l], R[6 * n + l], R[7 * n + l], R[8 * n + l]};
+    carap_edge_vector(Rl, a, b, c, dx[l], dy[l], dz[l]);
   }
 }
 
@@ -253,14 +255,14 @@ inline void backprop(Index n, const S* SMG_RESTRICT R, S* SMG_RESTRICT gx, S* SM
                      const S* SMG_RESTRICT dy, const S* SMG_RESTRICT dz, S* SMG_RESTRICT fi,
                      S* SMG_RESTRICT ri) {
   for (Index l = 0; l < n; ++l) {
-    const S s = h[l] * il[l];
-    const S g0 = gx[l], g1 = gy[l], g2 = gz[l];
-    ri[l] += g1 * dz[l] - g2 * dy[l];
-    ri[n + l] += g2 * dx[l] - g0 * dz[l];
-    ri[2 * n + l] += g0 * dy[l] - g1 * dx[l];
-    const S fx = R[0 * n + l] * g0 + R[1 * n + l] * g1 + R[2 * n + l] * g2 + s * ex[l];
-    const S fy = R[3 * n + l] * g0 + R[4 * n + l] * g1 + R[5 * n + l] * g2 + s * ey[l];
-    const S fz = R[6 * n + l] * g0 + R[7 * n + l] * g1 + R[8 * n + l] * g2 + s * ez[l];
+    const S Rl[9] = {R[0 * n + l], R[1 * n + l], R[2 * n + l], R[3 * n + l], R[4 * n + l],
+                     R[5 * n + l], R[6 * n + l], R[7 * n + l], R[8 * n + l]};
+    S fx, fy, fz, rx, ry, rz;
+    carap_edge_backprop(Rl, gx[l], gy[l], gz[l], h[l], il[l], ex[l], ey[l], ez[l], dx[l], dy[l],
+                        dz[l], fx, fy, fz, rx, ry, rz);
+    ri[l] += rx;
+    ri[n + l] += ry;
+    ri[2 * n + l] += rz;
     gx[l] = fx;
     gy[l] = fy;
     gz[l] = fz;
@@ -556,8 +558,10 @@ struct CarapKernel {
 // (Q5). rotations [T][N][4] are normalised on entry. confidence [T][N] may be empty (all 1).
 // Precondition: validate_carap.
 template <class S, class I>
-Accumulator<S> carap(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-                     FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
+Accumulator<S> carap(detail::NonDeducedT<PositionsView<const S>> positions,
+                     detail::NonDeducedT<QuaternionsView<const S>> rotations,
+                     detail::NonDeducedT<FrameScalarsView<const S>> confidence,
+                     const NeighborsView<S, I>& graph,
                      const CarapOptions& options, PositionsView<S> grad_positions = {},
                      detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {},
                      EnergyWorkspace<S>* workspace = nullptr, ParallelOptions parallel = {}) {

@@ -152,8 +152,10 @@ inline Index carap_residual_chunks(Index frames, Index nodes, std::size_t n_gaps
 // only write state owned by its chunk (e.g. per-chunk partial normal equations, combined in
 // chunk order afterwards for a thread-count-independent result). Precondition: validate_carap.
 template <class S, class I, class Visitor>
-void for_each_carap_residual(PositionsView<const S> positions, QuaternionsView<const S> rotations,
-                             FrameScalarsView<const S> confidence, const NeighborsView<S, I>& graph,
+void for_each_carap_residual(detail::NonDeducedT<PositionsView<const S>> positions,
+                             detail::NonDeducedT<QuaternionsView<const S>> rotations,
+                             detail::NonDeducedT<FrameScalarsView<const S>> confidence,
+                             const NeighborsView<S, I>& graph,
                              const CarapOptions& options, Visitor&& visit, bool jacobians = true,
                              ParallelOptions parallel = {}) {
   const Index T = positions.frames(), N = positions.nodes();

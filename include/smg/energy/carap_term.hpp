@@ -15,19 +15,45 @@
 
 namespace smg {
 
+// The rotated edge vector d = Rᵀ e of e = x_j − x_i (E8); R is row-major 3x3.
+template <class S>
+SMG_FORCE_INLINE SMG_HOST_DEVICE void carap_edge_vector(const S* R, S ex, S ey, S ez, S& dx,
+                                                        S& dy, S& dz) {
+  dx = R[0] * ex + R[3] * ey + R[6] * ez;
+  dy = R[1] * ex + R[4] * ey + R[7] * ez;
+  dz = R[2] * ex + R[5] * ey + R[8] * ez;
+}
+
+// Back from ∂E/∂d = G and ∂E/∂‖e‖ = H of one edge at one frame to its variables (E10):
+// F = R G + (H/‖e‖) e is ∂E/∂x_j (and −F is ∂E/∂x_i), G × d is the right-tangent gradient of R_i.
+// inv_len = 1/‖e‖, or 0 at e = 0 (pinned: the derivative of ‖d‖ at d = 0 is taken as 0).
+template <class S>
+SMG_FORCE_INLINE SMG_HOST_DEVICE void carap_edge_backprop(const S* R, S gx, S gy, S gz, S h,
+                                                          S inv_len, S ex, S ey, S ez, S dx,
+                                                          S dy, S dz, S& fx, S& fy, S& fz,
+                                                          S& rx, S& ry, S& rz) {
+  const S s = h * inv_len;
+  rx = gy * dz - gz * dy;
+  ry = gz * dx - gx * dz;
+  rz = gx * dy - gy * dx;
+  fx = R[0] * gx + R[1] * gy + R[2] * gz + s * ex;
+  fy = R[3] * gx + R[4] * gy + R[5] * gz + s * ey;
+  fz = R[6] * gx + R[7] * gy + R[8] * gz + s * ez;
+}
+
 // The C-ARAP term of one edge and one pair of frames (t, s = t + δ) given the change of the
 // rotated edge vector Δd = d^s − d^t (E8) and of its length Δℓ = ‖d^s‖ − ‖d^t‖, with the pair
 // factor k = γ_δ · w̃_ij^t (times the energy's overall scale):
 //   E = k (λc ‖Δd‖² + λl Δℓ²)                                                        (E9)
 template <class S, class L>
-SMG_FORCE_INLINE S carap_term_energy(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l) {
+SMG_FORCE_INLINE SMG_HOST_DEVICE S carap_term_energy(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l) {
   return k * (lambda_c * (dx * dx + dy * dy + dz * dz) + lambda_l * dl * dl);
 }
 
 // The same term and its partial derivatives (E10): P = ∂E/∂d^s = −∂E/∂d^t = 2 k λc Δd and
 // Q = ∂E/∂‖d^s‖ = −∂E/∂‖d^t‖ = 2 k λl Δℓ. Returns E.
 template <class S, class L>
-SMG_FORCE_INLINE S carap_term(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l, S& px, S& py,
+SMG_FORCE_INLINE SMG_HOST_DEVICE S carap_term(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l, S& px, S& py,
                               S& pz, S& q) {
   const S f = L(2) * lambda_c * k;
   px = f * dx;
@@ -40,7 +66,7 @@ SMG_FORCE_INLINE S carap_term(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_
 // The same term as a residual r = [√(k λc) Δd ; √(k λl) Δℓ] with ‖r‖² = E (E17); sc = √(k λc)
 // and sl = √(k λl) are returned for the Jacobians.
 template <class S, class L>
-SMG_FORCE_INLINE void carap_term_residual(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l,
+SMG_FORCE_INLINE SMG_HOST_DEVICE void carap_term_residual(S k, S dx, S dy, S dz, S dl, L lambda_c, L lambda_l,
                                           S* r, S& sc, S& sl) {
   using std::sqrt;
   sc = sqrt(k * lambda_c);

@@ -25,7 +25,7 @@ using Accumulator = std::conditional_t<std::is_same_v<S, float>, double, S>;
 // at frame t (the confidence of the *neighbour* j). The one definition of (E7), called by the
 // C-ARAP and LRM kernels and their residual forms. V: a scalar or a lane type (lanes.hpp).
 template <class V, class L>
-SMG_FORCE_INLINE V confidence_edge_weight(const V& w_ij, L alpha, const V& c_j) {
+SMG_FORCE_INLINE SMG_HOST_DEVICE V confidence_edge_weight(const V& w_ij, L alpha, const V& c_j) {
   return w_ij * (alpha + (L(1) - alpha) * c_j);
 }
 
@@ -34,7 +34,7 @@ SMG_FORCE_INLINE V confidence_edge_weight(const V& w_ij, L alpha, const V& c_j) 
 // degenerate direction instead of rounding noise, while biasing ordinary neighbourhoods by
 // less than 1e-6 (double).  (E13)
 template <class S>
-inline Literal<S> lrm_mu_factor() {
+SMG_HOST_DEVICE inline Literal<S> lrm_mu_factor() {
   using L = Literal<S>;
   return Eigen::NumTraits<L>::epsilon() > L(1e-10) ? L(1e-5) : L(1e-10);
 }

@@ -21,7 +21,6 @@
 
 #include <cmath>
 #include <cstdint>
-#include <vector>
 
 #include "smg/core/parallel.hpp"
 #include "smg/core/scalar.hpp"
@@ -38,7 +37,7 @@ namespace smg {
 // Checks the inputs and outputs of node_confidences. `visibility` and every output may be empty
 // views (visibility: all visible; outputs: not computed).
 template <class S, class I>
-Status validate_confidence(PositionsView<const S> positions,
+Status validate_confidence(detail::NonDeducedT<PositionsView<const S>> positions,
                            VisibilityView<const std::uint8_t> visibility,
                            const NeighborsView<S, I>& graph, const ConfidenceOptions& options,
                            FrameScalarsView<S> confidence, FrameScalarsView<S> motion = {},
@@ -61,7 +60,7 @@ Status validate_confidence(PositionsView<const S> positions,
 namespace detail {
 // Σ_k w_ik of row i (the normaliser of ŵ).
 template <class S, class I>
-inline S row_weight(const NeighborsView<S, I>& g, Index i) {
+SMG_HOST_DEVICE inline S row_weight(const NeighborsView<S, I>& g, Index i) {
   S W(0);
   for (Index k = 0; k < g.k(); ++k) {
     if (g.indices(i, k) < 0) break;
@@ -71,23 +70,106 @@ inline S row_weight(const NeighborsView<S, I>& g, Index i) {
 }
 }  // namespace detail
 
+// The constants of (E3)-(E6) in the computation's literal type, converted once per call from
+// ConfidenceOptions (a plain value: GPU kernels take it by value).
+template <class S>
+struct ConfidenceConstants {
+  Literal<S> kappa_m, kappa_r, lambda_m, lambda_r, eps;
+  explicit ConfidenceConstants(const ConfidenceOptions& o)
+      : kappa_m(o.kappa_m), kappa_r(o.kappa_r), lambda_m(o.lambda_m), lambda_r(o.lambda_r),
+        eps(o.eps) {}
+};
+
+// e_i^t (E4): the ŵ-weighted mean change |ℓ_ij^{t'} − ℓ_ij^t| of node i's edge lengths between
+// the two frames of its velocity (E1). inv_w = 1 / Σ_k w_ik (0 for an empty row: e = 0).
+// One per-element function for the CPU loop and the CUDA kernel (include/smg/cuda/).
+template <class S, class I>
+SMG_HOST_DEVICE inline S confidence_edge_change(PositionsView<const S> positions,
+                                                const NeighborsView<S, I>& graph, S inv_w,
+                                                Index t, Index i) {
+  using std::abs;
+  using std::sqrt;
+  const VelocityFrames f = velocity_frames(t, positions.frames());
+  const Index n = graph.degree(i);
+  if (!f.moving || !(inv_w > S(0)) || n == 0) return S(0);
+  const S* pi = positions.ptr(f.plus, i);
+  const S* mi = positions.ptr(f.minus, i);
+  S e(0);
+  for (Index k = 0; k < n; ++k) {
+    const Index j = graph.indices(i, k);
+    const S* pj = positions.ptr(f.plus, j);
+    const S* mj = positions.ptr(f.minus, j);
+    S a(0), b(0);
+    for (int c = 0; c < 3; ++c) {
+      a += (pj[c] - pi[c]) * (pj[c] - pi[c]);
+      b += (mj[c] - mi[c]) * (mj[c] - mi[c]);
+    }
+    e += graph.weights(i, k) * abs(sqrt(a) - sqrt(b));
+  }
+  return e * inv_w;
+}
+
+// The factors of node i at frame t from the velocities u [T][N][3] (E1) and the edge changes
+// e [T][N] (E4): c^m (E2, E3) into *motion and c^r (E4, E5) into *rigidity (exponents not
+// applied), and returns exp(−λm a² − λr b²) = (c^m)^λm (c^r)^λr, the confidence before the
+// visibility factor of (E6). inv_w = 1 / Σ_k w_ik (0: no neighbours, empty sums = 0).
+template <class S, class I>
+SMG_HOST_DEVICE inline S confidence_node(const S* velocity, const S* edge_change,
+                                         const NeighborsView<S, I>& graph, S inv_w, Index t,
+                                         Index i, const ConfidenceConstants<S>& p, S* motion,
+                                         S* rigidity) {
+  using std::abs;
+  using std::exp;
+  using std::sqrt;
+  const Index N = graph.nodes();
+  const S* e_t = edge_change + t * N;
+  const S* ui = velocity + (t * N + i) * 3;
+  S vb0(0), vb1(0), vb2(0), s_v(0), e_bar(0), s_l(0);
+  const Index n = inv_w > S(0) ? graph.degree(i) : 0;
+  for (Index k = 0; k < n; ++k) {
+    const Index j = graph.indices(i, k);
+    const S w = graph.weights(i, k) * inv_w;
+    const S* uj = velocity + (t * N + j) * 3;
+    vb0 += w * uj[0];
+    vb1 += w * uj[1];
+    vb2 += w * uj[2];
+    e_bar += w * e_t[j];
+  }
+  for (Index k = 0; k < n; ++k) {
+    const Index j = graph.indices(i, k);
+    const S w = graph.weights(i, k) * inv_w;
+    const S* uj = velocity + (t * N + j) * 3;
+    const S d0 = uj[0] - vb0, d1 = uj[1] - vb1, d2 = uj[2] - vb2;
+    s_v += w * sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+    s_l += w * abs(e_t[j] - e_bar);
+  }
+  const S d0 = ui[0] - vb0, d1 = ui[1] - vb1, d2 = ui[2] - vb2;
+  const S r_v = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+  const S r_l = abs(e_t[i] - e_bar);
+  const S a = r_v / (p.kappa_m * (s_v + p.eps));
+  const S b = r_l / (p.kappa_r * (s_l + p.eps));
+  const S a2 = a * a, b2 = b * b;
+  if (motion) *motion = exp(-a2);
+  if (rigidity) *rigidity = exp(-b2);
+  // (c^m)^λm (c^r)^λr = exp(−λm a² − λr b²): no pow, exact for λ = 0.
+  return exp(-(p.lambda_m * a2 + p.lambda_r * b2));
+}
+
 // Writes c_{t,i} (E6) into `confidence` [T][N] and, when given, the factors c^m (E3) into
 // `motion` and c^r (E5) into `rigidity` (each [T][N], in [0, 1]; exponents λ not applied).
 // visibility [T][N] (0/1) may be an empty view: every node visible. Empty output views are not
 // computed. Deterministic for any thread count. Precondition: validate_confidence.
 template <class S, class I>
-void node_confidences(PositionsView<const S> positions,
+void node_confidences(detail::NonDeducedT<PositionsView<const S>> positions,
                       VisibilityView<const std::uint8_t> visibility, const NeighborsView<S, I>& graph,
                       const ConfidenceOptions& options, FrameScalarsView<S> confidence,
                       FrameScalarsView<S> motion = {}, FrameScalarsView<S> rigidity = {},
                       EnergyWorkspace<S>* workspace = nullptr, ParallelOptions parallel = {}) {
   using L = Literal<S>;
-  using std::abs;
-  using std::exp;
-  const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
+  const Index T = positions.frames(), N = positions.nodes();
   SMG_ASSERT(visibility.data() == nullptr || (visibility.frames() == T && visibility.nodes() == N),
              "node_confidences: visibility shape");
-  SMG_ASSERT(graph.nodes() == N && graph.weights.rows() == N && graph.weights.cols() == K,
+  SMG_ASSERT(graph.nodes() == N && graph.weights.rows() == N && graph.weights.cols() == graph.k(),
              "node_confidences: graph shape");
   SMG_ASSERT(confidence.data() == nullptr || (confidence.frames() == T && confidence.nodes() == N),
              "node_confidences: confidence shape");
@@ -106,92 +188,31 @@ void node_confidences(PositionsView<const S> positions,
     const S W = detail::row_weight(graph, i);
     inv_w[i] = W > S(0) ? S(L(1) / W) : S(0);
   }
-  auto u_of = [vel](Index t, Index N_, Index j) { return vel + (t * N_ + j) * 3; };
-
-  // Pass 1: e_i^t, the weighted mean change of node i's edge lengths (E4). Squared lengths
-  // are collected per node and square-rooted together (vectorised through Eigen).
-  parallel_for_chunks(
+  // Pass 1: e_i^t (E4) of every node and frame; pass 2 reads the neighbours' values.
+  parallel_for(
       T * N,
-      [&](Index, Index begin, Index end) {
-        std::vector<S> sq(static_cast<std::size_t>(2 * K)), len(static_cast<std::size_t>(2 * K));
-        for (Index item = begin; item < end; ++item) {
-          const Index t = item / N, i = item % N;
-          const VelocityFrames f = velocity_frames(t, T);
-          S e(0);
-          const Index n = graph.degree(i);
-          if (f.moving && inv_w[i] > S(0) && n > 0) {
-            const S* pi = positions.ptr(f.plus, i);
-            const S* mi = positions.ptr(f.minus, i);
-            for (Index k = 0; k < n; ++k) {
-              const Index j = graph.indices(i, k);
-              const S* pj = positions.ptr(f.plus, j);
-              const S* mj = positions.ptr(f.minus, j);
-              S a(0), b(0);
-              for (int c = 0; c < 3; ++c) {
-                a += (pj[c] - pi[c]) * (pj[c] - pi[c]);
-                b += (mj[c] - mi[c]) * (mj[c] - mi[c]);
-              }
-              sq[static_cast<std::size_t>(k)] = a;
-              sq[static_cast<std::size_t>(n + k)] = b;
-            }
-            detail::sqrt_array(sq.data(), len.data(), 2 * n);
-            for (Index k = 0; k < n; ++k)
-              e += graph.weights(i, k) * abs(len[static_cast<std::size_t>(k)] -
-                                             len[static_cast<std::size_t>(n + k)]);
-            e *= inv_w[i];
-          }
-          edge_change[item] = e;
-        }
+      [&](Index begin, Index end) {
+        for (Index item = begin; item < end; ++item)
+          edge_change[item] =
+              confidence_edge_change(positions, graph, inv_w[item % N], item / N, item % N);
       },
       parallel);
-
-  // Pass 2: the residuals, their normalisers and the two factors.
-  const L kappa_m(options.kappa_m), kappa_r(options.kappa_r), lambda_m(options.lambda_m),
-      lambda_r(options.lambda_r), eps(options.eps);
-  parallel_for_chunks(
+  // Pass 2: the residuals, their normalisers and the two factors (E2)-(E6).
+  const ConfidenceConstants<S> p(options);
+  parallel_for(
       T * N,
-      [&](Index, Index begin, Index end) {
-        std::vector<S> sq(static_cast<std::size_t>(K)), nrm(static_cast<std::size_t>(K));
+      [&](Index begin, Index end) {
         for (Index item = begin; item < end; ++item) {
           const Index t = item / N, i = item % N;
-          const S* e_t = edge_change + t * N;
-          const S* ui = u_of(t, N, i);
-          S vb0(0), vb1(0), vb2(0), s_v(0), e_bar(0), s_l(0);
-          const Index n = inv_w[i] > S(0) ? graph.degree(i) : 0;
-          for (Index k = 0; k < n; ++k) {
-            const Index j = graph.indices(i, k);
-            const S w = graph.weights(i, k) * inv_w[i];
-            const S* uj = u_of(t, N, j);
-            vb0 += w * uj[0];
-            vb1 += w * uj[1];
-            vb2 += w * uj[2];
-            e_bar += w * e_t[j];
-          }
-          for (Index k = 0; k < n; ++k) {
-            const S* uj = u_of(t, N, graph.indices(i, k));
-            const S d0 = uj[0] - vb0, d1 = uj[1] - vb1, d2 = uj[2] - vb2;
-            sq[static_cast<std::size_t>(k)] = d0 * d0 + d1 * d1 + d2 * d2;
-          }
-          detail::sqrt_array(sq.data(), nrm.data(), n);
-          for (Index k = 0; k < n; ++k) {
-            const Index j = graph.indices(i, k);
-            const S w = graph.weights(i, k) * inv_w[i];
-            s_v += w * nrm[static_cast<std::size_t>(k)];
-            s_l += w * abs(e_t[j] - e_bar);
-          }
-          const S d0 = ui[0] - vb0, d1 = ui[1] - vb1, d2 = ui[2] - vb2;
-          using std::sqrt;
-          const S r_v = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
-          const S r_l = abs(e_t[i] - e_bar);
-          const S a = r_v / (kappa_m * (s_v + eps));
-          const S b = r_l / (kappa_r * (s_l + eps));
-          const S a2 = a * a, b2 = b * b;
-          if (motion.data()) motion(t, i) = exp(-a2);
-          if (rigidity.data()) rigidity(t, i) = exp(-b2);
+          S m(0), r(0);
+          const S c = confidence_node(vel, edge_change, graph, inv_w[i], t, i, p,
+                                      motion.data() ? &m : nullptr,
+                                      rigidity.data() ? &r : nullptr);
+          if (motion.data()) motion(t, i) = m;
+          if (rigidity.data()) rigidity(t, i) = r;
           if (confidence.data()) {
-            // (c^m)^λm (c^r)^λr = exp(−λm a² − λr b²): no pow, exact for λ = 0.
             const S vis = visibility.data() ? S(visibility(t, i) ? 1 : 0) : S(1);
-            confidence(t, i) = vis * exp(-(lambda_m * a2 + lambda_r * b2));
+            confidence(t, i) = vis * c;
           }
         }
       },

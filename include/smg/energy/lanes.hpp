@@ -22,8 +22,12 @@
 
 namespace smg::detail {
 
+// GCC/Clang vector extensions on the host. nvcc's device pass has none: there Lanes falls back
+// to the plain array below (its instantiations from the host-device functions are compiled for
+// the device too, though only scalar lanes ever run there); the host pass, and so the CPU
+// kernels' instructions, are unchanged.
 #ifndef SMG_HAVE_VECTOR_EXTENSIONS
-#if defined(__GNUC__) || defined(__clang__)
+#if (defined(__GNUC__) || defined(__clang__)) && !defined(__CUDA_ARCH__)
 #define SMG_HAVE_VECTOR_EXTENSIONS 1
 #else
 #define SMG_HAVE_VECTOR_EXTENSIONS 0
@@ -53,60 +57,60 @@ struct Lanes {
 #else
   struct Vec {
     S e[W];
-    S& operator[](int l) { return e[l]; }
-    const S& operator[](int l) const { return e[l]; }
+    SMG_HOST_DEVICE S& operator[](int l) { return e[l]; }
+    SMG_HOST_DEVICE const S& operator[](int l) const { return e[l]; }
   };
 #endif
   Vec v;
 
   Lanes() = default;
-  static SMG_LANE_INLINE Lanes constant(S s) {
+  SMG_HOST_DEVICE static SMG_LANE_INLINE Lanes constant(S s) {
     Lanes r;
     for (int l = 0; l < W; ++l) r.v[l] = s;
     return r;
   }
-  SMG_LANE_INLINE S& operator[](int l) { return reinterpret_cast<S*>(&v)[l]; }
-  SMG_LANE_INLINE const S& operator[](int l) const { return reinterpret_cast<const S*>(&v)[l]; }
+  SMG_HOST_DEVICE SMG_LANE_INLINE S& operator[](int l) { return reinterpret_cast<S*>(&v)[l]; }
+  SMG_HOST_DEVICE SMG_LANE_INLINE const S& operator[](int l) const { return reinterpret_cast<const S*>(&v)[l]; }
 
 #if SMG_HAVE_VECTOR_EXTENSIONS
 #define SMG_LANES_BINARY(op)                                                    \
-  friend SMG_LANE_INLINE Lanes operator op(const Lanes& a, const Lanes& b) {    \
+  friend SMG_HOST_DEVICE SMG_LANE_INLINE Lanes operator op(const Lanes& a, const Lanes& b) {    \
     Lanes r;                                                                    \
     r.v = a.v op b.v;                                                           \
     return r;                                                                   \
   }                                                                             \
-  friend SMG_LANE_INLINE Lanes operator op(const Lanes& a, S b) {               \
+  friend SMG_HOST_DEVICE SMG_LANE_INLINE Lanes operator op(const Lanes& a, S b) {               \
     Lanes r;                                                                    \
     r.v = a.v op b;                                                             \
     return r;                                                                   \
   }                                                                             \
-  friend SMG_LANE_INLINE Lanes operator op(S a, const Lanes& b) {               \
+  friend SMG_HOST_DEVICE SMG_LANE_INLINE Lanes operator op(S a, const Lanes& b) {               \
     Lanes r;                                                                    \
     r.v = a op b.v;                                                             \
     return r;                                                                   \
   }                                                                             \
-  SMG_LANE_INLINE Lanes& operator op##=(const Lanes& b) {                       \
+  SMG_HOST_DEVICE SMG_LANE_INLINE Lanes& operator op##=(const Lanes& b) {                       \
     v = v op b.v;                                                               \
     return *this;                                                               \
   }
 #else
 #define SMG_LANES_BINARY(op)                                                    \
-  friend SMG_LANE_INLINE Lanes operator op(const Lanes& a, const Lanes& b) {    \
+  friend SMG_HOST_DEVICE SMG_LANE_INLINE Lanes operator op(const Lanes& a, const Lanes& b) {    \
     Lanes r;                                                                    \
     for (int l = 0; l < W; ++l) r.v[l] = a.v[l] op b.v[l];                      \
     return r;                                                                   \
   }                                                                             \
-  friend SMG_LANE_INLINE Lanes operator op(const Lanes& a, S b) {               \
+  friend SMG_HOST_DEVICE SMG_LANE_INLINE Lanes operator op(const Lanes& a, S b) {               \
     Lanes r;                                                                    \
     for (int l = 0; l < W; ++l) r.v[l] = a.v[l] op b;                           \
     return r;                                                                   \
   }                                                                             \
-  friend SMG_LANE_INLINE Lanes operator op(S a, const Lanes& b) {               \
+  friend SMG_HOST_DEVICE SMG_LANE_INLINE Lanes operator op(S a, const Lanes& b) {               \
     Lanes r;                                                                    \
     for (int l = 0; l < W; ++l) r.v[l] = a op b.v[l];                           \
     return r;                                                                   \
   }                                                                             \
-  SMG_LANE_INLINE Lanes& operator op##=(const Lanes& b) {                       \
+  SMG_HOST_DEVICE SMG_LANE_INLINE Lanes& operator op##=(const Lanes& b) {                       \
     for (int l = 0; l < W; ++l) v[l] = v[l] op b.v[l];                          \
     return *this;                                                               \
   }
@@ -117,7 +121,7 @@ struct Lanes {
   SMG_LANES_BINARY(/)
 #undef SMG_LANES_BINARY
 
-  friend SMG_LANE_INLINE Lanes operator-(const Lanes& a) {
+  friend SMG_HOST_DEVICE SMG_LANE_INLINE Lanes operator-(const Lanes& a) {
     Lanes r;
     for (int l = 0; l < W; ++l) r.v[l] = -a.v[l];
     return r;
@@ -142,7 +146,7 @@ struct LaneTraits<Lanes<S, W>> {
 };
 
 template <class V, class L>
-SMG_LANE_INLINE V lane_constant(L value) {
+SMG_HOST_DEVICE SMG_LANE_INLINE V lane_constant(L value) {
   if constexpr (LaneTraits<V>::is_lanes) {
     return V::constant(value);
   } else {
@@ -151,7 +155,7 @@ SMG_LANE_INLINE V lane_constant(L value) {
 }
 
 template <class V>
-SMG_LANE_INLINE typename LaneTraits<V>::Mask lane_greater(const V& a, const V& b) {
+SMG_HOST_DEVICE SMG_LANE_INLINE typename LaneTraits<V>::Mask lane_greater(const V& a, const V& b) {
   if constexpr (LaneTraits<V>::is_lanes) {
 #if SMG_HAVE_VECTOR_EXTENSIONS
     return a.v > b.v;
@@ -167,7 +171,7 @@ SMG_LANE_INLINE typename LaneTraits<V>::Mask lane_greater(const V& a, const V& b
 
 // mask ? a : b, lane-wise (bitwise blend, no branch).
 template <class M, class V>
-SMG_LANE_INLINE V lane_select(const M& mask, const V& a, const V& b) {
+SMG_HOST_DEVICE SMG_LANE_INLINE V lane_select(const M& mask, const V& a, const V& b) {
   if constexpr (LaneTraits<V>::is_lanes) {
     V r;
 #if SMG_HAVE_VECTOR_EXTENSIONS
@@ -184,7 +188,7 @@ SMG_LANE_INLINE V lane_select(const M& mask, const V& a, const V& b) {
 }
 
 template <class V>
-SMG_LANE_INLINE V lane_sqrt(const V& a) {
+SMG_HOST_DEVICE SMG_LANE_INLINE V lane_sqrt(const V& a) {
   if constexpr (LaneTraits<V>::is_lanes) {
     using SS = std::remove_const_t<std::remove_reference_t<decltype(a[0])>>;
     constexpr int W = int(sizeof(a.v) / sizeof(SS));

@@ -49,7 +49,8 @@ namespace smg {
 // Checks the inputs and outputs of lrm(). `confidence` may be empty (all 1); the gradient and
 // omega outputs may be empty (not computed).
 template <class S, class I>
-Status validate_lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
+Status validate_lrm(detail::NonDeducedT<PositionsView<const S>> positions,
+                    detail::NonDeducedT<FrameScalarsView<const S>> confidence,
                     const NeighborsView<S, I>& graph, const LrmOptions& options,
                     PositionsView<S> grad_positions = {}, TangentsView<S> omega = {}) {
   const Index T = positions.frames(), N = positions.nodes();
@@ -77,7 +78,7 @@ namespace detail {
 template <class V>
 struct Ldlt3 {
   V d0, d1, d2, l10, l20, l21;
-  Ldlt3(const V& m00, const V& m01, const V& m02, const V& m11, const V& m12, const V& m22)
+  SMG_HOST_DEVICE Ldlt3(const V& m00, const V& m01, const V& m02, const V& m11, const V& m12, const V& m22)
       : d0(m00) {
     l10 = m01 / d0;
     l20 = m02 / d0;
@@ -85,7 +86,7 @@ struct Ldlt3 {
     l21 = (m12 - l20 * l10 * d0) / d1;
     d2 = m22 - l20 * l20 * d0 - l21 * l21 * d1;
   }
-  void solve(const V& b0, const V& b1, const V& b2, V& x0, V& x1, V& x2) const {
+  SMG_HOST_DEVICE void solve(const V& b0, const V& b1, const V& b2, V& x0, V& x1, V& x2) const {
     const V y1 = b1 - l10 * b0, y2 = b2 - l20 * b0 - l21 * y1;
     x2 = y2 / d2;
     x1 = y1 / d1 - l21 * x2;
@@ -109,7 +110,7 @@ inline Index lrm_scratch_size(Index K) { return 11 * K; }
 // positions x[3K], velocities u[3K], raw weights a[K] (entries with a = 0, e.g. padding, add
 // nothing). scratch: lrm_scratch_size(K) lanes. omega (3 lanes, optional) receives ω.
 template <class V, class S>
-V lrm_neighborhood(Index K, const V* x, const V* u, const V* a, const LrmParams<S>& p,
+SMG_HOST_DEVICE V lrm_neighborhood(Index K, const V* x, const V* u, const V* a, const LrmParams<S>& p,
                    V* scratch, V* gx, V* gu, V* omega = nullptr) {
   using L = Literal<S>;
   const V zero = lane_constant<V>(L(0)), one = lane_constant<V>(L(1));
@@ -296,7 +297,8 @@ inline namespace SMG_ISA_NAMESPACE {
 // are single vector loads, and gradients go to the same layout, owned by the frame block; a
 // last pass adds them to the caller's [T][N][3] rows.
 template <class S, class I>
-Accumulator<S> lrm(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
+Accumulator<S> lrm(detail::NonDeducedT<PositionsView<const S>> positions,
+                   detail::NonDeducedT<FrameScalarsView<const S>> confidence,
                    const NeighborsView<S, I>& graph, const LrmOptions& options,
                    PositionsView<S> grad_positions = {}, EnergyWorkspace<S>* workspace = nullptr,
                    ParallelOptions parallel = {}, TangentsView<S> omega = {}) {

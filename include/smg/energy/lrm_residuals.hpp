@@ -222,7 +222,8 @@ inline Index lrm_residual_chunks(Index frames, Index nodes) {
 // (t, i) within each chunk; chunks may run concurrently (the visitor writes only per-chunk
 // state). Precondition: validate_lrm.
 template <class S, class I, class Visitor>
-void for_each_lrm_residual(PositionsView<const S> positions, FrameScalarsView<const S> confidence,
+void for_each_lrm_residual(detail::NonDeducedT<PositionsView<const S>> positions,
+                           detail::NonDeducedT<FrameScalarsView<const S>> confidence,
                            const NeighborsView<S, I>& graph, const LrmOptions& options,
                            Visitor&& visit, bool jacobians = true, ParallelOptions parallel = {}) {
   const Index T = positions.frames(), N = positions.nodes();

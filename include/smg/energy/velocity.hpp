@@ -12,6 +12,7 @@
 #include "smg/core/config.hpp"
 
 #include "smg/core/parallel.hpp"
+#include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
 
 namespace smg {
@@ -24,7 +25,7 @@ struct VelocityFrames {
 };
 
 // The two frames whose difference is the velocity at frame t of a T-frame sequence.  (E1)
-inline VelocityFrames velocity_frames(Index t, Index frames) {
+SMG_HOST_DEVICE inline VelocityFrames velocity_frames(Index t, Index frames) {
   if (frames < 2) return {t, t, false};
   if (t < frames - 1) return {t + 1, t, true};
   return {frames - 1, frames - 2, true};
@@ -40,7 +41,8 @@ inline Vector3<S> velocity(PositionsView<const S> x, Index t, Index i) {
 
 // All velocities u [T][N][3] (same shape as x).  (E1)
 template <class S>
-void velocities(PositionsView<const S> x, PositionsView<S> u, ParallelOptions parallel = {}) {
+void velocities(detail::NonDeducedT<PositionsView<const S>> x, PositionsView<S> u,
+                ParallelOptions parallel = {}) {
   const Index T = x.frames(), N = x.nodes();
   SMG_ASSERT(u.frames() == T && u.nodes() == N, "velocities: u shape");
   parallel_for(
@@ -49,6 +51,13 @@ void velocities(PositionsView<const S> x, PositionsView<S> u, ParallelOptions pa
         for (Index k = begin; k < end; ++k) u(k / N, k % N) = velocity(x, k / N, k % N);
       },
       parallel);
+}
+
+// Checks velocities()' arguments: x [T][N][3] finite, u of the same shape (written).
+template <class S>
+Status validate_velocities(detail::NonDeducedT<PositionsView<const S>> x, PositionsView<S> u) {
+  if (Status s = validate_positions<S>(x, -1, -1, "positions"); !s) return s;
+  return validate_output(u, x.frames(), x.nodes(), "velocities");
 }
 
 }  // namespace smg

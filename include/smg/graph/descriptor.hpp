@@ -58,7 +58,7 @@ struct DescriptorStats {
 // Checks feature samples [T][N][C] (finite, C >= 1), visibility [T][N] of 0/1 or empty (all
 // visible), rho in (0, 1], and the output [N][C].
 template <class S>
-Status validate_semantic_descriptors(FeatureSamplesView<const S> samples,
+Status validate_semantic_descriptors(detail::NonDeducedT<FeatureSamplesView<const S>> samples,
                                      VisibilityView<const std::uint8_t> v,
                                      const DescriptorOptions& o, FeaturesView<S> out) {
   if (!(o.rho > 0.0 && o.rho <= 1.0)) {
@@ -83,7 +83,7 @@ Status validate_semantic_descriptors(FeatureSamplesView<const S> samples,
 // Writes the descriptor of every node into out [N][C], (G7)-(G8): unit vectors, or zero.
 // Deterministic and bit-identical for any thread count; scratch O(T * C) per task.
 template <class S>
-DescriptorStats semantic_descriptors(FeatureSamplesView<const S> samples,
+DescriptorStats semantic_descriptors(detail::NonDeducedT<FeatureSamplesView<const S>> samples,
                                      VisibilityView<const std::uint8_t> v,
                                      const DescriptorOptions& o, FeaturesView<S> out) {
   const Index T = samples.frames(), N = samples.nodes(), C = samples.dim();

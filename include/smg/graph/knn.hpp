@@ -56,7 +56,8 @@ struct KnnStats {
 // [T][N] of 0/1 or empty (all visible); k >= 1, m >= 1, min_covisible >= 0,
 // segment_frames >= 0, seed_segments >= 1; indices and distances of shape [N][k].
 template <class S>
-Status validate_trajectory_knn(PositionsView<const S> x, VisibilityView<const std::uint8_t> v,
+Status validate_trajectory_knn(detail::NonDeducedT<PositionsView<const S>> x,
+                               VisibilityView<const std::uint8_t> v,
                                const KnnOptions& o,
                                TableView<std::int32_t, Eigen::Dynamic> indices,
                                TableView<S, Eigen::Dynamic> distances) {
@@ -175,7 +176,8 @@ int automatic_segment_frames(const TrajectoryStore<S>& st) {
 // Exact trajectory KNN (G4): rows sorted by (D_ij, j), -1/0 padded. Deterministic and
 // bit-identical for any thread count. Call validate_trajectory_knn first on untrusted input.
 template <class S>
-KnnStats trajectory_knn(PositionsView<const S> x, VisibilityView<const std::uint8_t> v,
+KnnStats trajectory_knn(detail::NonDeducedT<PositionsView<const S>> x,
+                        VisibilityView<const std::uint8_t> v,
                         const KnnOptions& o, TableView<std::int32_t, Eigen::Dynamic> indices,
                         TableView<S, Eigen::Dynamic> distances) {
   KnnStats stats;
@@ -360,7 +362,8 @@ KnnStats trajectory_knn(PositionsView<const S> x, VisibilityView<const std::uint
 // The all-pairs reference: same contract and bit-identical rows as trajectory_knn, in
 // O(N^2 T) time (use for tests and to measure the fast search; memory O(N*T)).
 template <class S>
-KnnStats trajectory_knn_brute_force(PositionsView<const S> x, VisibilityView<const std::uint8_t> v,
+KnnStats trajectory_knn_brute_force(detail::NonDeducedT<PositionsView<const S>> x,
+                                    VisibilityView<const std::uint8_t> v,
                                     const KnnOptions& o,
                                     TableView<std::int32_t, Eigen::Dynamic> indices,
                                     TableView<S, Eigen::Dynamic> distances) {

@@ -31,13 +31,13 @@ struct NeighborsView {
   TableView<const S, Eigen::Dynamic> weights;  // [N][K]
 
   NeighborsView() = default;
-  NeighborsView(const I* idx, const S* w, Index nodes, Index k)
+  SMG_HOST_DEVICE NeighborsView(const I* idx, const S* w, Index nodes, Index k)
       : indices(idx, nodes, k), weights(w, nodes, k) {}
 
-  Index nodes() const { return indices.rows(); }
-  Index k() const { return indices.cols(); }
+  SMG_HOST_DEVICE Index nodes() const { return indices.rows(); }
+  SMG_HOST_DEVICE Index k() const { return indices.cols(); }
   // Number of valid (non-negative) entries in row i (they come first).
-  Index degree(Index i) const {
+  SMG_HOST_DEVICE Index degree(Index i) const {
     Index d = 0;
     while (d < k() && indices(i, d) >= 0) ++d;
     return d;

@@ -62,7 +62,8 @@ struct NodeSelectionStats {
 // min_covisible >= 0, min_visible >= 0, segment_frames >= 0, and the outputs: selected,
 // assignment and error of N entries each.
 template <class S>
-Status validate_node_selection(PositionsView<const S> x, VisibilityView<const std::uint8_t> v,
+Status validate_node_selection(detail::NonDeducedT<PositionsView<const S>> x,
+                               VisibilityView<const std::uint8_t> v,
                                const NodeSelectionOptions& o, TableView<std::int32_t, 1> selected,
                                TableView<std::int32_t, 1> assignment, TableView<S, 1> error) {
   if (!(std::isfinite(o.unit) && o.unit > 0)) {
@@ -94,7 +95,8 @@ Status validate_node_selection(PositionsView<const S> x, VisibilityView<const st
 // within the unit (-1 when j is not eligible); error[j] = D(assignment[j], j) (0 when -1).
 // Deterministic for any thread count.
 template <class S>
-NodeSelectionStats<S> select_nodes(PositionsView<const S> x, VisibilityView<const std::uint8_t> v,
+NodeSelectionStats<S> select_nodes(detail::NonDeducedT<PositionsView<const S>> x,
+                                   VisibilityView<const std::uint8_t> v,
                                    const NodeSelectionOptions& o, TableView<std::int32_t, 1> selected,
                                    TableView<std::int32_t, 1> assignment, TableView<S, 1> error) {
   NodeSelectionStats<S> stats;

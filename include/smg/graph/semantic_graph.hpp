@@ -93,8 +93,9 @@ inline Status check_table(const char* name, Index rows, Index cols, Index want_r
 // tau finite, and outputs [N][K].
 template <class S>
 Status validate_gate_and_weight(TableView<const std::int32_t, Eigen::Dynamic> knn_indices,
-                                TableView<const S, Eigen::Dynamic> knn_distances,
-                                FeaturesView<const S> features, const GraphOptions& o,
+                                detail::NonDeducedT<TableView<const S, Eigen::Dynamic>> knn_distances,
+                                detail::NonDeducedT<FeaturesView<const S>> features,
+                                const GraphOptions& o,
                                 TableView<std::int32_t, Eigen::Dynamic> indices,
                                 TableView<S, Eigen::Dynamic> weights,
                                 TableView<S, Eigen::Dynamic> distances) {
@@ -141,8 +142,9 @@ Status validate_gate_and_weight(TableView<const std::int32_t, Eigen::Dynamic> kn
 // zero descriptor is 0.
 template <class S>
 GraphStats gate_and_weight(TableView<const std::int32_t, Eigen::Dynamic> knn_indices,
-                           TableView<const S, Eigen::Dynamic> knn_distances,
-                           FeaturesView<const S> features, const GraphOptions& o,
+                           detail::NonDeducedT<TableView<const S, Eigen::Dynamic>> knn_distances,
+                           detail::NonDeducedT<FeaturesView<const S>> features,
+                           const GraphOptions& o,
                            TableView<std::int32_t, Eigen::Dynamic> indices,
                            TableView<S, Eigen::Dynamic> weights,
                            TableView<S, Eigen::Dynamic> distances) {
@@ -246,8 +248,10 @@ GraphStats gate_and_weight(TableView<const std::int32_t, Eigen::Dynamic> knn_ind
 // Checks the inputs of build_semantic_graph: those of trajectory_knn, features [N][C] finite
 // when the gate is on, tau finite, and outputs of shape [N][k].
 template <class S>
-Status validate_semantic_graph(PositionsView<const S> x, VisibilityView<const std::uint8_t> v,
-                               FeaturesView<const S> features, const GraphOptions& o,
+Status validate_semantic_graph(detail::NonDeducedT<PositionsView<const S>> x,
+                               VisibilityView<const std::uint8_t> v,
+                               detail::NonDeducedT<FeaturesView<const S>> features,
+                               const GraphOptions& o,
                                TableView<std::int32_t, Eigen::Dynamic> indices,
                                TableView<S, Eigen::Dynamic> weights,
                                TableView<S, Eigen::Dynamic> distances) {
@@ -268,8 +272,10 @@ Status validate_semantic_graph(PositionsView<const S> x, VisibilityView<const st
 // node descriptors (semantic_descriptors, or the caller's own); with options.gate == false
 // they are not read. Deterministic for any thread count.
 template <class S>
-GraphStats build_semantic_graph(PositionsView<const S> x, VisibilityView<const std::uint8_t> v,
-                                FeaturesView<const S> features, const GraphOptions& o,
+GraphStats build_semantic_graph(detail::NonDeducedT<PositionsView<const S>> x,
+                                VisibilityView<const std::uint8_t> v,
+                                detail::NonDeducedT<FeaturesView<const S>> features,
+                                const GraphOptions& o,
                                 TableView<std::int32_t, Eigen::Dynamic> indices,
                                 TableView<S, Eigen::Dynamic> weights,
                                 TableView<S, Eigen::Dynamic> distances) {

@@ -297,4 +297,16 @@ S trajectory_distance(PositionsView<const S> x, VisibilityView<const std::uint8_
   return detail::pair_distance(st, 0, 1, o, buffer.data());
 }
 
+// The same two functions for a mutable positions view (no template argument needed).
+template <class View, detail::EnableMutableSequence<View, 3> = 0>
+Status validate_trajectory_distance(const View& x, VisibilityView<const std::uint8_t> v, Index i,
+                                    Index j, const TrajectoryDistanceOptions& o) {
+  return validate_trajectory_distance<typename View::Value>(x, v, i, j, o);
+}
+template <class View, detail::EnableMutableSequence<View, 3> = 0>
+typename View::Value trajectory_distance(const View& x, VisibilityView<const std::uint8_t> v,
+                                         Index i, Index j, const TrajectoryDistanceOptions& o = {}) {
+  return trajectory_distance<typename View::Value>(x, v, i, j, o);
+}
+
 }  // namespace smg

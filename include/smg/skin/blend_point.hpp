@@ -69,18 +69,18 @@ namespace detail {
 // nullptr for any of them.
 
 template <class S>
-inline Quaternion<S> skin_pure(const Vector3<S>& v) {
+SMG_HOST_DEVICE inline Quaternion<S> skin_pure(const Vector3<S>& v) {
   return Quaternion<S>(S(0), v(0), v(1), v(2));
 }
 template <class S>
-inline Quaternion<S> skin_quat(const Vector4<S>& coeffs_xyzw) {
+SMG_HOST_DEVICE inline Quaternion<S> skin_quat(const Vector4<S>& coeffs_xyzw) {
   return Quaternion<S>(coeffs_xyzw);
 }
 
 // +1 if q is the canonical representative of ±q (w > 0, or the first nonzero of (w, x, y, z)
 // positive), else −1. Used for the pivot so that outputs do not depend on input signs.
 template <class S>
-inline bool skin_is_canonical(const Quaternion<S>& q) {
+SMG_HOST_DEVICE inline bool skin_is_canonical(const Quaternion<S>& q) {
   const Literal<S> zero(0);
   if (q.w() != zero) return q.w() > zero;
   if (q.x() != zero) return q.x() > zero;
@@ -90,7 +90,7 @@ inline bool skin_is_canonical(const Quaternion<S>& q) {
 
 // Largest weight, first on ties (docs/design.md "Pinned details: DQB").  (S8)
 template <class S>
-inline Index skin_pivot(const SkinDriver<S>* d, Index D) {
+SMG_HOST_DEVICE inline Index skin_pivot(const SkinDriver<S>* d, Index D) {
   Index pivot = 0;
   for (Index k = 1; k < D; ++k)
     if (d[k].weight > d[pivot].weight) pivot = k;
@@ -99,14 +99,14 @@ inline Index skin_pivot(const SkinDriver<S>* d, Index D) {
 
 // r_k = q_t ⊗ conj(q_ref).  (S6)
 template <class S>
-inline Quaternion<S> skin_motion_rotation(const SkinDriver<S>& d) {
+SMG_HOST_DEVICE inline Quaternion<S> skin_motion_rotation(const SkinDriver<S>& d) {
   return d.q_t * d.q_ref.conjugate();
 }
 
 // (0, a) ⊗ q − q ⊗ (0, b) = (q_v·(b − a), q_w (a − b) + (a + b) × q_v): the pattern of the
 // motion's dual part (S7) and of its adjoint (S15), in 12 multiplications instead of 32.
 template <class S>
-inline Quaternion<S> skin_pure_commutator(const Vector3<S>& a, const Quaternion<S>& q,
+SMG_HOST_DEVICE inline Quaternion<S> skin_pure_commutator(const Vector3<S>& a, const Quaternion<S>& q,
                                           const Vector3<S>& b) {
   const Vector3<S> v = q.vec();
   const Vector3<S> vec = q.w() * (a - b) + (a + b).cross(v);
@@ -115,12 +115,12 @@ inline Quaternion<S> skin_pure_commutator(const Vector3<S>& a, const Quaternion<
 
 // vec(conj(a) ⊗ b) = a_w b_v − b_w a_v − a_v × b_v (the scalar part is not needed).
 template <class S>
-inline Vector3<S> skin_vec_conj_product(const Quaternion<S>& a, const Quaternion<S>& b) {
+SMG_HOST_DEVICE inline Vector3<S> skin_vec_conj_product(const Quaternion<S>& a, const Quaternion<S>& b) {
   return a.w() * b.vec() - b.w() * a.vec() - a.vec().cross(b.vec());
 }
 // vec(b ⊗ conj(a)) = a_w b_v − b_w a_v + a_v × b_v.
 template <class S>
-inline Vector3<S> skin_vec_product_conj(const Quaternion<S>& b, const Quaternion<S>& a) {
+SMG_HOST_DEVICE inline Vector3<S> skin_vec_product_conj(const Quaternion<S>& b, const Quaternion<S>& a) {
   return a.w() * b.vec() - b.w() * a.vec() + a.vec().cross(b.vec());
 }
 
@@ -128,12 +128,12 @@ inline Vector3<S> skin_vec_product_conj(const Quaternion<S>& b, const Quaternion
 // call them once per driver, and Eigen's out-of-line operator* on a conjugated temporary
 // measured several times slower there.
 template <class S>
-inline Vector3<S> skin_rotate(const Quaternion<S>& q, const Vector3<S>& v) {
+SMG_HOST_DEVICE inline Vector3<S> skin_rotate(const Quaternion<S>& q, const Vector3<S>& v) {
   const Vector3<S> t = Literal<S>(2) * q.vec().cross(v);
   return v + q.w() * t + q.vec().cross(t);
 }
 template <class S>
-inline Vector3<S> skin_inverse_rotate(const Quaternion<S>& q, const Vector3<S>& v) {
+SMG_HOST_DEVICE inline Vector3<S> skin_inverse_rotate(const Quaternion<S>& q, const Vector3<S>& v) {
   const Vector3<S> t = Literal<S>(2) * q.vec().cross(v);
   return v - q.w() * t + q.vec().cross(t);
 }
@@ -141,7 +141,7 @@ inline Vector3<S> skin_inverse_rotate(const Quaternion<S>& q, const Vector3<S>& 
 // Dual part of the motion's unit dual quaternion, s_k = ½ (0, t_k) ⊗ r_k, written without
 // forming R(r_k):  s_k = ½ (x̂_t ⊗ r_k − r_k ⊗ x̂_ref).  (S7)
 template <class S>
-inline Quaternion<S> skin_motion_dual(const SkinDriver<S>& d, const Quaternion<S>& r) {
+SMG_HOST_DEVICE inline Quaternion<S> skin_motion_dual(const SkinDriver<S>& d, const Quaternion<S>& r) {
   return Quaternion<S>(Literal<S>(0.5) * skin_pure_commutator(d.x_t, r, d.x_ref).coeffs());
 }
 
@@ -159,7 +159,7 @@ struct SkinBlendState {
 // Forward pass (S6)-(S13). Preconditions: D >= 1, unit quaternions, weights >= 0 with a
 // positive maximum (then |b_r| >= max_k w_k > 0, see (S10)).
 template <class S>
-inline void skin_blend_forward(SkinMethod method, const SkinDriver<S>* d, Index D,
+SMG_HOST_DEVICE inline void skin_blend_forward(SkinMethod method, const SkinDriver<S>* d, Index D,
                                const Vector3<S>& p, const Quaternion<S>& q_p,
                                SkinBlendState<S>& st) {
   using std::sqrt;
@@ -195,7 +195,7 @@ inline void skin_blend_forward(SkinMethod method, const SkinDriver<S>* d, Index 
 // calls emit(k, SkinDriverGradient) once per driver in order and sets *g_p, *g_phi_p (the
 // gradients w.r.t. p and the right tangent of q_p). Equations (S14)-(S18).
 template <class S, class Emit>
-inline void skin_blend_backward(SkinMethod method, const SkinDriver<S>* d, Index D,
+SMG_HOST_DEVICE inline void skin_blend_backward(SkinMethod method, const SkinDriver<S>* d, Index D,
                                 const Vector3<S>& p, const Quaternion<S>& q_p,
                                 const SkinBlendState<S>& st, const Vector3<S>& g_position,
                                 const Vector3<S>& g_rotation, Emit&& emit, Vector3<S>& g_p,
@@ -266,7 +266,7 @@ inline void skin_blend_backward(SkinMethod method, const SkinDriver<S>* d, Index
 // The six rows of the Jacobian of (p', θ') as six vector-Jacobian products with unit output
 // gradients: calls on_driver(row, k, SkinDriverGradient) and on_point(row, g_p, g_phi_p).
 template <class S, class OnDriver, class OnPoint>
-inline void skin_blend_jacobian_rows(SkinMethod method, const SkinDriver<S>* d, Index D,
+SMG_HOST_DEVICE inline void skin_blend_jacobian_rows(SkinMethod method, const SkinDriver<S>* d, Index D,
                                      const Vector3<S>& p, const Quaternion<S>& q_p,
                                      const SkinBlendState<S>& st, OnDriver&& on_driver,
                                      OnPoint&& on_point) {
@@ -295,7 +295,7 @@ inline void skin_blend_jacobian_rows(SkinMethod method, const SkinDriver<S>* d, 
 // weights >= 0 with a positive maximum. LBS assumes weights summing to 1 (it is not scale
 // invariant; DQB is).
 template <class S>
-inline void skin_point(SkinMethod method, const SkinDriver<S>* drivers, Index D,
+SMG_HOST_DEVICE inline void skin_point(SkinMethod method, const SkinDriver<S>* drivers, Index D,
                        const detail::NonDeducedT<Vector3<S>>& p,
                        const detail::NonDeducedT<Quaternion<S>>& q_p,
                        detail::NonDeducedT<Vector3<S>>* p_out, detail::NonDeducedT<Quaternion<S>>* q_out,
@@ -329,7 +329,7 @@ inline void skin_point(SkinMethod method, const SkinDriver<S>* drivers, Index D,
 // *g_phi_p = dL/dφ_p (right tangent of q_p). Any output pointer may be null. Returns nothing
 // about the forward; call skin_point for the values. Same preconditions as skin_point.
 template <class S>
-inline void skin_point_vjp(SkinMethod method, const SkinDriver<S>* drivers, Index D,
+SMG_HOST_DEVICE inline void skin_point_vjp(SkinMethod method, const SkinDriver<S>* drivers, Index D,
                            const detail::NonDeducedT<Vector3<S>>& p,
                            const detail::NonDeducedT<Quaternion<S>>& q_p,
                            const detail::NonDeducedT<Vector3<S>>& g_position,

@@ -37,8 +37,8 @@ template <class S>
 struct SkinNodes {
   PositionsView<const S> positions;      // [T][N][3]
   QuaternionsView<const S> quaternions;  // [T][N][4] (w, x, y, z), normalised on entry
-  Index frames() const { return positions.frames(); }
-  Index nodes() const { return positions.nodes(); }
+  SMG_HOST_DEVICE Index frames() const { return positions.frames(); }
+  SMG_HOST_DEVICE Index nodes() const { return positions.nodes(); }
 };
 
 // The skinned points: drivers, weights, reference time and reference pose.
@@ -49,8 +49,8 @@ struct SkinPoints {
   SkinIndexView t_ref;                      // [P]
   TableView<const S, 3> positions;          // [P][3] reference positions
   TableView<const S, 4> quaternions;        // [P][4] reference rotations; empty = identity
-  Index count() const { return drivers.rows(); }
-  Index width() const { return drivers.cols(); }
+  SMG_HOST_DEVICE Index count() const { return drivers.rows(); }
+  SMG_HOST_DEVICE Index width() const { return drivers.cols(); }
 };
 
 struct SkinOptions {
@@ -242,16 +242,17 @@ inline Status check_output_table(TableView<S, C> a, Index rows, Index cols, cons
   return Status::ok();
 }
 
-// Normalised node quaternion (t, n) and position.
+// Normalised node quaternion (t, n) and position. The loaders below are host-device: the CPU
+// loops and the CUDA kernels (smg/cuda/dqb.cuh) read the drivers through them.
 template <class S>
-inline Quaternion<S> skin_node_quaternion(QuaternionsView<const S> q, Index t, Index n) {
+SMG_HOST_DEVICE inline Quaternion<S> skin_node_quaternion(QuaternionsView<const S> q, Index t, Index n) {
   using std::sqrt;
   const S* c = q.ptr(t, n);
   const Quaternion<S> r(c[0], c[1], c[2], c[3]);
   return Quaternion<S>(r.coeffs() * (S(1) / sqrt(r.coeffs().squaredNorm())));
 }
 template <class S>
-inline Quaternion<S> skin_point_quaternion(TableView<const S, 4> q, Index p, S* norm = nullptr) {
+SMG_HOST_DEVICE inline Quaternion<S> skin_point_quaternion(TableView<const S, 4> q, Index p, S* norm = nullptr) {
   if (q.rows() == 0) {
     if (norm) *norm = S(1);
     return Quaternion<S>::Identity();
@@ -266,7 +267,7 @@ inline Quaternion<S> skin_point_quaternion(TableView<const S, 4> q, Index p, S* 
 // Loads the reference half of a point's drivers (positions, normalised quaternions at t_ref,
 // weights). Returns the number of valid drivers.
 template <class S>
-inline Index skin_load_ref(const SkinNodes<S>& nodes, const SkinPoints<S>& pts, Index p,
+SMG_HOST_DEVICE inline Index skin_load_ref(const SkinNodes<S>& nodes, const SkinPoints<S>& pts, Index p,
                            bool with_weights, SkinDriver<S>* d) {
   const Index tr = pts.t_ref(p, 0);
   Index D = 0;
@@ -282,7 +283,7 @@ inline Index skin_load_ref(const SkinNodes<S>& nodes, const SkinPoints<S>& pts, 
 }
 // Loads the query half (poses at frame t) of a point's first D drivers.
 template <class S>
-inline void skin_load_query(const SkinNodes<S>& nodes, const SkinPoints<S>& pts, Index p, Index t,
+SMG_HOST_DEVICE inline void skin_load_query(const SkinNodes<S>& nodes, const SkinPoints<S>& pts, Index p, Index t,
                             Index D, SkinDriver<S>* d) {
   for (Index k = 0; k < D; ++k) {
     const std::int32_t n = pts.drivers(p, k);

@@ -73,14 +73,20 @@ Status validate_skin_sigma(TableView<const S, 1> sigma, Index nodes,
                            const std::string& name = "sigma") {
   return detail::check_sigma<S>(sigma, nodes, name);
 }
+template <class View, detail::EnableMutableTable<View, 1> = 0>
+Status validate_skin_sigma(const View& sigma, Index nodes, const std::string& name = "sigma") {
+  return validate_skin_sigma<typename View::Value>(sigma, nodes, name);
+}
 
 // Checks skinning_weights' arguments: positions [T][N][3] finite; drivers [P][D] (entries in
 // [−1, N), padding trailing, entry 0 valid); t_ref [P] in [0, T); points [P][3] finite;
 // sigma [N] finite and > 0; weights_out [P][D].
 template <class S>
-Status validate_skinning_weights(PositionsView<const S> positions, SkinDriversView drivers,
-                                 SkinIndexView t_ref, TableView<const S, 3> points,
-                                 TableView<const S, 1> sigma,
+Status validate_skinning_weights(detail::NonDeducedT<PositionsView<const S>> positions,
+                                 SkinDriversView drivers,
+                                 SkinIndexView t_ref,
+                                 detail::NonDeducedT<TableView<const S, 3>> points,
+                                 detail::NonDeducedT<TableView<const S, 1>> sigma,
                                  TableView<S, Eigen::Dynamic> weights_out) {
   if (Status s = detail::check_weight_inputs<S>(positions, drivers, t_ref, points, sigma); !s)
     return s;
@@ -91,9 +97,11 @@ Status validate_skinning_weights(PositionsView<const S> positions, SkinDriversVi
 // weights_out[p][k] = w_pk (S2)-(S4), 0 on padding. Returns the number of points whose weights
 // used the fallback (S4) (all of their weight on the anchor). Deterministic, multithreaded.
 template <class S>
-Index skinning_weights(PositionsView<const S> positions, SkinDriversView drivers,
-                       SkinIndexView t_ref, TableView<const S, 3> points,
-                       TableView<const S, 1> sigma, TableView<S, Eigen::Dynamic> weights_out,
+Index skinning_weights(detail::NonDeducedT<PositionsView<const S>> positions,
+                       SkinDriversView drivers,
+                       SkinIndexView t_ref, detail::NonDeducedT<TableView<const S, 3>> points,
+                       detail::NonDeducedT<TableView<const S, 1>> sigma,
+                       TableView<S, Eigen::Dynamic> weights_out,
                        ParallelOptions options = {}) {
   const Index Dmax = drivers.cols();
   return parallel_reduce(
@@ -127,11 +135,11 @@ struct SkinWeightsGradients {
 // Checks skinning_weights_backward's arguments: those of skinning_weights, grad_weights [P][D]
 // finite, and each non-empty gradient view's shape.
 template <class S>
-Status validate_skinning_weights_backward(PositionsView<const S> positions,
+Status validate_skinning_weights_backward(detail::NonDeducedT<PositionsView<const S>> positions,
                                           SkinDriversView drivers, SkinIndexView t_ref,
-                                          TableView<const S, 3> points,
-                                          TableView<const S, 1> sigma,
-                                          TableView<const S, Eigen::Dynamic> grad_weights,
+                                          detail::NonDeducedT<TableView<const S, 3>> points,
+                                          detail::NonDeducedT<TableView<const S, 1>> sigma,
+                                          detail::NonDeducedT<TableView<const S, Eigen::Dynamic>> grad_weights,
                                           const SkinWeightsGradients<S>& grads) {
   if (Status s = detail::check_weight_inputs<S>(positions, drivers, t_ref, points, sigma); !s)
     return s;
@@ -158,10 +166,12 @@ Status validate_skinning_weights_backward(PositionsView<const S> positions,
 // node buffers go through the workspace's incidence in the fixed order (node, point, driver):
 // bit-identical results for any thread count.
 template <class S>
-void skinning_weights_backward(PositionsView<const S> positions, SkinDriversView drivers,
-                               SkinIndexView t_ref, TableView<const S, 3> points,
-                               TableView<const S, 1> sigma,
-                               TableView<const S, Eigen::Dynamic> grad_weights,
+void skinning_weights_backward(detail::NonDeducedT<PositionsView<const S>> positions,
+                               SkinDriversView drivers,
+                               SkinIndexView t_ref,
+                               detail::NonDeducedT<TableView<const S, 3>> points,
+                               detail::NonDeducedT<TableView<const S, 1>> sigma,
+                               detail::NonDeducedT<TableView<const S, Eigen::Dynamic>> grad_weights,
                                const SkinWeightsGradients<S>& grads, SkinWorkspace<S>& ws,
                                ParallelOptions options = {}) {
   const Index P = drivers.rows(), Dmax = drivers.cols(), N = positions.nodes();

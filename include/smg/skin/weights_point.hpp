@@ -31,7 +31,7 @@ namespace smg {
 // (S5): dw_j/dl_k = w_j (δ_jk − w_k), dl_k/dp = −(p − x_k)/σ_k², dl_k/dx_k = (p − x_k)/σ_k²,
 // dl_k/dσ_k = ‖p − x_k‖²/σ_k³.  Precondition: D >= 1.
 template <class S>
-inline bool skinning_weights_point(const detail::NonDeducedT<Vector3<S>>& p, Index D, const Vector3<S>* x,
+SMG_HOST_DEVICE inline bool skinning_weights_point(const detail::NonDeducedT<Vector3<S>>& p, Index D, const Vector3<S>* x,
                                    const S* sigma, S* w,
                                    detail::NonDeducedT<Vector3<S>>* J_w_p = nullptr,
                                    detail::NonDeducedT<Vector3<S>>* J_w_x = nullptr,
@@ -96,7 +96,7 @@ inline bool skinning_weights_point(const detail::NonDeducedT<Vector3<S>>& p, Ind
 // (any of the three may be null). (S19): g_l_k = w_k (g_w_k − Σ_j w_j g_w_j). A driver with
 // weight 0 receives 0; after the fallback every gradient is 0.
 template <class S>
-inline void skinning_weights_point_vjp(const detail::NonDeducedT<Vector3<S>>& p, Index D, const Vector3<S>* x,
+SMG_HOST_DEVICE inline void skinning_weights_point_vjp(const detail::NonDeducedT<Vector3<S>>& p, Index D, const Vector3<S>* x,
                                        const S* sigma, const S* w, const S* g_w,
                                        detail::NonDeducedT<Vector3<S>>* g_p,
                                        detail::NonDeducedT<Vector3<S>>* g_x,

@@ -27,6 +27,7 @@ struct Camera {
 
   // From a 3x3 intrinsic matrix K = [fx 0 cx; 0 fy cy; 0 0 1] (K(0,1), the skew, is ignored
   // as gsplat ignores it; validate_camera_matrix rejects a nonzero one).
+  SMG_HOST_DEVICE
   static Camera from_K(const Matrix4<S>& viewmat, const Matrix3<S>& K, int width, int height) {
     Camera c;
     c.viewmat = viewmat;
@@ -39,10 +40,10 @@ struct Camera {
     return c;
   }
 
-  Matrix3<S> rotation() const { return viewmat.template topLeftCorner<3, 3>(); }
-  Vector3<S> translation() const { return viewmat.template topRightCorner<3, 1>(); }
+  SMG_HOST_DEVICE Matrix3<S> rotation() const { return viewmat.template topLeftCorner<3, 3>(); }
+  SMG_HOST_DEVICE Vector3<S> translation() const { return viewmat.template topRightCorner<3, 1>(); }
   // Camera centre in world coordinates, -Rᵀ t (R is a rotation, validate_camera checks it).
-  Vector3<S> center() const { return -(rotation().transpose() * translation()); }
+  SMG_HOST_DEVICE Vector3<S> center() const { return -(rotation().transpose() * translation()); }
 };
 
 // Checks what the splatter relies on: image size >= 1, finite positive focal lengths, finite

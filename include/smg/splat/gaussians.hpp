@@ -34,9 +34,9 @@ struct GaussianParams {
   TableView<const S, Eigen::Dynamic> colors;  // [G][C] or [G][K*C]
   int sh_degree = -1;                         // -1: plain colours; 0..3: SH coefficients
 
-  Index count() const { return means.rows(); }
+  SMG_HOST_DEVICE Index count() const { return means.rows(); }
   // Colour channels C implied by the colours' width and sh_degree.
-  Index channels() const {
+  SMG_HOST_DEVICE Index channels() const {
     return sh_degree < 0 ? colors.cols() : colors.cols() / sh_basis_count(sh_degree);
   }
 };

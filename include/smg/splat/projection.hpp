@@ -29,7 +29,7 @@ enum class Cull {
   transparent,  // opacity < 1/255: no pixel can pass the alpha test (decided by the renderer)
 };
 
-inline const char* cull_name(Cull c) {
+SMG_HOST_DEVICE inline const char* cull_name(Cull c) {
   switch (c) {
     case Cull::none: return "visible";
     case Cull::depth: return "depth";
@@ -51,7 +51,7 @@ struct ProjectedGaussian {
 
 // Unit quaternion (w, x, y, z) -> rotation matrix, the polynomial form gsplat uses. (R2)
 template <class S>
-inline Matrix3<S> rotmat_from_unit_wxyz(const Vector4<S>& q) {
+SMG_HOST_DEVICE inline Matrix3<S> rotmat_from_unit_wxyz(const Vector4<S>& q) {
   const S w = q(0), x = q(1), y = q(2), z = q(3);
   Matrix3<S> R;
   R << S(1) - S(2) * (y * y + z * z), S(2) * (x * y - w * z), S(2) * (x * z + w * y),
@@ -62,6 +62,7 @@ inline Matrix3<S> rotmat_from_unit_wxyz(const Vector4<S>& q) {
 
 // dL/dq of L(rotmat_from_unit_wxyz(q)) given v_R = dL/dR (the polynomial's gradient). (R24)
 template <class S>
+SMG_HOST_DEVICE
 inline Vector4<S> rotmat_from_unit_wxyz_vjp(const Vector4<S>& q, const Matrix3<S>& v) {
   const S w = q(0), x = q(1), y = q(2), z = q(3);
   Vector4<S> g;
@@ -95,6 +96,7 @@ struct ProjectionState {
 
 // gsplat's clamp of x/z, y/z for the Jacobian: 0.3 * tan(fov/2) beyond the image edges.
 template <class S>
+SMG_HOST_DEVICE
 inline void fov_limits(const Camera<S>& cam, S* lim_x_pos, S* lim_x_neg, S* lim_y_pos, S* lim_y_neg) {
   const S tan_fovx = S(0.5) * S(cam.width) / cam.fx;
   const S tan_fovy = S(0.5) * S(cam.height) / cam.fy;
@@ -106,6 +108,7 @@ inline void fov_limits(const Camera<S>& cam, S* lim_x_pos, S* lim_x_neg, S* lim_
 
 // Depth test, covariances and J. Returns Cull::depth when z is outside [near, far].
 template <class S>
+SMG_HOST_DEVICE
 inline Cull projection_state(const Camera<S>& cam, const Vector3<S>& mean, const Vector4<S>& quat,
                              const Vector3<S>& log_scale, S eps2d, ProjectionState<S>* st) {
   const Matrix3<S> W = cam.rotation();
@@ -150,6 +153,7 @@ inline Cull projection_state(const Camera<S>& cam, const Vector3<S>& mean, const
 // with the camera. Returns Cull::none and fills *out when visible; otherwise the reason
 // (out is then unspecified). radius_sigmas: k in (R7), 3 for gsplat.  (R1)-(R8)
 template <class S>
+SMG_HOST_DEVICE
 inline Cull project_gaussian(const Camera<S>& cam, const Vector3<S>& mean, const Vector4<S>& quat,
                              const Vector3<S>& log_scale, S eps2d, S radius_sigmas,
                              ProjectedGaussian<S>* out) {
@@ -185,6 +189,7 @@ inline Cull project_gaussian(const Camera<S>& cam, const Vector3<S>& mean, const
 // v_quat_tangent right-tangent 3-vector (d/dφ at q̂ ⊗ Exp(φ)), v_log_scale [3].  (R20)-(R26)
 // Must only be called for a Gaussian that project_gaussian reported visible.
 template <class S>
+SMG_HOST_DEVICE
 inline void project_gaussian_vjp(const Camera<S>& cam, const Vector3<S>& mean,
                                  const Vector4<S>& quat, const Vector3<S>& log_scale, S eps2d,
                                  const Vector3<S>& conic, const Vector2<S>& v_mean2d,

@@ -18,21 +18,23 @@ namespace smg::splat {
 constexpr int sh_basis_count(int degree) { return (degree + 1) * (degree + 1); }
 
 namespace sh_detail {
+// Scalars at namespace scope (device code may read a namespace-scope constexpr scalar, not an
+// array); the degree-2 and degree-3 constants are local arrays of sh_basis.
 constexpr double C0 = 0.28209479177387814;
 constexpr double C1 = 0.4886025119029199;
-constexpr double C2[5] = {1.0925484305920792, -1.0925484305920792, 0.31539156525252005,
-                          -1.0925484305920792, 0.5462742152960396};
-constexpr double C3[7] = {-0.5900435899266435, 2.890611442640554, -0.4570457994644658,
-                          0.3731763325901154, -0.4570457994644658, 1.445305721320277,
-                          -0.5900435899266435};
 }  // namespace sh_detail
 
 // Y_b(d) for b < (degree+1)², d a unit vector; optionally the 3 partial derivatives of each
 // basis function with respect to (x, y, z) (dY[3 b + i]), as polynomials in d (the caller
 // chains through the normalisation). (R14)
 template <class S>
-inline void sh_basis(int degree, const Vector3<S>& d, S* Y, S* dY = nullptr) {
+SMG_HOST_DEVICE inline void sh_basis(int degree, const Vector3<S>& d, S* Y, S* dY = nullptr) {
   using namespace sh_detail;
+  constexpr double C2[5] = {1.0925484305920792, -1.0925484305920792, 0.31539156525252005,
+                            -1.0925484305920792, 0.5462742152960396};
+  constexpr double C3[7] = {-0.5900435899266435, 2.890611442640554, -0.4570457994644658,
+                            0.3731763325901154, -0.4570457994644658, 1.445305721320277,
+                            -0.5900435899266435};
   const S x = d.x(), y = d.y(), z = d.z();
   Y[0] = S(C0);
   if (dY) dY[0] = dY[1] = dY[2] = S(0);
@@ -88,6 +90,7 @@ inline void sh_basis(int degree, const Vector3<S>& d, S* Y, S* dY = nullptr) {
 // with d̂ = dir / |dir| (dir = mean - camera centre, any nonzero length; a zero direction
 // evaluates the degree-0 term only). coeffs is [K][channels], K = (degree+1)². (R15)
 template <class S>
+SMG_HOST_DEVICE
 inline void sh_to_color(int degree, int channels, const Vector3<S>& dir, const S* coeffs, S* out) {
   S Y[16];
   const S n = dir.norm();
@@ -105,6 +108,7 @@ inline void sh_to_color(int degree, int channels, const Vector3<S>& dir, const S
 // ([K][channels], overwritten) and returns dL/d dir (through the normalisation). The clamp at
 // 0 passes the gradient where the unclamped value is >= 0 (as torch.clamp_min does).
 template <class S>
+SMG_HOST_DEVICE
 inline Vector3<S> sh_to_color_vjp(int degree, int channels, const Vector3<S>& dir,
                                   const S* coeffs, const S* v_color, S* v_coeffs) {
   S Y[16], dY[48];

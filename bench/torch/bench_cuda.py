@@ -1,0 +1,174 @@
+#!/usr/bin/env python3
+"""smg_torch's CUDA operators against pure-PyTorch autograd on the same GPU: forward + backward,
+CUDA-event timing, best and median of --repeat runs after a warm-up.
+
+usage: PYTHONPATH=<smg_torch built with CUDA> python3 bench/torch/bench_cuda.py [--repeat 20]
+           [--json out.json] [--quick]
+
+Energies: the scene of bench_torch.py (N = 5000 nodes, T = 100 frames, K = 16, gaps 1,2,4,
+float32), loss = C-ARAP + LRM + ARAP with node confidences computed first, backward to the
+positions and raw quaternions; each operator is also timed alone. Every energy smg_torch runs on
+CUDA is included (smg_torch._C lists them: cuda_carap, cuda_arap, cuda_lrm, ...); one it lacks
+is left out of both sides and named in the output. The PyTorch baseline is
+tests/torch/torch_reference.py (vectorised autograd implementations of docs/math/energy.md)
+on the same device. DQB: 32768 points x 17 drivers when smg_torch has cuda_dqb.
+Prints a markdown table with the device name; --json writes the rows.
+"""
+import argparse
+import json
+import os
+import statistics
+import sys
+
+import torch
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+sys.path.insert(0, os.path.join(ROOT, "tests", "torch"))
+sys.path.insert(0, HERE)
+
+import smg_torch as smg  # noqa: E402
+import torch_reference as ref  # noqa: E402
+from bench_torch import energy_scene, skin_scene  # noqa: E402
+
+
+def timed(fn, repeat):
+    """(best, median) seconds of fn() by CUDA events, after two warm-up calls."""
+    fn()
+    fn()
+    times = []
+    for _ in range(repeat):
+        a, b = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
+        a.record()
+        fn()
+        b.record()
+        torch.cuda.synchronize()
+        times.append(a.elapsed_time(b) * 1e-3)
+    return min(times), statistics.median(times)
+
+
+def rel(a, b):
+    return float((a.double() - b.double()).norm() / b.double().norm().clamp_min(1e-300))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeat", type=int, default=20)
+    ap.add_argument("--json", default=None)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--profile", action="store_true",
+                    help="print the CUDA kernel times of one smg_torch energies call (torch.profiler)")
+    args = ap.parse_args()
+    if not (torch.cuda.is_available() and smg.has_cuda):
+        print("bench_cuda: skipped (no CUDA device, or smg_torch built without CUDA)")
+        return 0
+    dev = torch.device("cuda")
+    name = torch.cuda.get_device_name(dev)
+    N, T, K, P = (500, 20, 16, 2048) if args.quick else (5000, 100, 16, 32768)
+    x, q, idx, w = (t.to(dev) for t in energy_scene(N, T, K))
+    has = {op: hasattr(smg._C, "cuda_" + op) for op in ("carap", "arap", "lrm", "dqb_forward")}
+    g = (idx, w)
+
+    def loss(f, xs, qs):
+        c = f.node_confidences(xs, idx, w) if f is ref else f.node_confidences(xs, g)
+        e = (ref.carap(xs, qs, idx, w, c) if f is ref else smg.carap(xs, qs, g, c))
+        e = e + (ref.arap(xs, qs, idx, w) if f is ref else smg.arap(xs, qs, g))
+        if has["lrm"]:
+            e = e + (ref.lrm(xs, idx, w, c) if f is ref else smg.lrm(xs, g, c))
+        return e
+
+    def run(f):
+        xs, qs = x.clone().requires_grad_(), q.clone().requires_grad_()
+        e = loss(f, xs, qs)
+        e.backward()
+        return e.detach(), xs.grad, qs.grad
+
+    rows = []
+    terms = "conf + C-ARAP + ARAP" + (" + LRM" if has["lrm"] else "")
+    t_smg = timed(lambda: run(smg), args.repeat)
+    t_ref = timed(lambda: run(ref), args.repeat)
+    rows.append((f"energies fwd+bwd ({terms}), N={N} T={T} K={K} float32", t_smg, t_ref))
+    e1, gx1, gq1 = run(smg)
+    e2, gx2, gq2 = run(ref)
+    agree = (f"float32, smg CUDA vs PyTorch autograd CUDA: energy {abs(float(e1 - e2)) / abs(float(e2)):.1e}, "
+             f"grad x {rel(gx1, gx2):.1e}, grad q {rel(gq1, gq2):.1e}")
+    # Against float64 on the CPU (the library's reference precision) on the same inputs.
+    xd, qd, wd = x.double().cpu(), q.double().cpu(), w.double().cpu()
+    xs, qs = xd.clone().requires_grad_(), qd.clone().requires_grad_()
+    cd = smg.node_confidences(xs, (idx.cpu(), wd))
+    ed = smg.carap(xs, qs, (idx.cpu(), wd), cd) + smg.arap(xs, qs, (idx.cpu(), wd))
+    if has["lrm"]:
+        ed = ed + smg.lrm(xs, (idx.cpu(), wd), cd)
+    ed.backward()
+    ed = float(ed.detach())
+    agree64 = (f"float32 CUDA vs float64 CPU (same inputs): energy {abs(float(e1) - ed) / abs(ed):.1e}, "
+               f"grad x {rel(gx1.cpu(), xs.grad):.1e}, grad q {rel(gq1.cpu(), qs.grad):.1e}")
+
+    c = smg.node_confidences(x, g)
+    for op in ("node_confidences", "carap", "arap", "lrm"):
+        if op != "node_confidences" and not has[op]:
+            continue
+        def one(f, op=op):
+            xs, qs = x.clone().requires_grad_(), q.clone().requires_grad_()
+            if op == "node_confidences":
+                return f.node_confidences(xs, idx, w) if f is ref else f.node_confidences(xs, g)
+            if op == "carap":
+                e = ref.carap(xs, qs, idx, w, c) if f is ref else smg.carap(xs, qs, g, c)
+            elif op == "arap":
+                e = ref.arap(xs, qs, idx, w) if f is ref else smg.arap(xs, qs, g)
+            else:
+                e = ref.lrm(xs, idx, w, c) if f is ref else smg.lrm(xs, g, c)
+            e.backward()
+        rows.append((f"{op} {'fwd' if op == 'node_confidences' else 'fwd+bwd'}, N={N} T={T} K={K} float32",
+                     timed(lambda: one(smg), args.repeat), timed(lambda: one(ref), args.repeat)))
+
+    if has["dqb_forward"]:
+        s = [t.to(dev) for t in skin_scene(N, T, K, P)]
+        xs_, qs_, idx_, w_, pts, pq, anchor, t_ref, t_query, sigma = s
+
+        def dqb(f):
+            leaves = [t.clone().requires_grad_() for t in (xs_, qs_, pts, pq)]
+            if f is smg:
+                px, pqo = smg.dqb(leaves[0], leaves[1], (idx_, w_), leaves[2], leaves[3], anchor, t_ref,
+                                  t_query, sigma)
+            else:
+                px, pqo = ref.dqb(leaves[0], leaves[1], idx_, leaves[2], leaves[3], anchor, t_ref,
+                                  t_query, sigma)
+            (px.sum() + pqo.sum()).backward()
+        rows.append((f"DQB fwd+bwd, P={P} points x {K + 1} drivers, 1 query frame, float32",
+                     timed(lambda: dqb(smg), args.repeat), timed(lambda: dqb(ref), args.repeat)))
+
+    if args.profile:
+        from torch.profiler import ProfilerActivity, profile
+        run(smg)
+        torch.cuda.synchronize()
+        with profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof:
+            run(smg)
+            torch.cuda.synchronize()
+        print(prof.key_averages().table(sort_by="cuda_time_total", row_limit=25))
+
+    missing = [op for op, ok in has.items() if not ok]
+    print(f"smg_torch CUDA vs pure-PyTorch autograd on {name}, CUDA events, best and median of "
+          f"{args.repeat} after 2 warm-ups, torch {torch.__version__}\n")
+    print("| operation | smg_torch best (median) | PyTorch autograd best (median) | speed-up (best) |")
+    print("|---|---:|---:|---:|")
+    for rname, a, b in rows:
+        print(f"| {rname} | {a[0] * 1e3:.3f} ms ({a[1] * 1e3:.3f}) | {b[0] * 1e3:.3f} ms ({b[1] * 1e3:.3f}) | "
+              f"{b[0] / a[0]:.1f}x |")
+    print(f"\n{agree}\n{agree64}")
+    if missing:
+        print(f"not measured (no CUDA operator in this build): {', '.join(missing)}")
+    if args.json:
+        out = {"context": {"device": name, "torch": torch.__version__, "repeat": args.repeat},
+               "benchmarks": [{"name": r, "real_time": a[0] * 1e3, "median_ms": a[1] * 1e3,
+                               "pytorch_ms": b[0] * 1e3, "pytorch_median_ms": b[1] * 1e3,
+                               "speedup": b[0] / a[0], "time_unit": "ms", "device": name}
+                              for r, a, b in rows],
+               "agreement": [agree, agree64]}
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,237 @@
+// The per-element steps of the CUDA LRM and DQB kernels (smg/cuda/lrm.cuh, dqb.cuh), run by a
+// host loop: the scheme (gathers in the CPU's order, velocity pass, driver incidence) reproduces
+// the CPU smg::lrm / smg::skin_blend / smg::skin_blend_backward bit for bit on the host (where no
+// FMA contraction differs), for float and double, int32 and int64 indices. Needs no GPU: the
+// suite "cuda-host" can run on machines without one (doctest -ts=cuda-host).
+#include <doctest/doctest.h>
+
+#include <cstdint>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "smg/cuda/dqb.cuh"
+#include "smg/cuda/lrm.cuh"
+#include "smg/energy/lrm.hpp"
+#include "smg/skin/blend.hpp"
+
+namespace {
+
+using smg::Index;
+
+double uniform(std::mt19937_64& rng, double a = -1, double b = 1) {
+  return std::uniform_real_distribution<double>(a, b)(rng);
+}
+
+template <class T>
+bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+// Host copy of the in-edge lists (the same ordering as build_reverse_graph / build_driver_incidence).
+template <class I>
+void in_edges(const std::vector<I>& table, Index nodes, std::vector<std::int32_t>& off,
+              std::vector<std::int64_t>& ent) {
+  off.assign(static_cast<std::size_t>(nodes + 1), 0);
+  for (const I j : table)
+    if (j >= 0) ++off[static_cast<std::size_t>(j) + 1];
+  for (Index j = 0; j < nodes; ++j) off[static_cast<std::size_t>(j + 1)] += off[static_cast<std::size_t>(j)];
+  ent.assign(static_cast<std::size_t>(off.back()), 0);
+  std::vector<std::int32_t> fill(off.begin(), off.end() - 1);
+  for (std::size_t e = 0; e < table.size(); ++e)
+    if (table[e] >= 0) ent[static_cast<std::size_t>(fill[static_cast<std::size_t>(table[e])]++)] = std::int64_t(e);
+}
+
+template <class S, class I>
+void lrm_steps_case(Index T, Index N, Index K, bool conf, const smg::LrmOptions& o, std::uint64_t seed) {
+  CAPTURE(seed);
+  CAPTURE(sizeof(S));
+  CAPTURE(sizeof(I));
+  std::mt19937_64 rng(seed);
+  std::vector<S> x(static_cast<std::size_t>(T * N * 3)), c(conf ? static_cast<std::size_t>(T * N) : 0),
+      w(static_cast<std::size_t>(N * K), S(0)), g0(static_cast<std::size_t>(T * N * 3));
+  std::vector<I> idx(static_cast<std::size_t>(N * K), -1);
+  for (auto& v : x) v = S(uniform(rng));
+  for (auto& v : c) v = S(uniform(rng, 0, 1));
+  for (auto& v : g0) v = S(uniform(rng));
+  for (Index i = 0; i < N; ++i) {
+    const Index deg = std::min<Index>({K, N - 1, 4 + Index(uniform(rng, 0, 1) * double(K))});
+    std::vector<Index> p;
+    for (Index j = 0; j < N; ++j)
+      if (j != i) p.push_back(j);
+    std::shuffle(p.begin(), p.end(), rng);
+    for (Index k = 0; k < deg; ++k) {
+      idx[static_cast<std::size_t>(i * K + k)] = I(p[static_cast<std::size_t>(k)]);
+      w[static_cast<std::size_t>(i * K + k)] = S(uniform(rng, 0.2, 1));
+    }
+  }
+  const smg::NeighborsView<S, I> g(idx.data(), w.data(), N, K);
+  smg::FrameScalarsView<const S> cv;
+  if (conf) cv = smg::FrameScalarsView<const S>(c.data(), T, N);
+  const smg::PositionsView<const S> xv(x.data(), T, N);
+  std::vector<S> g_cpu = g0, om_cpu(x.size(), S(0));
+  const double e_cpu = double(smg::lrm<S, I>(xv, cv, g, o, smg::PositionsView<S>(g_cpu.data(), T, N),
+                                             nullptr, {}, smg::TangentsView<S>(om_cpu.data(), T, N)));
+
+  std::vector<std::int32_t> off;
+  std::vector<std::int64_t> ent;
+  in_edges(idx, N, off, ent);
+  double scale = o.weight;
+  if (o.normalization == smg::Normalization::mean) scale /= double(T * Index(ent.size()));
+  smg::cuda::detail::LrmKernelArgs<S> a;
+  a.p.huber_delta = smg::Literal<S>(o.huber_delta);
+  a.p.mu_factor = smg::lrm_mu_factor<S>();
+  a.p.detach_omega = o.detach_omega;
+  a.p.gradient = true;
+  a.alpha = smg::Literal<S>(o.alpha);
+  a.scale = smg::Literal<S>(scale);
+  const Index n = T * N;
+  std::vector<smg::Accumulator<S>> terms(static_cast<std::size_t>(n));
+  std::vector<S> edges(static_cast<std::size_t>(6 * n * K)), nodes(static_cast<std::size_t>(6 * n));
+  std::vector<S> g_gpu = g0, om_gpu(x.size(), S(0));
+  S* gxe = edges.data();
+  S* gue = gxe + 3 * n * K;
+  for (Index e = 0; e < n; ++e)
+    smg::cuda::detail::lrm_term_at<S, I, 32>(e, xv, cv, g, a, terms.data(), gxe, gue,
+                                             smg::TangentsView<S>(om_gpu.data(), T, N));
+  for (Index e = 0; e < n; ++e)
+    smg::cuda::detail::lrm_gather_at<S>(e, N, K, off.data(), ent.data(), gxe, gue, nodes.data(),
+                                        nodes.data() + 3 * n);
+  for (Index e = 0; e < n; ++e)
+    smg::cuda::detail::lrm_velocity_at<S>(e, T, N, nodes.data(), nodes.data() + 3 * n,
+                                          smg::PositionsView<S>(g_gpu.data(), T, N));
+  double e_gpu = 0;
+  for (const auto v : terms) e_gpu += double(v);
+  e_gpu *= scale;
+  CHECK(e_gpu == doctest::Approx(e_cpu).epsilon(1e-12));
+  CHECK(same_bits(g_gpu, g_cpu));
+  CHECK(same_bits(om_gpu, om_cpu));
+}
+
+template <class S>
+void dqb_steps_case(Index T, Index N, Index P, Index D, Index Q, smg::SkinMethod m, std::uint64_t seed) {
+  CAPTURE(seed);
+  CAPTURE(sizeof(S));
+  CAPTURE(smg::to_string(m));
+  std::mt19937_64 rng(seed);
+  std::vector<S> xn(static_cast<std::size_t>(T * N * 3)), qn(static_cast<std::size_t>(T * N * 4)),
+      w(static_cast<std::size_t>(P * D), S(0)), pts(static_cast<std::size_t>(P * 3)),
+      pq(static_cast<std::size_t>(P * 4));
+  std::vector<std::int32_t> drv(static_cast<std::size_t>(P * D), -1), tref(static_cast<std::size_t>(P)),
+      tq(static_cast<std::size_t>(Q));
+  for (auto& v : xn) v = S(uniform(rng, -2, 2));
+  for (auto& v : qn) v = S(uniform(rng));
+  for (auto& v : pts) v = S(uniform(rng, -2, 2));
+  for (auto& v : pq) v = S(uniform(rng));
+  for (Index p = 0; p < P; ++p) {
+    const Index deg = std::min<Index>({D, N, 1 + Index(uniform(rng, 0, 1) * double(D))});
+    std::vector<std::int32_t> perm(static_cast<std::size_t>(N));
+    for (Index k = 0; k < N; ++k) perm[static_cast<std::size_t>(k)] = std::int32_t(k);
+    std::shuffle(perm.begin(), perm.end(), rng);
+    for (Index k = 0; k < deg; ++k) {
+      drv[static_cast<std::size_t>(p * D + k)] = perm[static_cast<std::size_t>(k)];
+      w[static_cast<std::size_t>(p * D + k)] = S(uniform(rng, 0.05, 1));
+    }
+    tref[static_cast<std::size_t>(p)] = std::int32_t(Index(uniform(rng, 0, 1) * double(T)) % T);
+  }
+  for (auto& v : tq) v = std::int32_t(Index(uniform(rng, 0, 1) * double(T)) % T);
+  smg::SkinNodes<S> nodes;
+  nodes.positions = smg::PositionsView<const S>(xn.data(), T, N);
+  nodes.quaternions = smg::QuaternionsView<const S>(qn.data(), T, N);
+  smg::SkinPoints<S> pv;
+  pv.drivers = smg::SkinDriversView(drv.data(), P, D);
+  pv.weights = smg::TableView<const S, Eigen::Dynamic>(w.data(), P, D);
+  pv.t_ref = smg::SkinIndexView(tref.data(), P);
+  pv.positions = smg::TableView<const S, 3>(pts.data(), P);
+  pv.quaternions = smg::TableView<const S, 4>(pq.data(), P);
+  const smg::SkinIndexView tv(tq.data(), Q);
+  smg::SkinOptions opt;
+  opt.method = m;
+
+  // Eleven arrays: forward outputs, then the gradient buffers (random start: both add to them).
+  auto run = [&](bool steps, std::vector<std::vector<S>>& A) {
+    std::mt19937_64 r2(9);
+    auto fill = [&](Index len) {
+      std::vector<S> v(static_cast<std::size_t>(len));
+      for (auto& x : v) x = S(uniform(r2));
+      return v;
+    };
+    A = {std::vector<S>(static_cast<std::size_t>(Q * P * 3), S(0)),
+         std::vector<S>(static_cast<std::size_t>(Q * P * 4), S(0)),
+         std::vector<S>(static_cast<std::size_t>(Q * P * D * 78), S(-7)),
+         std::vector<S>(static_cast<std::size_t>(Q * P * 36), S(0)),
+         fill(T * N * 3), fill(T * N * 3), fill(T * N * 4), fill(P * 3), fill(P * 3), fill(P * 4),
+         fill(P * D)};
+    const std::vector<S> gop = fill(Q * P * 3), gor = fill(Q * P * 3), goq = fill(Q * P * 4);
+    smg::SkinBlendOutputs<S> o;
+    o.positions = smg::SequenceView<S, 3>(A[0].data(), Q, P);
+    o.quaternions = smg::SequenceView<S, 4>(A[1].data(), Q, P);
+    o.J_drivers = smg::SequenceView<S, Eigen::Dynamic>(A[2].data(), Q, P, D * 78);
+    o.J_point = smg::SequenceView<S, Eigen::Dynamic>(A[3].data(), Q, P, 36);
+    smg::SkinBlendGradients<S> g;
+    g.node_positions = smg::PositionsView<S>(A[4].data(), T, N);
+    g.node_rotations = smg::TangentsView<S>(A[5].data(), T, N);
+    g.node_quaternions = smg::QuaternionsView<S>(A[6].data(), T, N);
+    g.points = smg::TableView<S, 3>(A[7].data(), P);
+    g.point_rotations = smg::TableView<S, 3>(A[8].data(), P);
+    g.point_quaternions = smg::TableView<S, 4>(A[9].data(), P);
+    g.weights = smg::TableView<S, Eigen::Dynamic>(A[10].data(), P, D);
+    smg::SkinBlendOutputGradients<S> go;
+    go.positions = smg::SequenceView<const S, 3>(gop.data(), Q, P);
+    go.rotations = smg::SequenceView<const S, 3>(gor.data(), Q, P);
+    go.quaternions = smg::SequenceView<const S, 4>(goq.data(), Q, P);
+    if (!steps) {
+      smg::skin_blend<S>(nodes, pv, tv, o, opt);
+      smg::SkinWorkspace<S> ws;
+      smg::skin_blend_backward<S>(nodes, pv, tv, go, g, ws, opt);
+      return;
+    }
+    for (Index e = 0; e < Q * P; ++e) smg::cuda::detail::skin_forward_at<S, 32>(e, nodes, pv, tv, o, m);
+    std::vector<std::int32_t> off;
+    std::vector<std::int64_t> ent;
+    in_edges(drv, N, off, ent);
+    std::vector<S> buf(static_cast<std::size_t>(P * D * smg::cuda::detail::kSkinEdgeStride));
+    for (Index q = 0; q < Q; ++q) {
+      const Index t = tq[static_cast<std::size_t>(q)];
+      for (Index p = 0; p < P; ++p)
+        smg::cuda::detail::skin_backward_point_at<S, 32>(p, nodes, pv, q, t, go, g, m, buf.data());
+      for (Index nn = 0; nn < N; ++nn)
+        smg::cuda::detail::skin_backward_node_at<S>(nn, nodes, pv, t, g, off.data(), ent.data(), buf.data());
+    }
+  };
+  std::vector<std::vector<S>> cpu, steps;
+  run(false, cpu);
+  run(true, steps);
+  const char* names[] = {"positions", "quaternions", "J_drivers", "J_point", "grad_node_positions",
+                         "grad_node_rotations", "grad_node_quaternions", "grad_points",
+                         "grad_point_rotations", "grad_point_quaternions", "grad_weights"};
+  for (std::size_t i = 0; i < cpu.size(); ++i) {
+    CAPTURE(names[i]);
+    CHECK(same_bits(steps[i], cpu[i]));
+  }
+}
+
+}  // namespace
+
+TEST_SUITE("cuda-host") {
+  TEST_CASE("cuda lrm steps on the host reproduce the CPU lrm bit for bit") {
+    smg::LrmOptions o;
+    o.huber_delta = 0.3;
+    lrm_steps_case<double, std::int32_t>(5, 40, 8, true, o, 1);
+    lrm_steps_case<float, std::int64_t>(5, 40, 16, true, o, 2);
+    lrm_steps_case<double, std::int32_t>(2, 30, 6, true, o, 3);
+    o.normalization = smg::Normalization::mean;
+    o.detach_omega = true;
+    o.weight = 0.7;
+    lrm_steps_case<double, std::int64_t>(7, 40, 32, false, o, 4);
+    lrm_steps_case<float, std::int32_t>(1, 30, 6, true, o, 5);
+  }
+
+  TEST_CASE("cuda dqb steps on the host reproduce the CPU skin_blend and its backward bit for bit") {
+    for (const smg::SkinMethod m : {smg::SkinMethod::dqb, smg::SkinMethod::lbs}) {
+      dqb_steps_case<double>(4, 20, 100, 6, 3, m, 11);
+      dqb_steps_case<float>(3, 30, 80, 17, 2, m, 12);
+    }
+  }
+}
