@@ -1,11 +1,13 @@
 // Core rotation maths: Exp, Log and rotate, with and without Jacobians, float vs double.
 //
-// Each benchmark evaluates a batch of 1024 random inputs per iteration (so the compiler cannot
-// hoist the work) and reports:
-//   ns_per_call      time per call
+// Each benchmark evaluates a batch of random inputs per iteration (--n, default 1024, so the
+// compiler cannot hoist the work) and reports:
+//   ns_per_call      wall time per call (plain number, nanoseconds)
 //   err_vs_double    for float: max over the batch of the relative error of the float result
-//                    against the double result on the same inputs (0 for double itself);
-//                    with Jacobians, the max of the value error and the Jacobian error.
+//                    against the double result on the same float-representable inputs (the
+//                    inputs are rounded to float first; 0 for double itself); with Jacobians, the
+//                    max of the value error and the Jacobian error.
+// Parameters (bench/bench_common.hpp, --smg_help): --n --precision=float|double|both --reps=3.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -13,12 +15,13 @@
 #include <random>
 #include <vector>
 
+#include "bench_common.hpp"
 #include "smg/core/so3.hpp"
 #include "support/finite_diff.hpp"
 
 namespace {
 
-constexpr int kBatch = 1024;
+int kBatch = 1024;  // --n
 
 struct Inputs {
   std::vector<smg::Vector3<double>> phi, v;
@@ -33,9 +36,10 @@ const Inputs& inputs() {
     for (int k = 0; k < kBatch; ++k) {
       smg::Vector3<double> axis(n(g), n(g), n(g));
       axis.normalize();
-      r.phi.push_back(angle(g) * axis);
-      r.q.push_back(smg::so3::exp(r.phi.back()));
-      r.v.emplace_back(n(g), n(g), n(g));
+      // Float-representable inputs: float and double rows see identical values.
+      r.phi.push_back((angle(g) * axis).cast<float>().cast<double>());
+      r.q.push_back(smg::so3::exp(r.phi.back()).cast<float>().cast<double>());
+      r.v.push_back(smg::Vector3<double>(n(g), n(g), n(g)).cast<float>().cast<double>());
     }
     return r;
   }();
@@ -60,10 +64,8 @@ double rel(const A& a, const B& b) {
   return smg::test::relative_error(a, b, 1e-300);
 }
 
-void report(benchmark::State& state, double err) {
-  state.counters["ns_per_call"] = benchmark::Counter(
-      static_cast<double>(state.iterations()) * kBatch * 1e-9,
-      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+void report(benchmark::State& state, const smg_bench::Stopwatch& clock, double err) {
+  state.counters["ns_per_call"] = smg_bench::per(state, clock.seconds(), kBatch, 1e9);
   state.counters["err_vs_double"] = err;
 }
 
@@ -80,6 +82,7 @@ void BM_exp(benchmark::State& state) {
     err = std::max(err, rel(q.coeffs(), qd.coeffs()));
     if (kJacobian) err = std::max(err, rel(J, Jd));
   }
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     for (int k = 0; k < kBatch; ++k) {
       smg::Matrix3<S> J;
@@ -88,7 +91,7 @@ void BM_exp(benchmark::State& state) {
       if (kJacobian) benchmark::DoNotOptimize(J);
     }
   }
-  report(state, std::is_same_v<S, double> ? 0.0 : err);
+  report(state, clock, std::is_same_v<S, double> ? 0.0 : err);
 }
 
 // ---- Log ----
@@ -104,6 +107,7 @@ void BM_log(benchmark::State& state) {
     err = std::max(err, rel(phi, phid));
     if (kJacobian) err = std::max(err, rel(J, Jd));
   }
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     for (int k = 0; k < kBatch; ++k) {
       smg::Matrix3<S> J;
@@ -112,7 +116,7 @@ void BM_log(benchmark::State& state) {
       if (kJacobian) benchmark::DoNotOptimize(J);
     }
   }
-  report(state, std::is_same_v<S, double> ? 0.0 : err);
+  report(state, clock, std::is_same_v<S, double> ? 0.0 : err);
 }
 
 // ---- rotate (R v) with Jacobians w.r.t. rotation (right tangent) and vector ----
@@ -130,6 +134,7 @@ void BM_rotate(benchmark::State& state) {
     err = std::max(err, rel(y, yd));
     if (kJacobian) err = std::max({err, rel(Jq, Jqd), rel(Jv, Jvd)});
   }
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     for (int k = 0; k < kBatch; ++k) {
       smg::Matrix3<S> Jq, Jv;
@@ -141,22 +146,33 @@ void BM_rotate(benchmark::State& state) {
       }
     }
   }
-  report(state, std::is_same_v<S, double> ? 0.0 : err);
+  report(state, clock, std::is_same_v<S, double> ? 0.0 : err);
 }
 
 }  // namespace
 
-BENCHMARK_TEMPLATE(BM_exp, double, false);
-BENCHMARK_TEMPLATE(BM_exp, float, false);
-BENCHMARK_TEMPLATE(BM_exp, double, true);
-BENCHMARK_TEMPLATE(BM_exp, float, true);
-BENCHMARK_TEMPLATE(BM_log, double, false);
-BENCHMARK_TEMPLATE(BM_log, float, false);
-BENCHMARK_TEMPLATE(BM_log, double, true);
-BENCHMARK_TEMPLATE(BM_log, float, true);
-BENCHMARK_TEMPLATE(BM_rotate, double, false);
-BENCHMARK_TEMPLATE(BM_rotate, float, false);
-BENCHMARK_TEMPLATE(BM_rotate, double, true);
-BENCHMARK_TEMPLATE(BM_rotate, float, true);
-
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  smg_bench::Params p(argc, argv, "core");
+  kBatch = static_cast<int>(p.integer("n", 1024, "random inputs per iteration (the batch)"));
+  p.precision();
+  const int reps = p.reps(3);
+  p.finish();
+  if (kBatch < 1) return 2;
+  auto add = [&](const char* name, void (*f)(benchmark::State&), bool is_double) {
+    if (is_double ? p.runs<double>() : p.runs<float>())
+      smg_bench::protocol(benchmark::RegisterBenchmark(name, f), reps);
+  };
+  add("BM_exp<double, false>", BM_exp<double, false>, true);
+  add("BM_exp<float, false>", BM_exp<float, false>, false);
+  add("BM_exp<double, true>", BM_exp<double, true>, true);
+  add("BM_exp<float, true>", BM_exp<float, true>, false);
+  add("BM_log<double, false>", BM_log<double, false>, true);
+  add("BM_log<float, false>", BM_log<float, false>, false);
+  add("BM_log<double, true>", BM_log<double, true>, true);
+  add("BM_log<float, true>", BM_log<float, true>, false);
+  add("BM_rotate<double, false>", BM_rotate<double, false>, true);
+  add("BM_rotate<float, false>", BM_rotate<float, false>, false);
+  add("BM_rotate<double, true>", BM_rotate<double, true>, true);
+  add("BM_rotate<float, true>", BM_rotate<float, true>, false);
+  return smg_bench::run(argc, argv);
+}

@@ -1,27 +1,41 @@
-// Energies at the size: N = 5000 nodes, T = 100 frames, K = 16 neighbours, gaps {1, 2, 4}
-// (bench/notes/energy.md describes every row and counter).
+// Energies at a run-time size (default: the N = 5000 nodes, T = 100 frames, K = 16
+// neighbours, gaps {1, 2, 4}); bench/notes/energy.md describes every row and counter.
+// Parameters (flags or SMG_BENCH_* variables, bench/bench_common.hpp; --smg_help lists them):
+//   --n --t --k --gaps=1,2,4 --threads=1,2 --precision=float|double|both --reps=3
+//   --res_frames=10 (residual rows) --ad_frames=8 (autodiff rows, 0 = none) --locality=1
 //
-// Counters beside each time:
-//   ms                  wall time of one call (median of the repetitions)
-//   err_vs_double       float rows: ‖g_float − g_double‖ / ‖g_double‖ over the gradients the
-//                       row computes (energy-only rows: relative energy error); 0 for double
+// Counters beside each time (wall time and process CPU time, bench_common.hpp):
+//   ns_per_term         wall time per term: C-ARAP/ARAP one (edge, frame, gap) pair term, LRM one
+//                       (edge, frame) neighbour entry, confidences one (edge, frame)
+//   err_vs_double       float rows: ‖g_float − g_double‖ / ‖g_double‖ over the gradients the row
+//                       computes (energy-only rows: relative energy error), where the double
+//                       result is computed on the float-rounded inputs (identical inputs)
+//   err_input_rounding  float rows: the same measure between double on the float-rounded inputs
+//                       and double on the original inputs (what rounding the inputs alone costs)
 //   err_detach_vs_exact LRM with ω held constant: ‖g_detached − g_exact‖ / ‖g_exact‖ (double)
 //   ad_ratio            autodiff rows: AutoDiffScalar time / analytic time on the same problem
 //   ns_per_block        residual rows: time per residual block (with its Jacobians)
+//   locality rows       C-ARAP / LRM with gradient with the nodes in a random order and in the
+//                       Morton order of smg/graph/node_order.hpp (same scene, same graph)
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <numeric>
+#include <random>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
 #include <unsupported/Eigen/AutoDiff>
 
 #include "energy/reference_energies.hpp"
+#include "bench_common.hpp"
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
+#include "smg/graph/node_order.hpp"
 #include "support/finite_diff.hpp"
 
 namespace {
@@ -30,7 +44,12 @@ using smg::Index;
 using smg::Vector3;
 using smg::test::Scene;
 
-constexpr Index kN = 5000, kT = 100, kK = 16;
+// The run-time configuration (main() fills it from the parameters before registering rows).
+struct Config {
+  Index N = 5000, T = 100, K = 16, res_frames = 10, ad_frames = 8;
+  smg::GapList gaps = smg::default_gaps();
+};
+Config cfg;
 
 // Several rigid bodies moving smoothly (rotation + translation), each node with a little
 // non-rigid noise, some nodes corrupted: a scene where every factor and Huber's both zones
@@ -62,7 +81,7 @@ Scene<double> make_scene(Index T, Index N) {
       s.v[static_cast<std::size_t>(t * N + i)] = rng.uniform(0, 1) < 0.95 ? 1 : 0;
     }
   }
-  smg::test::knn_graph(s, kK);
+  smg::test::knn_graph(s, cfg.K);
   std::vector<double> c(s.v.size());
   smg::node_confidences<double>(s.positions(), s.visibility(), s.graph(), {},
                                 {c.data(), s.T, s.N});
@@ -71,7 +90,7 @@ Scene<double> make_scene(Index T, Index N) {
 }
 
 const Scene<double>& scene() {
-  static const Scene<double> s = make_scene(kT, kN);
+  static const Scene<double> s = make_scene(cfg.T, cfg.N);
   return s;
 }
 template <class S>
@@ -80,7 +99,22 @@ const Scene<S>& scene_as() {
   return s;
 }
 
-smg::CarapOptions carap_options() { return {}; }  // gaps {1, 2, 4}, α 0.6, λc = λl = 1
+// The scene with every input rounded to float and back: float and double rows on identical inputs.
+const Scene<double>& rounded_scene() {
+  static const Scene<double> s = scene_as<float>().template cast<double>();
+  return s;
+}
+
+smg::CarapOptions carap_options() {  // gaps from the parameters, α 0.6, λc = λl = 1
+  smg::CarapOptions o;
+  o.gaps = cfg.gaps;
+  return o;
+}
+smg::ArapOptions arap_options() {
+  smg::ArapOptions o;
+  o.gaps = cfg.gaps;
+  return o;
+}
 smg::LrmOptions lrm_options(bool detach = false) {
   smg::LrmOptions o;
   o.detach_omega = detach;
@@ -92,10 +126,9 @@ struct Reference {
   double carap = 0, lrm = 0, lrm_detached = 0, arap = 0, conf_sum = 0;
   std::vector<double> carap_x, carap_r, lrm_x, lrm_detached_x, arap_x, arap_r, conf;
 };
-const Reference& reference() {
-  static const Reference r = [] {
+Reference compute_reference(const Scene<double>& s) {
+  {
     Reference f;
-    const Scene<double>& s = scene();
     const std::size_t n = s.x.size();
     f.carap_x.assign(n, 0.0);
     f.carap_r.assign(n, 0.0);
@@ -113,10 +146,19 @@ const Reference& reference() {
                              {f.lrm_x.data(), s.T, s.N});
     f.lrm_detached = smg::lrm<double>(s.positions(), s.confidence(), s.graph(),
                                       lrm_options(true), {f.lrm_detached_x.data(), s.T, s.N});
-    f.arap = smg::arap<double>(s.positions(), s.rotations(), s.graph(), {},
+    f.arap = smg::arap<double>(s.positions(), s.rotations(), s.graph(), arap_options(),
                                {f.arap_x.data(), s.T, s.N}, {f.arap_r.data(), s.T, s.N});
     return f;
-  }();
+  }
+}
+// Double on the float-rounded inputs: the reference of the float rows (identical inputs).
+const Reference& reference() {
+  static const Reference r = compute_reference(rounded_scene());
+  return r;
+}
+// Double on the original inputs: reference() against it is the input-rounding error.
+const Reference& original_reference() {
+  static const Reference r = compute_reference(scene());
   return r;
 }
 
@@ -138,32 +180,46 @@ smg::ParallelOptions threads(const benchmark::State& state) {
   p.threads = static_cast<int>(state.range(0));
   return p;
 }
-void set_ms(benchmark::State& state) {
-  state.counters["ms"] = benchmark::Counter(static_cast<double>(state.iterations()) * 1e-3,
-                                            benchmark::Counter::kIsRate |
-                                                benchmark::Counter::kInvert);
-}
 template <class S>
 constexpr bool is_double() {
   return sizeof(S) == sizeof(double);
 }
 
+// Term counts of the per-term cost: E valid edges; C-ARAP/ARAP Σ_gaps (T − δ)·E pair terms, LRM
+// and confidences T·E neighbour entries.
+double edges() {
+  const Scene<double>& s = scene();
+  return static_cast<double>(std::count_if(s.idx.begin(), s.idx.end(), [](std::int32_t j) { return j >= 0; }));
+}
+double pair_terms() {
+  double n = 0;
+  for (const smg::Gap& g : cfg.gaps) n += static_cast<double>(std::max<Index>(0, cfg.T - g.delta));
+  return n * edges();
+}
+double neighbour_terms() { return static_cast<double>(cfg.T) * edges(); }
+void set_ns_per_term(benchmark::State& state, double seconds, double terms) {
+  state.counters["ns_per_term"] = smg_bench::per(state, seconds, terms, 1e9);
+}
+
 // The body every energy row shares: times `call()` (one evaluation, returning its energy), sets
-// ms, and returns the energy of the last call.
+// ns_per_term, and returns the energy of the last call.
 template <class Call>
-double time_energy(benchmark::State& state, Call&& call) {
+double time_energy(benchmark::State& state, double terms, Call&& call) {
   double e = 0;
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     e = call();
     benchmark::DoNotOptimize(e);
   }
-  set_ms(state);
+  set_ns_per_term(state, clock.seconds(), terms);
   return e;
 }
-// err_vs_double: error() for float rows (evaluated only there), 0 for double.
-template <class S, class Error>
-void set_err_vs_double(benchmark::State& state, Error&& error) {
-  state.counters["err_vs_double"] = is_double<S>() ? 0.0 : error();
+// Float rows: err_vs_double = error(reference()) (double on the same, float-rounded, inputs) and
+// err_input_rounding = rounding(reference(), original_reference()); double rows show 0 and nothing.
+template <class S, class Error, class Rounding>
+void set_errors(benchmark::State& state, Error&& error, Rounding&& rounding) {
+  state.counters["err_vs_double"] = is_double<S>() ? 0.0 : error(reference());
+  if (!is_double<S>()) state.counters["err_input_rounding"] = rounding(reference(), original_reference());
 }
 // The gradient views of a row: `on` = false gives empty views (energy-only rows).
 template <class S>
@@ -183,38 +239,55 @@ void BM_confidence(benchmark::State& state) {
   const Scene<S>& s = scene_as<S>();
   std::vector<S> c(s.v.size());
   smg::EnergyWorkspace<S> ws;
-  for (auto _ : state) {
+  time_energy(state, neighbour_terms(), [&] {
     smg::node_confidences<S>(s.positions(), s.visibility(), s.graph(), {}, {c.data(), s.T, s.N},
                              {}, {}, &ws, threads(state));
-    benchmark::DoNotOptimize(c.data());
-  }
-  set_ms(state);
-  set_err_vs_double<S>(state, [&] { return relative_error(c, reference().conf); });
+    return double(c[0]);
+  });
+  set_errors<S>(
+      state, [&](const Reference& r) { return relative_error(c, r.conf); },
+      [](const Reference& r, const Reference& o) { return relative_error(r.conf, o.conf); });
 }
 
 // ---- C-ARAP and plain ARAP (kGradient: energy and gradients w.r.t. positions and rotations) ----
 // One row each; kCarap picks the energy, its double results are the references.
+template <bool kCarap>
+double ref_energy(const Reference& r) {
+  return kCarap ? r.carap : r.arap;
+}
+template <bool kCarap>
+const std::vector<double>& ref_x(const Reference& r) {
+  return kCarap ? r.carap_x : r.arap_x;
+}
+template <bool kCarap>
+const std::vector<double>& ref_r(const Reference& r) {
+  return kCarap ? r.carap_r : r.arap_r;
+}
 template <class S, bool kGradient, bool kCarap>
 void rigidity_row(benchmark::State& state) {
   const Scene<S>& s = scene_as<S>();
   std::vector<S> gx(s.x.size()), gr(s.x.size());
   smg::EnergyWorkspace<S> ws;
-  const double e = time_energy(state, [&] {
+  const double e = time_energy(state, pair_terms(), [&] {
     const smg::PositionsView<S> vx = grad_view(gx, s, kGradient);
     const smg::TangentsView<S> vr = tangent_view(gr, s, kGradient);
     if constexpr (kCarap)
       return double(smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(), carap_options(), vx,
                                   vr, &ws, threads(state)));
     else
-      return double(smg::arap<S>(s.positions(), s.rotations(), s.graph(), {}, vx, vr, &ws, threads(state)));
+      return double(smg::arap<S>(s.positions(), s.rotations(), s.graph(), arap_options(), vx, vr, &ws,
+                                 threads(state)));
   });
-  const Reference& r = reference();
-  const double ref = kCarap ? r.carap : r.arap;
-  const std::vector<double>& ref_x = kCarap ? r.carap_x : r.arap_x;
-  const std::vector<double>& ref_r = kCarap ? r.carap_r : r.arap_r;
-  set_err_vs_double<S>(state, [&] {
-    return kGradient ? relative_error(gx, ref_x, gr, ref_r) : std::abs(e - ref) / ref;
-  });
+  set_errors<S>(
+      state,
+      [&](const Reference& r) {
+        return kGradient ? relative_error(gx, ref_x<kCarap>(r), gr, ref_r<kCarap>(r))
+                         : std::abs(e - ref_energy<kCarap>(r)) / ref_energy<kCarap>(r);
+      },
+      [](const Reference& r, const Reference& o) {
+        return kGradient ? relative_error(ref_x<kCarap>(r), ref_x<kCarap>(o), ref_r<kCarap>(r), ref_r<kCarap>(o))
+                         : std::abs(ref_energy<kCarap>(r) - ref_energy<kCarap>(o)) / ref_energy<kCarap>(o);
+      });
 }
 template <class S, bool kGradient>
 void BM_carap(benchmark::State& state) {
@@ -226,20 +299,29 @@ void BM_arap(benchmark::State& state) {
 }
 
 // ---- LRM: 0 energy only, 1 exact gradient, 2 gradient with ω held constant ----
+template <int kMode>
+const std::vector<double>& lrm_ref_x(const Reference& r) {
+  return kMode == 1 ? r.lrm_x : r.lrm_detached_x;
+}
 template <class S, int kMode>
 void BM_lrm(benchmark::State& state) {
   const Scene<S>& s = scene_as<S>();
   std::vector<S> gx(s.x.size());
   smg::EnergyWorkspace<S> ws;
-  const double e = time_energy(state, [&] {
+  const double e = time_energy(state, neighbour_terms(), [&] {
     return double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(kMode == 2),
                               grad_view(gx, s, kMode > 0), &ws, threads(state)));
   });
-  const Reference& r = reference();
-  set_err_vs_double<S>(state, [&] {
-    return kMode == 0 ? std::abs(e - r.lrm) / r.lrm : relative_error(gx, kMode == 1 ? r.lrm_x : r.lrm_detached_x);
-  });
-  if (kMode == 2) state.counters["err_detach_vs_exact"] = relative_error(r.lrm_detached_x, r.lrm_x);
+  set_errors<S>(
+      state,
+      [&](const Reference& r) {
+        return kMode == 0 ? std::abs(e - r.lrm) / r.lrm : relative_error(gx, lrm_ref_x<kMode>(r));
+      },
+      [](const Reference& r, const Reference& o) {
+        return kMode == 0 ? std::abs(r.lrm - o.lrm) / o.lrm : relative_error(lrm_ref_x<kMode>(r), lrm_ref_x<kMode>(o));
+      });
+  if (kMode == 2)
+    state.counters["err_detach_vs_exact"] = relative_error(original_reference().lrm_detached_x, original_reference().lrm_x);
 }
 
 // ---- The target: C-ARAP + LRM, energy + exact gradient, into one gradient buffer ----
@@ -248,39 +330,112 @@ void BM_carap_plus_lrm(benchmark::State& state) {
   const Scene<S>& s = scene_as<S>();
   std::vector<S> gx(s.x.size()), gr(s.x.size());
   smg::EnergyWorkspace<S> ws;
-  time_energy(state, [&] {
+  time_energy(state, pair_terms() + neighbour_terms(), [&] {
     const smg::PositionsView<S> g = grad_view(gx, s, true);
     return double(smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(), carap_options(), g,
                                 tangent_view(gr, s, true), &ws, threads(state))) +
            double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(), g, &ws, threads(state)));
   });
-  const Reference& r = reference();
-  std::vector<double> sum(r.carap_x.size());
-  for (std::size_t k = 0; k < sum.size(); ++k) sum[k] = r.carap_x[k] + r.lrm_x[k];
-  set_err_vs_double<S>(state, [&] { return relative_error(gx, sum, gr, r.carap_r); });
+  auto sum = [](const Reference& r) {
+    std::vector<double> v(r.carap_x.size());
+    for (std::size_t k = 0; k < v.size(); ++k) v[k] = r.carap_x[k] + r.lrm_x[k];
+    return v;
+  };
+  set_errors<S>(
+      state, [&](const Reference& r) { return relative_error(gx, sum(r), gr, r.carap_r); },
+      [&](const Reference& r, const Reference& o) { return relative_error(sum(r), sum(o), r.carap_r, o.carap_r); });
   state.counters["target_ms"] = 100.0;
 }
 
+// ---- Memory locality: the same scene and graph with the nodes in a random order, and in the
+// Morton order of smg/graph/node_order.hpp computed from that random order. ----
+const Scene<double>& reordered_scene(const smg::NodeOrder& order) {
+  static Scene<double> r;
+  const Scene<double>& s = scene();
+  r = s;
+  smg::reorder_nodes(order, s.positions(), smg::PositionsView<double>(r.x.data(), s.T, s.N));
+  smg::reorder_nodes(order, s.rotations(), smg::QuaternionsView<double>(r.q.data(), s.T, s.N));
+  smg::reorder_nodes(order, s.visibility(), smg::VisibilityView<std::uint8_t>(r.v.data(), s.T, s.N));
+  smg::reorder_nodes(order, s.confidence(), smg::FrameScalarsView<double>(r.c.data(), s.T, s.N));
+  smg::reorder_graph(order, s.graph(), {r.idx.data(), s.N, s.K}, {r.w.data(), s.N, s.K});
+  return r;
+}
+smg::NodeOrder random_order() {
+  std::vector<Index> p(static_cast<std::size_t>(cfg.N));
+  std::iota(p.begin(), p.end(), Index(0));
+  std::mt19937_64 g(99);
+  std::shuffle(p.begin(), p.end(), g);
+  return smg::NodeOrder::from_new_to_old(p);
+}
+// kMorton = false: random order; true: Morton order (of the randomly ordered scene).
+template <class S, bool kMorton>
+const Scene<S>& ordered_scene() {
+  static const Scene<S> s = [] {
+    const Scene<double> random = reordered_scene(random_order());
+    if (!kMorton) return random.cast<S>();
+    const smg::NodeOrder order = smg::spatial_node_order(random.positions(), random.visibility());
+    Scene<double> sorted = random;
+    smg::reorder_nodes(order, random.positions(), smg::PositionsView<double>(sorted.x.data(), random.T, random.N));
+    smg::reorder_nodes(order, random.rotations(), smg::QuaternionsView<double>(sorted.q.data(), random.T, random.N));
+    smg::reorder_nodes(order, random.visibility(), smg::VisibilityView<std::uint8_t>(sorted.v.data(), random.T, random.N));
+    smg::reorder_nodes(order, random.confidence(), smg::FrameScalarsView<double>(sorted.c.data(), random.T, random.N));
+    smg::reorder_graph(order, random.graph(), {sorted.idx.data(), random.N, random.K},
+                       {sorted.w.data(), random.N, random.K});
+    return sorted.cast<S>();
+  }();
+  return s;
+}
+// Mean |i − j| over the graph's edges: how far apart in memory neighbours are stored.
+template <class S>
+double mean_edge_span(const Scene<S>& s) {
+  double sum = 0, n = 0;
+  for (Index i = 0; i < s.N; ++i)
+    for (Index k = 0; k < s.K; ++k) {
+      const std::int32_t j = s.idx[static_cast<std::size_t>(i * s.K + k)];
+      if (j < 0) continue;
+      sum += std::abs(static_cast<double>(j - i));
+      n += 1;
+    }
+  return sum / std::max(1.0, n);
+}
+// kEnergy 0: C-ARAP + gradient; 1: LRM + exact gradient.
+template <class S, int kEnergy, bool kMorton>
+void BM_locality(benchmark::State& state) {
+  const Scene<S>& s = ordered_scene<S, kMorton>();
+  std::vector<S> gx(s.x.size()), gr(s.x.size());
+  smg::EnergyWorkspace<S> ws;
+  const double e = time_energy(state, kEnergy == 0 ? pair_terms() : neighbour_terms(), [&] {
+    if constexpr (kEnergy == 0)
+      return double(smg::carap<S>(s.positions(), s.rotations(), s.confidence(), s.graph(), carap_options(),
+                                  grad_view(gx, s, true), tangent_view(gr, s, true), &ws, threads(state)));
+    else
+      return double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(), grad_view(gx, s, true),
+                                &ws, threads(state)));
+  });
+  // The energy does not depend on the order: its relative difference to the input order's.
+  const Reference& r = is_double<S>() ? original_reference() : reference();
+  const double ref = kEnergy == 0 ? r.carap : r.lrm;
+  state.counters["energy_vs_input_order"] = std::abs(e - ref) / ref;
+  state.counters["mean_edge_span"] = mean_edge_span(s);
+}
+
 // ---- Residual + Jacobian forms, streamed through a visitor that forms 2 Jᵀ r per chunk-free
-// sum (the sum of squares, so nothing is optimised away). Run on the first kResFrames frames:
+// sum (the sum of squares, so nothing is optimised away). Run on the first res_frames frames:
 // the per-block cost does not depend on T. ----
-constexpr Index kResFrames = 10;
 // The scene's first `frames` frames.
 Scene<double> first_frames(Index frames) {
   Scene<double> r = scene();
-  r.resize(frames, kN);
+  r.resize(std::min(frames, r.T), r.N);
   return r;
 }
 template <class S>
 const Scene<S>& residual_scene() {
-  static const Scene<S> s = first_frames(kResFrames).cast<S>();
+  static const Scene<S> s = first_frames(cfg.res_frames).cast<S>();
   return s;
 }
 // ns_per_block: wall time per residual block.
-void set_ns_per_block(benchmark::State& state, double blocks) {
-  state.counters["ns_per_block"] =
-      benchmark::Counter(static_cast<double>(state.iterations()) * blocks * 1e-9,
-                         benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+void set_ns_per_block(benchmark::State& state, double seconds, double blocks) {
+  state.counters["ns_per_block"] = smg_bench::per(state, seconds, blocks, 1e9);
 }
 template <class S>
 void BM_carap_residuals(benchmark::State& state) {
@@ -291,6 +446,7 @@ void BM_carap_residuals(benchmark::State& state) {
   constexpr std::size_t kPad = 16;
   std::vector<double> partial(static_cast<std::size_t>(chunks) * kPad);
   Index blocks = 0;
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     std::fill(partial.begin(), partial.end(), 0.0);
     smg::for_each_carap_residual<S>(
@@ -303,9 +459,9 @@ void BM_carap_residuals(benchmark::State& state) {
         true, par);
     benchmark::DoNotOptimize(partial.data());
   }
+  const double seconds = clock.seconds();
   blocks = smg::carap_residual_count(s.graph(), s.T, carap_options());
-  set_ms(state);
-  set_ns_per_block(state, static_cast<double>(blocks));
+  set_ns_per_block(state, seconds, static_cast<double>(blocks));
 }
 template <class S>
 void BM_lrm_residuals(benchmark::State& state) {
@@ -313,6 +469,7 @@ void BM_lrm_residuals(benchmark::State& state) {
   const auto par = threads(state);
   constexpr std::size_t kPad = 16;  // no false sharing between threads
   std::vector<double> partial(static_cast<std::size_t>(smg::lrm_residual_chunks(s.T, s.N)) * kPad);
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     std::fill(partial.begin(), partial.end(), 0.0);
     smg::for_each_lrm_residual<S>(
@@ -324,19 +481,17 @@ void BM_lrm_residuals(benchmark::State& state) {
         true, par);
     benchmark::DoNotOptimize(partial.data());
   }
-  set_ms(state);
-  set_ns_per_block(state, static_cast<double>(s.T * s.N));
+  set_ns_per_block(state, clock.seconds(), static_cast<double>(s.T * s.N));
 }
 
 // ---- Eigen AutoDiffScalar, per term (the fair comparison): each C-ARAP pair term with an
 // 18-entry fixed-size derivative vector (x_i, x_j at both frames, the two right tangents of
 // R_i), each LRM neighbourhood with a derivative vector of 6·|N(i)| <= 96 entries (x_j and u_j
 // of every neighbour, then u chained to x). Same equations, written straight from docs/design.md in
-// tests/energy/reference_energies.hpp. Double, one thread, on the first kAdFrames frames; the
+// tests/energy/reference_energies.hpp. Double, one thread, on the first ad_frames frames; the
 // analytic kernel is timed on the same sub-problem for ad_ratio. ----
-constexpr Index kAdFrames = 8;
 const Scene<double>& ad_scene() {
-  static const Scene<double> s = first_frames(kAdFrames);
+  static const Scene<double> s = first_frames(cfg.ad_frames);
   return s;
 }
 template <class F>
@@ -434,16 +589,16 @@ void lrm_autodiff(const Scene<double>& s, std::vector<double>& gx) {
 template <class AutoDiff, class Analytic>
 void autodiff_row(benchmark::State& state, const std::vector<double>& gx, AutoDiff&& autodiff,
                   Analytic&& analytic) {
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     autodiff();
     benchmark::DoNotOptimize(gx.data());
   }
-  set_ms(state);
+  const double ad = clock.seconds() / static_cast<double>(std::max<benchmark::IterationCount>(1, state.iterations()));
   smg::ParallelOptions one;
   one.threads = 1;
   smg::EnergyWorkspace<double> ws;
   const double analytic_seconds = seconds_of([&] { analytic(one, ws); }, 5);
-  const double ad = seconds_of(autodiff, 1);
   state.counters["ad_ratio"] = ad / analytic_seconds;
 }
 void BM_autodiff_carap(benchmark::State& state) {
@@ -474,38 +629,77 @@ void BM_autodiff_lrm(benchmark::State& state) {
   state.counters["err_vs_analytic"] = relative_error(gx, ax);
 }
 
-void Threads(benchmark::internal::Benchmark* b) {
-  b->ArgName("threads")->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond)
-      ->Repetitions(3)->ReportAggregatesOnly(true);
-}
-
 }  // namespace
 
-BENCHMARK_TEMPLATE(BM_confidence, float)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_confidence, double)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_carap, float, false)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_carap, double, false)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_carap, float, true)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_carap, double, true)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_lrm, float, 0)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_lrm, double, 0)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_lrm, float, 1)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_lrm, double, 1)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_lrm, float, 2)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_lrm, double, 2)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_arap, float, false)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_arap, float, true)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_arap, double, true)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_carap_plus_lrm, float)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_carap_plus_lrm, double)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_carap_residuals, float)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_carap_residuals, double)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_lrm_residuals, float)->Apply(Threads);
-BENCHMARK_TEMPLATE(BM_lrm_residuals, double)->Apply(Threads);
-// Two repetitions so that the report (which keeps median aggregates) lists them.
-BENCHMARK(BM_autodiff_carap)->Iterations(1)->Repetitions(2)->ReportAggregatesOnly(true)
-    ->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_autodiff_lrm)->Iterations(1)->Repetitions(2)->ReportAggregatesOnly(true)
-    ->UseRealTime()->Unit(benchmark::kMillisecond);
+int main(int argc, char** argv) {
+  smg_bench::Params p(argc, argv, "energy");
+  cfg.N = p.integer("n", 5000, "nodes N");
+  cfg.T = p.integer("t", 100, "frames T");
+  cfg.K = p.integer("k", 16, "neighbours K (KNN graph on frame 0)");
+  const std::vector<long> gaps = p.list("gaps", {1, 2, 4}, "C-ARAP / ARAP frame gaps, weight 1 each");
+  const std::vector<long> thread_counts = p.list("threads", {1, 2}, "ParallelOptions::threads of every row");
+  p.precision();
+  const int reps = p.reps(3);
+  cfg.res_frames = p.integer("res_frames", 10, "frames of the residual rows");
+  cfg.ad_frames = p.integer("ad_frames", 8, "frames of the AutoDiffScalar rows (0: no autodiff rows)");
+  const bool locality = p.integer("locality", 1, "1: the random-vs-Morton node order rows") != 0;
+  p.finish();
+  if (cfg.N < 2 || cfg.T < 2 || cfg.K < 1) {
+    std::fprintf(stderr, "bench_energy: need n >= 2, t >= 2, k >= 1\n");
+    return 2;
+  }
+  cfg.gaps = smg::GapList();
+  for (long g : gaps) cfg.gaps.push_back({static_cast<int>(g), 1.0});
+  if (!smg::validate_options(carap_options())) {
+    std::fprintf(stderr, "bench_energy: invalid gaps: %s\n", smg::validate_options(carap_options()).message().c_str());
+    return 2;
+  }
 
-BENCHMARK_MAIN();
+  // One row per thread count, named like BENCHMARK_TEMPLATE's "BM_x<float, true>/threads:2".
+  auto add = [&](const std::string& name, void (*f)(benchmark::State&)) {
+    auto* b = benchmark::RegisterBenchmark(name.c_str(), f);
+    b->ArgName("threads")->Unit(benchmark::kMillisecond);
+    for (long t : thread_counts) b->Arg(t);
+    smg_bench::protocol(b, reps);
+  };
+  const bool fl = p.runs<float>(), db = p.runs<double>();
+  if (fl) add("BM_confidence<float>", BM_confidence<float>);
+  if (db) add("BM_confidence<double>", BM_confidence<double>);
+  if (fl) add("BM_carap<float, false>", BM_carap<float, false>);
+  if (db) add("BM_carap<double, false>", BM_carap<double, false>);
+  if (fl) add("BM_carap<float, true>", BM_carap<float, true>);
+  if (db) add("BM_carap<double, true>", BM_carap<double, true>);
+  if (fl) add("BM_lrm<float, 0>", BM_lrm<float, 0>);
+  if (db) add("BM_lrm<double, 0>", BM_lrm<double, 0>);
+  if (fl) add("BM_lrm<float, 1>", BM_lrm<float, 1>);
+  if (db) add("BM_lrm<double, 1>", BM_lrm<double, 1>);
+  if (fl) add("BM_lrm<float, 2>", BM_lrm<float, 2>);
+  if (db) add("BM_lrm<double, 2>", BM_lrm<double, 2>);
+  if (fl) add("BM_arap<float, false>", BM_arap<float, false>);
+  if (fl) add("BM_arap<float, true>", BM_arap<float, true>);
+  if (db) add("BM_arap<double, true>", BM_arap<double, true>);
+  if (fl) add("BM_carap_plus_lrm<float>", BM_carap_plus_lrm<float>);
+  if (db) add("BM_carap_plus_lrm<double>", BM_carap_plus_lrm<double>);
+  if (locality) {
+    if (fl) add("locality/carap_grad<float>/random", BM_locality<float, 0, false>);
+    if (fl) add("locality/carap_grad<float>/morton", BM_locality<float, 0, true>);
+    if (fl) add("locality/lrm_grad<float>/random", BM_locality<float, 1, false>);
+    if (fl) add("locality/lrm_grad<float>/morton", BM_locality<float, 1, true>);
+    if (db) add("locality/carap_grad<double>/random", BM_locality<double, 0, false>);
+    if (db) add("locality/carap_grad<double>/morton", BM_locality<double, 0, true>);
+    if (db) add("locality/lrm_grad<double>/random", BM_locality<double, 1, false>);
+    if (db) add("locality/lrm_grad<double>/morton", BM_locality<double, 1, true>);
+  }
+  if (fl) add("BM_carap_residuals<float>", BM_carap_residuals<float>);
+  if (db) add("BM_carap_residuals<double>", BM_carap_residuals<double>);
+  if (fl) add("BM_lrm_residuals<float>", BM_lrm_residuals<float>);
+  if (db) add("BM_lrm_residuals<double>", BM_lrm_residuals<double>);
+  // Autodiff rows: double, one thread, one iteration per repetition (at least two repetitions,
+  // so that the report, which keeps aggregates, lists them).
+  if (db && cfg.ad_frames >= 2) {
+    for (auto [name, f] : {std::pair{"BM_autodiff_carap", BM_autodiff_carap}, std::pair{"BM_autodiff_lrm", BM_autodiff_lrm}})
+      smg_bench::protocol(benchmark::RegisterBenchmark(name, f)->Iterations(1)->Unit(benchmark::kMillisecond),
+                          std::max(2, reps));
+  }
+  return smg_bench::run(argc, argv);
+}

@@ -6,13 +6,17 @@
 //   alone         no OpenMP region before the call (the reference)
 // Run it with OMP_WAIT_POLICY=active to emulate OpenMP threads that spin between regions (what a
 // PyTorch process at 2 threads shows); with the default policy they spin briefly, then sleep.
-// Counter: ms = wall time of the smg call only (the OpenMP region is not timed).
+// Time column: wall time of the smg call only (manual time; the OpenMP region is not timed);
+// `cpu` is the process CPU time of the whole iteration, OpenMP region included. Counter call_ms:
+// the mean of the same wall time. Parameters (flags or SMG_BENCH_*, --smg_help): --n=5000
+// --t=100 --k=16 --threads=2 --reps=1.
 #include <benchmark/benchmark.h>
 
 #include <chrono>
 #include <cmath>
 #include <vector>
 
+#include "bench_common.hpp"
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
 
@@ -20,19 +24,22 @@ namespace {
 
 using smg::Index;
 
+Index g_n = 5000, g_t = 100, g_k = 16;
+int g_threads = 2;
+
 const smg::test::Scene<float>& scene() {
   static const smg::test::Scene<float> s = [] {
     smg::test::Rng rng(7);
-    return smg::test::random_scene(100, 5000, 16, rng, true).cast<float>();
+    return smg::test::random_scene(g_t, g_n, g_k, rng, true).cast<float>();
   }();
   return s;
 }
 
-// A short OpenMP region on 2 threads (about a millisecond of arithmetic), like a small tensor op.
+// A short OpenMP region on --threads threads (about a millisecond of arithmetic), like a small tensor op.
 float openmp_region(std::vector<float>& buf) {
   float sum = 0;
 #ifdef _OPENMP
-#pragma omp parallel for num_threads(2) reduction(+ : sum)
+#pragma omp parallel for num_threads(g_threads) reduction(+ : sum)
 #endif
   for (Index k = 0; k < Index(buf.size()); ++k) {
     buf[k] = std::sqrt(buf[k] + 1.0f);
@@ -48,7 +55,7 @@ void BM_after_openmp(benchmark::State& state) {
   std::vector<float> gx(T * N * 3), gr(T * N * 3), buf(1 << 20, 1.0f);
   smg::EnergyWorkspace<float> ws;
   smg::ParallelOptions po;
-  po.threads = 2;
+  po.threads = g_threads;
 #ifdef _OPENMP
   const smg::ScopedExecutor scoped(mode == 1 ? smg::openmp_executor() : smg::Executor{});
 #else
@@ -72,11 +79,20 @@ void BM_after_openmp(benchmark::State& state) {
     state.SetIterationTime(ms / 1e3);
     total_ms += ms;
   }
-  state.counters["ms"] = total_ms / static_cast<double>(state.iterations());
+  state.counters["call_ms"] = total_ms / static_cast<double>(state.iterations());
   state.SetLabel(mode == 0 ? "std_pool" : mode == 1 ? "openmp" : "alone");
 }
-BENCHMARK(BM_after_openmp)->Arg(0)->Arg(1)->Arg(2)->UseManualTime()->Unit(benchmark::kMillisecond);
-
 }  // namespace
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  smg_bench::Params p(argc, argv, "executor");
+  g_n = p.integer("n", 5000, "nodes N");
+  g_t = p.integer("t", 100, "frames T");
+  g_k = p.integer("k", 16, "neighbours K");
+  g_threads = static_cast<int>(p.integer("threads", 2, "threads of smg and of the OpenMP region"));
+  const int reps = p.reps(1);
+  p.finish();
+  auto* b = benchmark::RegisterBenchmark("BM_after_openmp", BM_after_openmp)->Arg(0)->Arg(1)->Arg(2);
+  smg_bench::protocol(b, reps, /*manual_time=*/true)->Unit(benchmark::kMillisecond);
+  return smg_bench::run(argc, argv);
+}

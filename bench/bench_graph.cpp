@@ -10,8 +10,6 @@
 //                          the double reference on the same (float-rounded) inputs
 //     dist_rel_err_vs_f64  float only: max relative error of the neighbour distances against it
 //     pairs_per_node       exact pair distances evaluated per node (brute force: N - 1)
-//     main_thread_cpu_ms   CPU time of the calling thread (a worker) per build: about the wall
-//                          time on an otherwise idle machine
 //     scratch_mb           memory the builder allocated (tracked: store, trees, state, scratch)
 //     peak_rss_mb          peak resident memory of a fresh process that generates the scene
 //                          and builds once (getrusage ru_maxrss); input_mb of it are the
@@ -21,7 +19,11 @@
 //   descriptors/...        semantic_descriptors; angle_err_vs_f64 for float
 //   graph/...              descriptors + KNN + gate + weights, with graph statistics
 //   node_selection/...     greedy cover: node count and coverage error against the unit
-// With --benchmark_min_time below 0.05 (scripts/bench.sh --smoke) only the smallest sizes run.
+// Beside each wall time: process CPU time over all threads and the load (bench_common.hpp).
+// Parameters (flags or SMG_BENCH_*, --smg_help): --n=1000,5000,20000,50000 --t=100,400 --k=16
+// --threads=0 (0: all hardware threads) --precision=both --reps=1 --descriptor_n=20000
+// --segments_n=10000. With --benchmark_min_time below 0.05 (scripts/bench.sh --smoke) only the
+// smallest sizes run (unless sizes are given).
 #include <benchmark/benchmark.h>
 
 #include <sys/resource.h>
@@ -39,6 +41,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_common.hpp"
 #include "graph/synthetic_scene.hpp"
 #include "smg/graph.hpp"
 
@@ -81,20 +84,8 @@ const char* type_name() {
   return std::is_same_v<S, float> ? "float" : "double";
 }
 
-constexpr int kK = 16;
-
-double thread_cpu_seconds() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-}
-
-// The calling thread is one of the workers: its CPU time per iteration is close to the wall time
-// of an otherwise idle machine, whatever else runs on a shared one.
-void report_cpu(benchmark::State& state, double cpu0) {
-  state.counters["main_thread_cpu_ms"] =
-      (thread_cpu_seconds() - cpu0) * 1e3 / static_cast<double>(std::max<benchmark::IterationCount>(1, state.iterations()));
-}
+int kK = 16;       // --k
+int kThreads = 0;  // --threads
 
 // ---- peak memory of a fresh process ---------------------------------------------------------
 // The benchmark re-runs itself as `bench_graph --rss-probe N T float|double`: the child builds
@@ -110,6 +101,7 @@ int rss_probe(Index N, Index T) {
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<S> dist(idx.size());
   smg::KnnOptions k;
+  k.k = kK;
   const auto st = smg::trajectory_knn<S>({sc.positions.data(), T, N}, {sc.visibility.data(), T, N}, k,
                                          {idx.data(), N, kK}, {dist.data(), N, kK});
   rusage u{};
@@ -140,15 +132,15 @@ void BM_knn(benchmark::State& state, Index N, Index T) {
   const smg::PositionsView<const S> xv(x.data(), T, N);
   const smg::VisibilityView<const std::uint8_t> vv(sc.visibility.data(), T, N);
   smg::KnnOptions o;
+  o.k = kK;
+  o.parallel.threads = kThreads;
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<S> dist(idx.size());
   smg::KnnStats st;
-  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     st = smg::trajectory_knn<S>(xv, vv, o, {idx.data(), N, kK}, {dist.data(), N, kK});
     benchmark::DoNotOptimize(idx.data());
   }
-  report_cpu(state, cpu0);
   // Error columns (not timed): brute-force rows, in S and in double on the same inputs.
   const bool all = static_cast<double>(N) * static_cast<double>(N) * static_cast<double>(T) <= 2.5e9;
   std::vector<Index> rows;
@@ -227,16 +219,16 @@ void BM_knn_brute_force(benchmark::State& state, Index N, Index T) {
   const auto& sc = scene({N, T, 0, 1.0});
   const auto x = cast<S>(sc.positions);
   smg::KnnOptions o;
+  o.k = kK;
+  o.parallel.threads = kThreads;
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<S> dist(idx.size());
   smg::KnnStats st;
-  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     st = smg::trajectory_knn_brute_force<S>({x.data(), T, N}, {sc.visibility.data(), T, N}, o, {idx.data(), N, kK},
                                             {dist.data(), N, kK});
     benchmark::DoNotOptimize(idx.data());
   }
-  report_cpu(state, cpu0);
   state.counters["pairs_per_node"] = static_cast<double>(st.pairs_evaluated) / static_cast<double>(N);
   state.counters["scratch_mb"] = static_cast<double>(st.scratch_bytes) / (1024.0 * 1024.0);
 }
@@ -245,17 +237,17 @@ void BM_knn_brute_force(benchmark::State& state, Index N, Index T) {
 void BM_knn_segments(benchmark::State& state, Index N, Index T, double speed, int L) {
   const auto& sc = scene({N, T, 0, speed});
   smg::KnnOptions o;
+  o.k = kK;
+  o.parallel.threads = kThreads;
   o.segment_frames = L;
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<double> dist(idx.size());
   smg::KnnStats st;
-  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     st = smg::trajectory_knn<double>({sc.positions.data(), T, N}, {sc.visibility.data(), T, N}, o, {idx.data(), N, kK},
                                      {dist.data(), N, kK});
     benchmark::DoNotOptimize(idx.data());
   }
-  report_cpu(state, cpu0);
   state.counters["segment_frames"] = st.segment_frames;
   state.counters["pairs_per_node"] = static_cast<double>(st.pairs_evaluated) / static_cast<double>(N);
   state.counters["scratch_mb"] = static_cast<double>(st.scratch_bytes) / (1024.0 * 1024.0);
@@ -268,12 +260,11 @@ void BM_descriptors(benchmark::State& state, Index N, Index T, Index C) {
   const auto g = cast<S>(sc.samples);
   std::vector<S> f(static_cast<std::size_t>(N * C));
   smg::DescriptorOptions o;
-  const double cpu0 = thread_cpu_seconds();
+  o.parallel.threads = kThreads;
   for (auto _ : state) {
     smg::semantic_descriptors<S>({g.data(), T, N, C}, {sc.visibility.data(), T, N}, o, {f.data(), N, C});
     benchmark::DoNotOptimize(f.data());
   }
-  report_cpu(state, cpu0);
   if (std::is_same_v<S, float>) {
     // Against double on the same (float-rounded) samples: the largest angle between descriptors.
     const std::vector<double> gd(g.begin(), g.end());
@@ -302,15 +293,15 @@ void BM_graph(benchmark::State& state, Index N, Index T, Index C) {
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<S> w(idx.size()), d(idx.size());
   smg::GraphOptions o;
+  o.knn.k = kK;
+  o.knn.parallel.threads = kThreads;
   smg::GraphStats st;
-  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     smg::semantic_descriptors<S>({g.data(), T, N, C}, {sc.visibility.data(), T, N}, {}, {f.data(), N, C});
     st = smg::build_semantic_graph<S>({x.data(), T, N}, {sc.visibility.data(), T, N}, {f.data(), N, C}, o,
                                       {idx.data(), N, kK}, {w.data(), N, kK}, {d.data(), N, kK});
     benchmark::DoNotOptimize(idx.data());
   }
-  report_cpu(state, cpu0);
   // Edges that join different objects (the gate's job: only keep_nearest may leave some).
   Index cross = 0;
   for (Index i = 0; i < N; ++i)
@@ -332,15 +323,14 @@ void BM_node_selection(benchmark::State& state, Index N, Index T, double unit) {
   std::vector<std::int32_t> sel(static_cast<std::size_t>(N)), asg(sel.size());
   std::vector<double> err(sel.size());
   smg::NodeSelectionOptions o;
+  o.parallel.threads = kThreads;
   o.unit = unit;
   smg::NodeSelectionStats<double> st;
-  const double cpu0 = thread_cpu_seconds();
   for (auto _ : state) {
     st = smg::select_nodes<double>({sc.positions.data(), T, N}, {sc.visibility.data(), T, N}, o, {sel.data(), N},
                                    {asg.data(), N}, {err.data(), N});
     benchmark::DoNotOptimize(sel.data());
   }
-  report_cpu(state, cpu0);
   state.counters["nodes"] = static_cast<double>(st.selected);
   state.counters["nodes_frac"] = static_cast<double>(st.selected) / static_cast<double>(std::max<Index>(1, st.eligible));
   state.counters["max_error"] = st.max_error;
@@ -356,9 +346,11 @@ bool smoke_run(int argc, char** argv) {
   return false;
 }
 
+int g_reps = 1;
 template <class F>
 void add(const std::string& name, F f, int iterations) {
-  benchmark::RegisterBenchmark(name.c_str(), f)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(iterations);
+  smg_bench::protocol(benchmark::RegisterBenchmark(name.c_str(), f)->Unit(benchmark::kMillisecond)->Iterations(iterations),
+                      g_reps);
 }
 
 }  // namespace
@@ -369,41 +361,48 @@ int main(int argc, char** argv) {
     return std::strcmp(argv[4], "float") == 0 ? rss_probe<float>(N, T) : rss_probe<double>(N, T);
   }
   const bool smoke = smoke_run(argc, argv);
-  const std::vector<Index> sizes = smoke ? std::vector<Index>{1000} : std::vector<Index>{1000, 5000, 20000, 50000};
-  const std::vector<Index> lengths = smoke ? std::vector<Index>{100} : std::vector<Index>{100, 400};
+  smg_bench::Params p(argc, argv, "graph");
+  const std::vector<long> n_list = p.list("n", smoke ? std::vector<long>{1000} : std::vector<long>{1000, 5000, 20000, 50000},
+                                          "node counts N of the KNN rows");
+  const std::vector<long> t_list = p.list("t", smoke ? std::vector<long>{100} : std::vector<long>{100, 400},
+                                          "frame counts T of the KNN rows");
+  kK = static_cast<int>(p.integer("k", 16, "neighbours K"));
+  kThreads = static_cast<int>(p.integer("threads", 0, "ParallelOptions::threads (0: all hardware threads)"));
+  p.precision();
+  g_reps = p.reps(1);
+  const Index dN = p.integer("descriptor_n", smoke ? 1000 : 20000, "N of the descriptor, graph and node-selection rows");
+  const Index segN = p.integer("segments_n", smoke ? 1000 : 10000, "N of the segment-length rows");
+  p.finish();
+  const bool fl = p.runs<float>(), db = p.runs<double>();
+  const std::vector<Index> sizes(n_list.begin(), n_list.end());
+  const std::vector<Index> lengths(t_list.begin(), t_list.end());
   auto its = [](Index N) { return N <= 5000 ? 3 : 1; };
   for (Index T : lengths)
     for (Index N : sizes) {
       const std::string s = "/" + std::to_string(N) + "/" + std::to_string(T);
-      add("knn/double" + s, [=](benchmark::State& st) { BM_knn<double>(st, N, T); }, its(N));
-      add("knn/float" + s, [=](benchmark::State& st) { BM_knn<float>(st, N, T); }, its(N));
+      if (db) add("knn/double" + s, [=](benchmark::State& st) { BM_knn<double>(st, N, T); }, its(N));
+      if (fl) add("knn/float" + s, [=](benchmark::State& st) { BM_knn<float>(st, N, T); }, its(N));
       if (N <= 5000 && T == 100) {
-        add("knn_brute_force/double" + s, [=](benchmark::State& st) { BM_knn_brute_force<double>(st, N, T); }, 1);
-        add("knn_brute_force/float" + s, [=](benchmark::State& st) { BM_knn_brute_force<float>(st, N, T); }, 1);
+        if (db) add("knn_brute_force/double" + s, [=](benchmark::State& st) { BM_knn_brute_force<double>(st, N, T); }, 1);
+        if (fl) add("knn_brute_force/float" + s, [=](benchmark::State& st) { BM_knn_brute_force<float>(st, N, T); }, 1);
       }
     }
-  const Index segN = smoke ? 1000 : 10000;
   for (double speed : {1.0, 0.1})
     for (int L : {0, 1, 2, 4, 8, 16, 32}) {
       const std::string s = "/" + std::to_string(segN) + "/100/speed" + (speed == 1.0 ? "1" : "0.1") + "/L" + std::to_string(L);
-      add("knn_segments/double" + s, [=](benchmark::State& st) { BM_knn_segments(st, segN, 100, speed, L); }, 1);
+      if (db) add("knn_segments/double" + s, [=](benchmark::State& st) { BM_knn_segments(st, segN, 100, speed, L); }, 1);
     }
-  const Index dN = smoke ? 1000 : 20000;
   for (Index C : {Index(8), Index(32)}) {
     const std::string s = "/" + std::to_string(dN) + "/100/" + std::to_string(C);
-    add("descriptors/double" + s, [=](benchmark::State& st) { BM_descriptors<double>(st, dN, 100, C); }, 1);
-    add("descriptors/float" + s, [=](benchmark::State& st) { BM_descriptors<float>(st, dN, 100, C); }, 1);
-    add("graph/double" + s, [=](benchmark::State& st) { BM_graph<double>(st, dN, 100, C); }, 1);
-    add("graph/float" + s, [=](benchmark::State& st) { BM_graph<float>(st, dN, 100, C); }, 1);
+    if (db) add("descriptors/double" + s, [=](benchmark::State& st) { BM_descriptors<double>(st, dN, 100, C); }, 1);
+    if (fl) add("descriptors/float" + s, [=](benchmark::State& st) { BM_descriptors<float>(st, dN, 100, C); }, 1);
+    if (db) add("graph/double" + s, [=](benchmark::State& st) { BM_graph<double>(st, dN, 100, C); }, 1);
+    if (fl) add("graph/float" + s, [=](benchmark::State& st) { BM_graph<float>(st, dN, 100, C); }, 1);
   }
   for (double unit : {0.02, 0.05, 0.1, 0.2, 0.4}) {
     char s[64];
     std::snprintf(s, sizeof s, "/%ld/100/unit%g", static_cast<long>(dN), unit);
-    add(std::string("node_selection/double") + s, [=](benchmark::State& st) { BM_node_selection(st, dN, 100, unit); }, 1);
+    if (db) add(std::string("node_selection/double") + s, [=](benchmark::State& st) { BM_node_selection(st, dN, 100, unit); }, 1);
   }
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  benchmark::RunSpecifiedBenchmarks();
-  benchmark::Shutdown();
-  return 0;
+  return smg_bench::run(argc, argv);
 }

@@ -10,12 +10,14 @@
 #include <random>
 #include <vector>
 
+#include "bench_common.hpp"
 #include "skin/skin_test_support.hpp"
 #include "smg/skin.hpp"
 
 namespace {
 
-constexpr smg::Index kT = 8, kN = 2000, kK = 16, kP = 32768, kPJac = 4096;
+// Run-time sizes (main() reads them from the parameters before any scene is built).
+smg::Index kT = 8, kN = 2000, kK = 16, kP = 32768, kPJac = 4096;
 constexpr double kPi = 3.14159265358979323846;
 
 // A smoothly deforming node cloud: nodes in a 4x4x1 slab; frame t bends and twists it
@@ -68,7 +70,7 @@ const Scene& scene() {
       q.normalize();
       r.point_quats.insert(r.point_quats.end(), {q(0), q(1), q(2), q(3)});
     }
-    r.t_query = {kT - 1};
+    r.t_query = {static_cast<std::int32_t>(kT - 1)};
     std::vector<double> gw(kN * kK, 1.0 / kK);
     r.drivers.resize(kP * r.D);
     smg::skin_drivers(smg::NeighborsView<double>(r.graph.data(), gw.data(), kN, kK),
@@ -176,12 +178,14 @@ double reference_error(smg::SkinMethod m) {
   return err;
 }
 
-void rates(benchmark::State& state, smg::Index points, smg::Index edges) {
-  state.counters["ns_per_point"] = benchmark::Counter(
-      double(state.iterations()) * double(points) * 1e-9,
-      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
-  state.counters["Mblends_per_s"] =
-      benchmark::Counter(double(state.iterations()) * double(edges) * 1e-6, benchmark::Counter::kIsRate);
+// ns_per_point: wall time per point; blend_rate: point x driver blends per second of wall time
+// (both measured around the loop: Google Benchmark's kIsRate would divide by the process CPU
+// time of all threads).
+void rates(benchmark::State& state, const smg_bench::Stopwatch& clock, smg::Index points, smg::Index edges) {
+  const double seconds = clock.seconds();
+  state.counters["ns_per_point"] = smg_bench::per(state, seconds, double(points), 1e9);
+  state.counters["blend_rate"] =
+      benchmark::Counter(double(state.iterations()) * double(edges) / seconds);
 }
 
 // ---- skinning weights ----
@@ -192,13 +196,14 @@ void BM_weights(benchmark::State& state) {
   smg::ParallelOptions par;
   par.threads = int(state.range(0));
   std::vector<S> w(kP * s.D);
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     smg::skinning_weights<S>({v.positions.data(), kT, kN}, {s.drivers.data(), kP, s.D},
                              {s.t_ref.data(), kP}, {v.points.data(), kP}, {v.sigma.data(), kN},
                              {w.data(), kP, s.D}, par);
     benchmark::ClobberMemory();
   }
-  rates(state, kP, s.edges);
+  rates(state, clock, kP, s.edges);
   state.counters["err_vs_ref"] = std::is_same_v<S, double> ? 0.0 : max_abs_diff(w, s.weights);
 }
 
@@ -214,11 +219,12 @@ void BM_blend(benchmark::State& state) {
   smg::SkinOptions opt;
   opt.method = M;
   opt.parallel.threads = int(state.range(0));
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     smg::skin_blend(v.nodes(), v.pts(), v.query(), o, opt);
     benchmark::ClobberMemory();
   }
-  rates(state, kP, s.edges);
+  rates(state, clock, kP, s.edges);
   state.counters["err_vs_ref"] = std::is_same_v<S, double>
                                      ? reference_error(M)
                                      : max_abs_diff(pos, blend_positions<double>(M));
@@ -241,11 +247,12 @@ void BM_blend_jacobians(benchmark::State& state) {
   smg::SkinOptions opt;
   opt.method = M;
   opt.parallel.threads = int(state.range(0));
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     smg::skin_blend(v.nodes(), v.pts(kPJac), v.query(), o, opt);
     benchmark::ClobberMemory();
   }
-  rates(state, kPJac, s.edges_jac);
+  rates(state, clock, kPJac, s.edges_jac);
   if (!std::is_same_v<S, double>) {
     const Views<double>& vd = views<double>();
     std::vector<double> Jdd(Jd.size()), Jpd(Jp.size());
@@ -301,11 +308,12 @@ void BM_backward(benchmark::State& state) {
   const Scene& s = scene();
   BackwardRun<S> b;
   b.run(M, int(state.range(0)));  // warm the workspace (incidence, edge buffer)
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) {
     b.run(M, int(state.range(0)));
     benchmark::ClobberMemory();
   }
-  rates(state, kP, s.edges);
+  rates(state, clock, kP, s.edges);
   if (!std::is_same_v<S, double>) {
     BackwardRun<S> f;
     BackwardRun<double> d;
@@ -382,8 +390,9 @@ void BM_twist(benchmark::State& state) {
     return v;
   };
   const smg::SkinMethod m = state.range(1) ? smg::SkinMethod::lbs : smg::SkinMethod::dqb;
+  const smg_bench::Stopwatch clock;
   for (auto _ : state) benchmark::DoNotOptimize(run(m));
-  rates(state, P, 2 * P);
+  rates(state, clock, P, 2 * P);
   const std::vector<double> dqb = run(smg::SkinMethod::dqb), lbs = run(smg::SkinMethod::lbs);
   const double v0 = volume(pts);
   state.counters["vol_ratio_dqb"] = volume(dqb) / v0;
@@ -395,18 +404,47 @@ using smg::SkinMethod;
 
 }  // namespace
 
-BENCHMARK_TEMPLATE(BM_weights, double)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_weights, float)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_blend, double, SkinMethod::dqb)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_blend, float, SkinMethod::dqb)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_blend, double, SkinMethod::lbs)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_blend, float, SkinMethod::lbs)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_blend_jacobians, double, SkinMethod::dqb)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_blend_jacobians, float, SkinMethod::dqb)->Arg(1)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_blend_jacobians, double, SkinMethod::lbs)->Arg(1)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_backward, double, SkinMethod::dqb)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_backward, float, SkinMethod::dqb)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK_TEMPLATE(BM_backward, double, SkinMethod::lbs)->Arg(1)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_twist)->Args({90, 0})->Args({90, 1})->Args({150, 0})->Args({150, 1})->UseRealTime()->Unit(benchmark::kMicrosecond);
-
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  smg_bench::Params p(argc, argv, "skin");
+  kN = p.integer("n", 2000, "nodes N");
+  kT = p.integer("t", 8, "frames T");
+  kK = p.integer("k", 16, "neighbours K (drivers per point: K + 1)");
+  kP = p.integer("points", 32768, "points P of the weight, blend and backward rows");
+  kPJac = p.integer("points_jac", 4096, "points of the Jacobian rows");
+  const std::vector<long> threads = p.list("threads", {1, 2}, "thread counts");
+  p.precision();
+  const int reps = p.reps(1);
+  p.finish();
+  if (kN <= kK || kT < 2 || kP < 1 || kPJac < 1 || kPJac > kP) {
+    std::fprintf(stderr, "bench_skin: need n > k, t >= 2, 1 <= points_jac <= points\n");
+    return 2;
+  }
+  // all_threads = false: only the first thread count (rows that were single-threaded before).
+  auto add = [&](const char* name, void (*f)(benchmark::State&), bool is_double, bool all_threads = true) {
+    if (!(is_double ? p.runs<double>() : p.runs<float>())) return;
+    auto* b = benchmark::RegisterBenchmark(name, f)->Unit(benchmark::kMillisecond);
+    for (long t : threads) {
+      b->Arg(t);
+      if (!all_threads) break;
+    }
+    smg_bench::protocol(b, reps);
+  };
+  using smg::SkinMethod;
+  add("BM_weights<double>", BM_weights<double>, true);
+  add("BM_weights<float>", BM_weights<float>, false);
+  add("BM_blend<double, SkinMethod::dqb>", BM_blend<double, SkinMethod::dqb>, true);
+  add("BM_blend<float, SkinMethod::dqb>", BM_blend<float, SkinMethod::dqb>, false);
+  add("BM_blend<double, SkinMethod::lbs>", BM_blend<double, SkinMethod::lbs>, true);
+  add("BM_blend<float, SkinMethod::lbs>", BM_blend<float, SkinMethod::lbs>, false);
+  add("BM_blend_jacobians<double, SkinMethod::dqb>", BM_blend_jacobians<double, SkinMethod::dqb>, true);
+  add("BM_blend_jacobians<float, SkinMethod::dqb>", BM_blend_jacobians<float, SkinMethod::dqb>, false, false);
+  add("BM_blend_jacobians<double, SkinMethod::lbs>", BM_blend_jacobians<double, SkinMethod::lbs>, true, false);
+  add("BM_backward<double, SkinMethod::dqb>", BM_backward<double, SkinMethod::dqb>, true);
+  add("BM_backward<float, SkinMethod::dqb>", BM_backward<float, SkinMethod::dqb>, false);
+  add("BM_backward<double, SkinMethod::lbs>", BM_backward<double, SkinMethod::lbs>, true, false);
+  if (p.runs<double>())
+    smg_bench::protocol(benchmark::RegisterBenchmark("BM_twist", BM_twist)->Args({90, 0})->Args({90, 1})->Args({150, 0})
+                            ->Args({150, 1})->Unit(benchmark::kMicrosecond),
+                        reps);
+  return smg_bench::run(argc, argv);
+}

@@ -8,13 +8,16 @@
 // [0, 1], background grey. The 3D scene is the same at every resolution. Backward: random
 // dL/dimage and dL/ddepth (the example trainer's RGB + expected-depth loss).
 //
-// Time column: wall time of one call (ms). Counters: cpu_ms (process CPU time per call, all
-// threads), visible (Gaussians drawn),
-// isect_per_visible (tiles per drawn Gaussian), and for the knob runs
+// Columns: wall time and process CPU time (all threads) of one call (bench_common.hpp).
+// Parameters (flags or SMG_BENCH_*, --smg_help): --g=10000,100000 --width=160,320,640
+// --threads=1,2 --knob_g --knob_width --knob_threads --precision --reps. Counters: visible
+// (Gaussians drawn), isect_per_visible (tiles per drawn Gaussian), and for the knob runs
 //   err_image    max |pixel - reference| over image, alpha and depth/8, reference = double,
 //                16-px tiles, 3 sigma (the pinned configuration);
 //   err_grad     ‖g - g_ref‖ / ‖g_ref‖ over every parameter gradient, same reference.
 #include <benchmark/benchmark.h>
+
+#include "bench_common.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -149,11 +152,8 @@ struct Run {
   }
 };
 
-// cpu_ms: process CPU time per call (all threads), which other processes' load on a shared
-// machine inflates much less than the wall time.
-void common_counters(benchmark::State& state, Index visible, Index isect, std::clock_t cpu) {
-  state.counters["cpu_ms"] =
-      1e3 * double(cpu) / CLOCKS_PER_SEC / double(std::max<benchmark::IterationCount>(1, state.iterations()));
+// Process CPU time (all threads) is the `cpu` column of every row (bench_common.hpp).
+void common_counters(benchmark::State& state, Index visible, Index isect) {
   state.counters["visible"] = double(visible);
   state.counters["isect_per_visible"] = visible ? double(isect) / double(visible) : 0.0;
 }
@@ -169,12 +169,11 @@ void BM_splat(benchmark::State& state) {
     state.SkipWithError(err.c_str());
     return;
   }
-  const std::clock_t c0 = std::clock();
   for (auto _ : state) {
     run.once(s, W, H, {}, kBackward, threads, &err);
     benchmark::DoNotOptimize(run.image.data());
   }
-  common_counters(state, run.ws.n_visible, run.ws.n_isect, std::clock() - c0);
+  common_counters(state, run.ws.n_visible, run.ws.n_isect);
 }
 
 // Reference for the knob runs: double, 16-px tiles, 3 sigma, forward + backward.
@@ -218,36 +217,59 @@ void BM_splat_knobs(benchmark::State& state) {
     num += (g[k] - gr[k]) * (g[k] - gr[k]);
     den += gr[k] * gr[k];
   }
-  const std::clock_t c0 = std::clock();
   for (auto _ : state) {
     run.once(s, W, H, set, true, threads, &err);
     benchmark::DoNotOptimize(run.image.data());
   }
-  common_counters(state, run.ws.n_visible, run.ws.n_isect, std::clock() - c0);
+  common_counters(state, run.ws.n_visible, run.ws.n_isect);
   state.counters["err_image"] = err_image;
   state.counters["err_grad"] = std::sqrt(num / den);
 }
 
+// Run-time parameters (main()).
+std::vector<long> g_threads{1, 2}, g_counts{10000, 100000}, g_widths{160, 320, 640};
+long g_knob_g = 100000, g_knob_w = 320, g_knob_threads = 2;
+int g_reps = 1;
+
 void sizes(benchmark::internal::Benchmark* b) {
-  for (int threads : {1, 2})
-    for (long G : {10000, 100000})
-      for (auto wh : {std::pair<int, int>{160, 120}, {320, 240}, {640, 480}})
-        b->Args({wh.first, wh.second, G, threads});
-  b->ArgNames({"W", "H", "G", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
+  for (long threads : g_threads)
+    for (long G : g_counts)
+      for (long w : g_widths) b->Args({w, w * 3 / 4, G, threads});
+  b->ArgNames({"W", "H", "G", "threads"})->Unit(benchmark::kMillisecond);
+  smg_bench::protocol(b, g_reps);
 }
 
 void knobs(benchmark::internal::Benchmark* b) {
-  for (int tile : {8, 16, 32}) b->Args({320, 240, 100000, 2, tile, 30});
-  b->Args({320, 240, 100000, 2, 16, 25});
-  b->ArgNames({"W", "H", "G", "threads", "tile", "sigmas_x10"})->Unit(benchmark::kMillisecond)->UseRealTime();
+  for (int tile : {8, 16, 32}) b->Args({g_knob_w, g_knob_w * 3 / 4, g_knob_g, g_knob_threads, tile, 30});
+  b->Args({g_knob_w, g_knob_w * 3 / 4, g_knob_g, g_knob_threads, 16, 25});
+  b->ArgNames({"W", "H", "G", "threads", "tile", "sigmas_x10"})->Unit(benchmark::kMillisecond);
+  smg_bench::protocol(b, g_reps);
 }
 
 }  // namespace
 
-BENCHMARK_TEMPLATE(BM_splat, false)->Name("forward")->Apply(sizes);
-BENCHMARK_TEMPLATE(BM_splat, true)->Name("forward_backward")->Apply(sizes);
-BENCHMARK_TEMPLATE(BM_splat_knobs, float)->Name("knobs_float")->Apply(knobs);
-BENCHMARK_TEMPLATE(BM_splat_knobs, double)->Name("knobs_double")->Args({320, 240, 100000, 2, 16, 30})
-    ->ArgNames({"W", "H", "G", "threads", "tile", "sigmas_x10"})->Unit(benchmark::kMillisecond)->UseRealTime();
-
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  smg_bench::Params p(argc, argv, "splat");
+  g_counts = p.list("g", g_counts, "Gaussian counts of the size rows");
+  g_widths = p.list("width", g_widths, "image widths of the size rows (height = 3/4 width)");
+  g_threads = p.list("threads", g_threads, "thread counts of the size rows");
+  g_knob_g = p.integer("knob_g", g_knob_g, "Gaussians of the knob rows");
+  g_knob_w = p.integer("knob_width", g_knob_w, "image width of the knob rows");
+  g_knob_threads = p.integer("knob_threads", g_knob_threads, "threads of the knob rows");
+  p.precision();
+  g_reps = p.reps(1);
+  p.finish();
+  if (p.runs<float>()) {
+    benchmark::RegisterBenchmark("forward", BM_splat<false>)->Apply(sizes);
+    benchmark::RegisterBenchmark("forward_backward", BM_splat<true>)->Apply(sizes);
+    benchmark::RegisterBenchmark("knobs_float", BM_splat_knobs<float>)->Apply(knobs);
+  }
+  if (p.runs<double>()) {
+    auto* b = benchmark::RegisterBenchmark("knobs_double", BM_splat_knobs<double>)
+                  ->Args({g_knob_w, g_knob_w * 3 / 4, g_knob_g, g_knob_threads, 16, 30})
+                  ->ArgNames({"W", "H", "G", "threads", "tile", "sigmas_x10"})
+                  ->Unit(benchmark::kMillisecond);
+    smg_bench::protocol(b, g_reps);
+  }
+  return smg_bench::run(argc, argv);
+}

@@ -1,28 +1,37 @@
 #!/usr/bin/env python3
 """Turn Google Benchmark JSON results into docs/performance.md (speed against error).
 
-usage: bench/report.py RESULTS_DIR > docs/performance.md
+usage: bench/report.py RESULTS_DIR > performance.md
 
-RESULTS_DIR holds one <module>.json per bench/bench_<module>.cpp (scripts/bench.sh writes them
-to bench/results/). Each module's section starts with bench/notes/<module>.md when it exists
-(what is measured and how), followed by a table of every benchmark: its wall time per
-iteration and every user counter (ns_per_call, errors against a reference, ...).
-Standard library only.
+RESULTS_DIR holds one <module>.json per bench/bench_<module>.cpp run, or <module>-<tag>.json for
+a run at other parameters (scripts/bench.sh --tag), each with an optional <name>.load (the load
+average before and after, written by scripts/bench.sh). Each module's section starts with
+bench/notes/<module>.md (what is measured and how), then for every result file: a header
+generated from the file (date, machine, smg's build, the run-time parameters, the load, the
+noise protocol), a table of every row (wall time median and min over the repetitions, process
+CPU time, other processes' load, every counter with its unit) and a summary generated from the
+numbers. bench/results/torch.json (bench/torch/bench_torch.py) also gives the energy section
+its PyTorch autograd baseline rows. Standard library only.
 """
 import json
 import math
 import os
+import re
 import sys
 
-ORDER = ["core", "graph", "energy", "skin", "splat"]
+ORDER = ["core", "graph", "energy", "skin", "splat", "executor", "torch"]
 HERE = os.path.dirname(os.path.abspath(__file__))
+LOAD_COUNTERS = ("others_cpus", "loadavg_1m")
 
 
-def fmt(value):
+# ---- formatting ---------------------------------------------------------------------------------
+def fmt(value, integer=False):
     if isinstance(value, str):
         return value
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "n/a"
+    if integer:
+        return f"{int(round(value))}"
     if value == 0:
         return "0"
     a = abs(value)
@@ -35,24 +44,335 @@ def fmt(value):
     return f"{value:.3g}"
 
 
-def load(path):
-    with open(path) as f:
-        data = json.load(f)
-    runs = data.get("benchmarks", [])
-    # With repetitions keep the median aggregate; otherwise the plain iterations.
-    medians = [b for b in runs if b.get("aggregate_name") == "median"]
-    runs = medians if medians else [b for b in runs if b.get("run_type", "iteration") == "iteration"]
-    return data.get("context", {}), runs
+def fmt_time(value):
+    """A time: fixed point, never scientific notation."""
+    if isinstance(value, (int, float)) and math.isfinite(value) and abs(value) >= 100:
+        return f"{value:.0f}"
+    return fmt(value)
+
+
+def unit_of(counter):
+    """The unit of a counter, from its name (bench/README.md lists the naming rule)."""
+    if counter.startswith("ns_per") or counter.endswith("_ns"):
+        return "ns"
+    if counter.endswith("_ms"):
+        return "ms"
+    if counter.endswith("_mb"):
+        return "MB"
+    if counter.endswith("_per_s") or counter.endswith("_rate"):
+        return "1/s"
+    if counter == "others_cpus":
+        return "CPUs"
+    return ""
+
+
+def clean_name(name):
+    for part in ("/process_time", "/real_time", "/manual_time"):
+        name = name.replace(part, "")
+    return re.sub(r"/repeats:\d+", "", name)
+
+
+# ---- loading ------------------------------------------------------------------------------------
+class Result:
+    """One result file: context, rows (median aggregates or plain iterations), the min aggregates."""
+
+    def __init__(self, path):
+        with open(path) as f:
+            data = json.load(f)
+        self.path = path
+        self.context = data.get("context", {})
+        runs = data.get("benchmarks", [])
+        # Per row: the median aggregate when it was repeated, otherwise its single iteration run.
+        self.rows, seen = [], {}
+        for b in runs:
+            key = b.get("run_name", b["name"])
+            if b.get("run_type", "iteration") == "aggregate" and b.get("aggregate_name") != "median":
+                continue
+            if key in seen:
+                if b.get("aggregate_name") == "median":
+                    self.rows[seen[key]] = b
+                continue
+            seen[key] = len(self.rows)
+            self.rows.append(b)
+        self.aggregated = any(b.get("aggregate_name") == "median" for b in self.rows)
+        self.reps = {}
+        for b in self.rows:
+            r = b.get("repetitions", 1) if b.get("aggregate_name") == "median" else 1
+            self.reps[r] = self.reps.get(r, 0) + 1
+        self.mins = {b.get("run_name", b["name"]): b for b in runs if b.get("aggregate_name") == "min"}
+        for b in self.rows:
+            b["clean"] = clean_name(b.get("run_name", b["name"]))
+        self.load = {}
+        load_path = path[:-5] + ".load"
+        if os.path.exists(load_path):
+            with open(load_path) as f:
+                for line in f:
+                    parts = line.split(None, 1)
+                    if len(parts) == 2:
+                        self.load[parts[0]] = parts[1].strip()
+
+    def min_of(self, row, key="real_time"):
+        m = self.mins.get(row.get("run_name", row["name"]))
+        return m.get(key) if m else None
+
+    def find(self, pattern):
+        """Rows whose clean name matches the regular expression."""
+        return [b for b in self.rows if re.search(pattern, b["clean"])]
+
+    def one(self, pattern):
+        rows = self.find(pattern)
+        return rows[0] if rows else None
 
 
 RESERVED = {"name", "family_index", "per_family_instance_index", "run_name", "run_type",
             "repetitions", "repetition_index", "threads", "iterations", "real_time", "cpu_time",
             "time_unit", "aggregate_name", "aggregate_unit", "label", "error_occurred",
-            "error_message", "items_per_second", "bytes_per_second"}
+            "error_message", "items_per_second", "bytes_per_second", "clean"}
 
 
-def section(module, path):
-    context, runs = load(path)
+# ---- the generated header of one result file ---------------------------------------------------
+def header(res, module, raw):
+    c = res.context
+    out = []
+    cpus = c.get("num_cpus", "?")
+    mhz = c.get("mhz_per_cpu", "?")
+    date = c.get("date", "?")
+    host = c.get("host_name")
+    out.append(f"*Run:* {date}{' on ' + host if host else ''}, {cpus} CPUs at {mhz} MHz; "
+               f"raw data `{raw}`.")
+    if "smg_build_type" in c:
+        out.append(f"*smg build:* {c['smg_build_type']}, {c.get('smg_compiler', '?')}, flags "
+                   f"`{c.get('smg_cxx_flags', '?')}`. Google Benchmark's own `library_build_type` "
+                   f"({c.get('library_build_type', '?')}) is how the installed benchmark library "
+                   f"(the Debian package) was compiled, not smg; it does not change the measured "
+                   f"code.")
+        out.append(f"*Parameters:* `{c.get('smg_params', '?')}`.")
+    elif module == "torch":
+        out.append(f"*smg build:* {c.get('library_build_type', '?')} (as bench_torch.py records it).")
+    else:
+        out.append(f"*smg build:* not recorded (a run from before the build was recorded; "
+                   f"Google Benchmark's library build type: {c.get('library_build_type', '?')}, "
+                   f"which is the benchmark library's, not smg's).")
+    load = []
+    if "loadavg_start" in c:
+        load.append(f"load average at the start {c['loadavg_start']}")
+    elif "loadavg_before" in res.load:
+        load.append(f"load average before {res.load['loadavg_before']}")
+    if "loadavg_after" in res.load:
+        load.append(f"after {res.load['loadavg_after']}")
+    others = [b.get("others_cpus") for b in res.rows if isinstance(b.get("others_cpus"), (int, float))]
+    if others:
+        load.append(f"other processes kept {fmt(min(others))}–{fmt(max(others))} of the "
+                    f"{cpus} CPUs busy while the rows ran (column `others`)")
+    out.append("*Load:* " + ("; ".join(load) if load else "not recorded") + ".")
+    if module == "torch":
+        cpu = "bench_torch.py measures wall time only (no CPU column)"
+    elif "smg_cpu_time" in c:
+        cpu = ("`cpu` is the process CPU time over all threads per iteration (Google Benchmark's "
+               "MeasureProcessCPUTime), beside the wall time (UseRealTime); `cpu/wall` near the "
+               "thread count means the threads had the CPUs to themselves")
+    else:
+        cpu = ("`cpu` is Google Benchmark's default CPU time (main thread only) — a run from before "
+               "the process-CPU convention; re-run to get it")
+    counts = ", ".join(f"{n} row{'s' if n > 1 else ''} {r} repetition{'s' if r > 1 else ''}"
+                       for r, n in sorted(res.reps.items(), reverse=True))
+    if res.aggregated:
+        proto = (f"*Noise protocol:* {counts}; a repeated row shows the median of its repetitions "
+                 f"(times and counters) and, as `wall min`, its fastest repetition; a row run once "
+                 f"is a single measurement (scripts/bench.sh --reps N repeats every row); {cpu}.")
+    else:
+        proto = (f"*Noise protocol:* one repetition per row (a single measurement: no median or "
+                 f"min; scripts/bench.sh --reps N repeats every row); {cpu}.")
+    out.append(proto)
+    return " ".join(out[:1]) + "\n\n" + "\n".join(f"- {x}" for x in out[1:]) + "\n"
+
+
+def table(res, with_cpu=True):
+    rows = res.rows
+    counters = []
+    for b in rows:
+        for k in b:
+            if (k not in RESERVED and k not in counters and k not in LOAD_COUNTERS
+                    and isinstance(b[k], (int, float))):
+                counters.append(k)
+    integer = {k: all(isinstance(b.get(k), (int, float)) and math.isfinite(b[k])
+                      and float(b[k]).is_integer() for b in rows if k in b) for k in counters}
+    for k in counters:  # error columns are never integers, even when they are 0
+        if k.startswith("err"):
+            integer[k] = False
+    has_min = bool(res.mins)
+    has_others = any("others_cpus" in b for b in rows)
+    head = ["benchmark", "wall"] + (["wall min"] if has_min else []) + (["cpu", "cpu/wall"] if with_cpu else [])
+    head += ["others [CPUs]"] if has_others else []
+    head += [f"{k} [{unit_of(k)}]" if unit_of(k) else k for k in counters]
+    out = ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|"]
+    for b in rows:
+        if b.get("error_occurred"):
+            out.append("| " + " | ".join([b["clean"], "error: " + b.get("error_message", "")]
+                                         + [""] * (len(head) - 2)) + " |")
+            continue
+        u = b.get("time_unit", "ns")
+        row = [b["clean"], f"{fmt_time(b['real_time'])} {u}"]
+        if has_min:
+            m = res.min_of(b)
+            row.append(f"{fmt_time(m)} {u}" if m is not None else "")
+        if with_cpu:
+            row.append(f"{fmt_time(b['cpu_time'])} {u}")
+            row.append(fmt(b["cpu_time"] / b["real_time"]) if b.get("real_time") else "n/a")
+        if has_others:
+            row.append(fmt(b.get("others_cpus")) if "others_cpus" in b else "")
+        row += [fmt(b.get(k), integer[k]) if k in b else "" for k in counters]
+        out.append("| " + " | ".join(row) + " |")
+    return "\n".join(out) + "\n"
+
+
+# ---- generated summaries ------------------------------------------------------------------------
+def ms(b):
+    """A row's median wall time in milliseconds."""
+    scale = {"ns": 1e-6, "us": 1e-3, "ms": 1.0, "s": 1e3}[b.get("time_unit", "ns")]
+    return b["real_time"] * scale
+
+
+def threads_of(b):
+    m = re.search(r"threads:(\d+)", b["clean"])
+    return int(m.group(1)) if m else None
+
+
+def max_threads_row(res, pattern):
+    rows = res.find(pattern)
+    return max(rows, key=lambda b: threads_of(b) or 0) if rows else None
+
+
+def summary_energy(res):
+    s = []
+    for prec in ("float", "double"):
+        t = max_threads_row(res, rf"^BM_carap_plus_lrm<{prec}>")
+        if not t:
+            continue
+        th = threads_of(t)
+        parts = [f"C-ARAP + LRM with gradients, {prec}, {th} thread(s): **{fmt(ms(t))} ms** "
+                 f"(median wall; cpu/wall {fmt(t['cpu_time'] / t['real_time'])})"]
+        if prec == "float" and "target_ms" in t:
+            verdict = "met" if ms(t) <= t["target_ms"] else "missed"
+            parts.append(f"the {fmt(t['target_ms'])} ms target is {verdict}")
+        c = res.one(rf"^BM_carap<{prec}, true>/threads:{th}$")
+        l1 = res.one(rf"^BM_lrm<{prec}, 1>/threads:{th}$")
+        if c and l1:
+            parts.append(f"the separate rows: C-ARAP + gradient {fmt(ms(c))} ms, LRM + exact gradient "
+                         f"{fmt(ms(l1))} ms (sum {fmt(ms(c) + ms(l1))} ms)")
+        if prec == "float" and "err_vs_double" in t:
+            parts.append(f"float-vs-double gradient error {fmt(t['err_vs_double'])} on identical "
+                         f"(float-representable) inputs; rounding the inputs to float alone changes "
+                         f"the double gradient by {fmt(t.get('err_input_rounding'))}")
+        s.append("; ".join(parts) + ".")
+    one = [b for b in res.find(r"^BM_(carap|lrm|arap)<") if threads_of(b) == 1]
+    if one:
+        costs = ", ".join(f"`{b['clean'].split('/')[0]}` {fmt(b['ns_per_term'])} ns"
+                          for b in one if "ns_per_term" in b and "<float" in b["clean"])
+        if costs:
+            s.append(f"Per-term cost, float, 1 thread (wall time per term): {costs}.")
+    for name in ("carap", "lrm"):
+        ad = res.one(rf"^BM_autodiff_{name}")
+        if ad and "ad_ratio" in ad:
+            s.append(f"AutoDiffScalar per term, {name.upper().replace('CARAP', 'C-ARAP')}: "
+                     f"{fmt(ad['ad_ratio'])}× the analytic kernel's time on the same sub-problem "
+                     f"(gradients agree to {fmt(ad.get('err_vs_analytic'))}).")
+    d = res.one(r"^BM_lrm<double, 2>")
+    if d and "err_detach_vs_exact" in d:
+        e = res.one(rf"^BM_lrm<double, 1>/threads:{threads_of(d)}$")
+        cost = f" at {fmt(ms(d))} ms against {fmt(ms(e))} ms exact" if e else ""
+        s.append(f"Holding ω constant changes the LRM gradient by {fmt(100 * d['err_detach_vs_exact'])} % "
+                 f"on this scene{cost}.")
+    s += locality_lines(res)
+    return s
+
+
+def locality_lines(res):
+    s = []
+    for b in sorted(res.find(r"^locality/.*/random/"), key=lambda r: r["clean"]):
+        m = res.one("^" + re.escape(b["clean"].replace("/random/", "/morton/")) + "$")
+        if not m:
+            continue
+        what = b["clean"].split("/")[1]
+        line = (f"Node order, `{what}` {b['clean'].split('/')[-1]}: random order {fmt(ms(b))} ms, "
+                f"Morton order {fmt(ms(m))} ms (medians): speed-up of the sorted order "
+                f"**{fmt(ms(b) / ms(m))}×**")
+        ratios = [ms(b) / ms(m)]
+        bmin, mmin = res.min_of(b), res.min_of(m)
+        if bmin and mmin:
+            ratios.append(bmin / mmin)
+            line += f", {fmt(ratios[-1])}× on the fastest repetitions"
+        if b.get("cpu_time") and m.get("cpu_time"):
+            ratios.append(b["cpu_time"] / m["cpu_time"])
+            line += f", {fmt(ratios[-1])}× in process CPU time"
+        if min(ratios) < 1 < max(ratios):
+            line += " (the measures disagree in sign: within this run's noise)"
+        line += (f"; mean |i − j| over edges {fmt(b.get('mean_edge_span'))} → "
+                 f"{fmt(m.get('mean_edge_span'))}; energies equal to "
+                 f"{fmt(max(b.get('energy_vs_input_order', 0), m.get('energy_vs_input_order', 0)))}.")
+        s.append(line)
+    return s
+
+
+def param(res, name):
+    m = re.search(rf"(?:^| ){name}=(\S+)", res.context.get("smg_params", ""))
+    return m.group(1) if m else None
+
+
+def summary_core(res):
+    s = []
+    batch = float(param(res, "n") or 1024)
+    ns = {"ns": 1.0, "us": 1e3, "ms": 1e6, "s": 1e9}
+    for fn in ("exp", "log", "rotate"):
+        for jac in ("false", "true"):
+            d = res.one(rf"^BM_{fn}<double, {jac}>")
+            f = res.one(rf"^BM_{fn}<float, {jac}>")
+            if d and f and "ns_per_call" in d and "ns_per_call" in f:
+                cd = d["cpu_time"] * ns[d.get("time_unit", "ns")] / batch
+                cf = f["cpu_time"] * ns[f.get("time_unit", "ns")] / batch
+                s.append(f"`{fn}`{' with Jacobians' if jac == 'true' else ''}: double "
+                         f"{fmt(d['ns_per_call'])} ns, float {fmt(f['ns_per_call'])} ns per call "
+                         f"(wall; in CPU time {fmt(cd)} and {fmt(cf)} ns); "
+                         f"float error {fmt(f.get('err_vs_double'))} on identical inputs.")
+    return s
+
+
+def summary_torch(res):
+    s = []
+    for b in res.rows:
+        if isinstance(b.get("speedup"), (int, float)) and math.isfinite(b["speedup"]):
+            s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}, "
+                     f"PyTorch autograd {fmt(b.get('pytorch_ms'))} ms — {fmt(b['speedup'])}× faster.")
+        elif "pytorch_ms" in b:
+            s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}; "
+                     f"no PyTorch reference at this size.")
+    return s
+
+
+SUMMARIES = {"energy": summary_energy, "core": summary_core, "torch": summary_torch}
+
+
+def torch_baseline(d):
+    path = os.path.join(d, "torch.json")
+    if not os.path.exists(path):
+        return ""
+    res = Result(path)
+    rows = [b for b in res.rows if b["name"].startswith("energies")]
+    if not rows:
+        return ""
+    out = [f"**PyTorch autograd baseline** (from `bench/torch/bench_torch.py`, "
+           f"`bench/results/torch.json`, measured {res.context.get('date', '?')}; not Google "
+           f"Benchmark — best of {rows[0].get('iterations', '?')} calls; see the torch section): the same "
+           f"energies forward + backward through `smg_torch` against vectorised pure-PyTorch "
+           f"autograd.\n",
+           "| row | smg_torch | PyTorch autograd | speed-up |", "|---|---:|---:|---:|"]
+    for b in rows:
+        out.append(f"| {b['name']} | {fmt(b['real_time'])} {b.get('time_unit', 'ms')} | "
+                   f"{fmt(b.get('pytorch_ms'))} ms | {fmt(b.get('speedup'))}× |")
+    return "\n".join(out) + "\n"
+
+
+def section(module, files, d):
     out = []
     notes = os.path.join(HERE, "notes", module + ".md")
     if os.path.exists(notes):
@@ -60,26 +380,77 @@ def section(module, path):
             out.append(f.read().rstrip() + "\n")
     else:
         out.append(f"## {module}\n")
-    cpus = context.get("num_cpus", "?")
-    mhz = context.get("mhz_per_cpu", "?")
-    out.append(f"Measured {context.get('date', '?')} on {cpus} CPUs at {mhz} MHz, "
-               f"library build type: {context.get('library_build_type', '?')}; "
-               f"raw data: `bench/results/{module}.json`.\n")
-    counters = []
-    for b in runs:
-        for k in b:
-            if k not in RESERVED and k not in counters and isinstance(b[k], (int, float)):
-                counters.append(k)
-    header = ["benchmark", "time / iteration"] + counters
-    out.append("| " + " | ".join(header) + " |")
-    out.append("|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|")
-    for b in runs:
-        if b.get("error_occurred"):
-            row = [b["name"], "error: " + b.get("error_message", "")] + [""] * len(counters)
-        else:
-            row = [b["name"], f"{fmt(b['real_time'])} {b.get('time_unit', 'ns')}"]
-            row += [fmt(b.get(c)) if c in b else "" for c in counters]
-        out.append("| " + " | ".join(row) + " |")
+    for name in files:
+        res = Result(os.path.join(d, name + ".json"))
+        raw = f"bench/results/{name}.json"
+        if name != module:
+            out.append(f"### {module}: `{res.context.get('smg_params', name)}` (`{name}.json`)\n")
+        elif len(files) > 1:
+            out.append(f"### {module}: `{res.context.get('smg_params', 'default parameters')}`\n")
+        out.append(header(res, module, raw))
+        summary = SUMMARIES.get(module, lambda r: [])(res)
+        if summary:
+            out.append("**Summary** (generated from this run's numbers):\n\n"
+                       + "\n".join(f"- {x}" for x in summary) + "\n")
+        out.append(table(res, with_cpu=module != "torch"))
+    if module == "energy":
+        out.append(per_term_comparison(files, d))
+        out.append(torch_baseline(d))
+    return "\n".join(x for x in out if x) + "\n"
+
+
+def per_term_comparison(files, d):
+    """Per-term cost of the same rows at every size that was run."""
+    if len(files) < 2:
+        return ""
+    # One result per problem size (a rerun of some rows at the same size, such as the
+    # interleaved locality run, measures noise, not size).
+    results, sizes = [], set()
+    for n in files:
+        r = Result(os.path.join(d, n + ".json"))
+        size = tuple(param(r, k) for k in ("n", "t", "k", "gaps"))
+        if size not in sizes:
+            sizes.add(size)
+            results.append((n, r))
+    if len(results) < 2:
+        return ""
+    names = []
+    for _, r in results:
+        for b in r.rows:
+            if "ns_per_term" in b and b["clean"] not in names and b["clean"].startswith(("BM_", "locality")):
+                names.append(b["clean"])
+    names = [n for n in names if sum(1 for _, r in results if r.one("^" + re.escape(n) + "$")) > 1]
+    if not names:
+        return ""
+    def others(r):
+        v = sorted(b["others_cpus"] for b in r.rows if isinstance(b.get("others_cpus"), (int, float)))
+        return fmt(v[len(v) // 2]) if v else "?"
+    out = ["### energy: per-term cost at each size (ns per term, median wall time / terms)\n",
+           "Each column is one run (`N/T/K/gaps`, and the median over its rows of the CPUs other "
+           "processes kept busy: compare columns run under similar load).\n",
+           "| row | " + " | ".join(f"`{n}.json`: {param(r, 'n')}/{param(r, 't')}/{param(r, 'k')}/"
+                                    f"{param(r, 'gaps')}, others {others(r)}" for n, r in results) + " |",
+           "|---|" + "---:|" * len(results)]
+    for n in names:
+        cells = []
+        for _, r in results:
+            b = r.one("^" + re.escape(n) + "$")
+            cells.append(fmt(b["ns_per_term"]) if b and "ns_per_term" in b else "")
+        out.append(f"| {n} | " + " | ".join(cells) + " |")
+    lines = []
+    (n0, r0), rest = results[0], results[1:]
+    for key in ("BM_carap<float, true>/threads:1", "BM_lrm<float, 1>/threads:1",
+                "locality/carap_grad<float>/random/threads:1", "locality/carap_grad<float>/morton/threads:1",
+                "locality/lrm_grad<float>/random/threads:1", "locality/lrm_grad<float>/morton/threads:1"):
+        b0 = r0.one("^" + re.escape(key) + "$")
+        for n1, r1 in rest:
+            b1 = r1.one("^" + re.escape(key) + "$")
+            if b0 and b1 and b0.get("ns_per_term") and b1.get("ns_per_term"):
+                lines.append(f"`{key}`: {fmt(b0['ns_per_term'])} ns per term in `{n0}.json`, "
+                             f"{fmt(b1['ns_per_term'])} ns in `{n1}.json` "
+                             f"(×{fmt(b1['ns_per_term'] / b0['ns_per_term'])}).")
+    if lines:
+        out.append("\nFrom the table:\n\n" + "\n".join(f"- {x}" for x in lines))
     return "\n".join(out) + "\n"
 
 
@@ -88,16 +459,28 @@ def main():
         print(__doc__, file=sys.stderr)
         return 2
     d = sys.argv[1]
-    modules = sorted((f[:-5] for f in os.listdir(d) if f.endswith(".json")),
-                     key=lambda m: (ORDER.index(m) if m in ORDER else len(ORDER), m))
+    names = [f[:-5] for f in os.listdir(d) if f.endswith(".json")]
+    by_module = {}
+    for n in names:
+        by_module.setdefault(n.split("-", 1)[0], []).append(n)
+    modules = sorted(by_module, key=lambda m: (ORDER.index(m) if m in ORDER else len(ORDER), m))
     parts = ["# Performance: speed against error\n",
              "Generated by `bench/report.py` from `bench/results/*.json`; regenerate with "
-             "`scripts/bench.sh` (all modules) or `scripts/bench.sh MODULE`. Do not edit by hand: "
-             "the text of each section lives in `bench/notes/<module>.md`. Times are wall-clock "
-             "times of one benchmark iteration; `ns_per_call` divides by the batch inside an "
-             "iteration. Error columns compare against the reference each section names.\n"]
+             "`scripts/bench.sh --publish [MODULE...]`. Problem sizes, gaps, threads, precision and "
+             "repetitions are run-time parameters of every binary — flags (`--n=20000 --t=50 --k=8 "
+             "--gaps=1 --threads=1,2 --precision=float|double|both --reps=5`; `--smg_help` lists a "
+             "binary's) or `SMG_BENCH_*` variables (`SMG_BENCH_N=20000 SMG_BENCH_T=50 SMG_BENCH_K=8 "
+             "SMG_BENCH_GAPS=1 scripts/bench.sh --tag large energy`); `scripts/bench.sh` takes "
+             "`--filter REGEX`, `--out DIR` (default `build/bench-results`) and touches "
+             "`bench/results/` and this page only with `--publish` (bench/README.md). Do not edit by hand: the text of each section lives in "
+             "`bench/notes/<module>.md`, and every summary line and number below is generated "
+             "from the JSON. Each section states smg's build, the run-time parameters, the load "
+             "of the machine during the run and the noise protocol. Times are per benchmark "
+             "iteration: `wall` (wall-clock) and `cpu` (process CPU time, all threads); "
+             "counters carry their unit in the column header (none: a plain number).\n"]
     for m in modules:
-        parts.append(section(m, os.path.join(d, m + ".json")))
+        files = sorted(by_module[m], key=lambda n: (n != m, n))
+        parts.append(section(m, files, d))
     sys.stdout.write("\n".join(parts))
     return 0
 
