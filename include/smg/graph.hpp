@@ -9,6 +9,7 @@
 #include "smg/graph/descriptor.hpp"
 #include "smg/graph/knn.hpp"
 #include "smg/graph/neighbors.hpp"
+#include "smg/graph/node_order.hpp"
 #include "smg/graph/node_selection.hpp"
 #include "smg/graph/semantic_graph.hpp"
 #include "smg/graph/trajectory_distance.hpp"
