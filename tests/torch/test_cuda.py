@@ -105,3 +105,143 @@ def test_cuda_mean_normalization():
     e = [float(smg.carap(x.to(d), q.to(d), (idx.to(d), w.to(d)), c.to(d), normalize=True))
          for d in ("cpu", "cuda")]
     assert abs(e[1] - e[0]) <= 1e-12 * abs(e[0])
+
+
+def _skin_scene(dtype, int64=True, T=5, N=30, K=6, P=200, Q=4, seed=3, antipodal=False):
+    g = torch.Generator().manual_seed(seed)
+    x0 = torch.randn(N, 3, generator=g, dtype=torch.float64)
+    x = x0[None] + 0.2 * torch.randn(T, N, 3, generator=g, dtype=torch.float64).cumsum(0)
+    q = torch.randn(T, N, 4, generator=g, dtype=torch.float64)
+    if antipodal:  # drivers of one point on both hemispheres (and across frames)
+        q[1::2] = -q[1::2]
+        q[:, ::3] = -q[:, ::3]
+    graph = smg.build_graph(x, k=K, gate=False)
+    idx = graph.indices.clone()
+    idx[2, K - 2:] = -1  # padding
+    idx[4, :] = -1  # a node that drives its points alone
+    w = graph.weights.clone()
+    w[idx < 0] = 0
+    anchor = torch.randint(0, N, (P,), generator=g)
+    anchor[:10] = 4
+    t_ref = torch.randint(0, T, (P,), generator=g)
+    pts = x[t_ref, anchor] + 0.3 * torch.randn(P, 3, generator=g, dtype=torch.float64)
+    pq = torch.randn(P, 4, generator=g, dtype=torch.float64)
+    t_query = torch.randint(0, T, (Q,), generator=g)
+    sigma = 0.3 + torch.rand(N, generator=g, dtype=torch.float64)
+    idx = idx if int64 else idx.int()
+    return (x.to(dtype), q.to(dtype), idx, w.to(dtype), pts.to(dtype), pq.to(dtype), anchor,
+            t_ref.int(), t_query, sigma.to(dtype))
+
+
+def _dqb_run(scene, dev, lbs, gx, gq, with_pq=True):
+    x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma = (t.to(dev) for t in scene)
+    leaves = [t.detach().clone().requires_grad_() for t in (x, q, pts, pq)]
+    px, pqo = smg.dqb(leaves[0], leaves[1], (idx, w), leaves[2], leaves[3] if with_pq else None,
+                      anchor, t_ref, t_query, sigma, lbs=lbs)
+    loss = (px * gx.to(dev)).sum() + (pqo * gq.to(dev)).sum()
+    loss.backward()
+    grads = [None if t.grad is None else t.grad.cpu() for t in leaves]
+    return px.detach().cpu(), pqo.detach().cpu(), grads
+
+
+@pytest.mark.parametrize("dtype,tol", [(torch.float64, 1e-12), (torch.float32, 1e-5)])
+@pytest.mark.parametrize("int64", [True, False])
+@pytest.mark.parametrize("lbs", [False, True])
+@pytest.mark.parametrize("antipodal", [False, True])
+def test_cuda_dqb_matches_cpu(dtype, tol, int64, lbs, antipodal):
+    scene = _skin_scene(dtype, int64, antipodal=antipodal)
+    Q, P = scene[8].numel(), scene[4].shape[0]
+    g = torch.Generator().manual_seed(5)
+    gx = torch.randn(Q, P, 3, generator=g, dtype=torch.float64).to(dtype)
+    gq = torch.randn(Q, P, 4, generator=g, dtype=torch.float64).to(dtype)
+    for with_pq in (True, False):
+        cpu = _dqb_run(scene, "cpu", lbs, gx, gq, with_pq)
+        gpu = _dqb_run(scene, "cuda", lbs, gx, gq, with_pq)
+        assert gpu[0].dtype == dtype and gpu[1].dtype == dtype
+        assert _rel(gpu[0], cpu[0]) <= tol
+        assert _rel(gpu[1], cpu[1]) <= tol
+        # A node gradient is a sum over points whose terms can cancel: its round-off is relative
+        # to the terms, so every gradient is compared against the largest of the four (as
+        # tests/cuda/test_cuda_dqb.cu).
+        scale = max(float(b.double().abs().max()) for b in cpu[2] if b is not None)
+        for name, a, b in zip(("node_positions", "node_quats", "points", "point_quats"), gpu[2],
+                              cpu[2]):
+            if not with_pq and name == "point_quats":
+                assert a is None and b is None
+                continue
+            assert a.dtype == dtype
+            assert float((a.double() - b.double()).abs().max()) <= tol * scale, name
+
+
+def test_cuda_dqb_internals_and_determinism():
+    """The driver table equals the CPU's; the weights match; two runs are bit-identical."""
+    x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma = _skin_scene(torch.float64)
+    cpu = smg._C.dqb_forward(x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma, False)
+    d = [t.cuda() for t in (x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma)]
+    runs = [smg._C.cuda_dqb_forward(*d, False) for _ in range(2)]
+    assert runs[0][2].dtype == torch.int32
+    assert torch.equal(runs[0][2].cpu(), cpu[2])
+    assert _rel(runs[0][3].cpu(), cpu[3]) <= 1e-12
+    for a, b in zip(runs[0], runs[1]):
+        assert torch.equal(a, b)
+    # on a side stream (the current stream of the device), forward and backward
+    side = torch.cuda.Stream()
+    side.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(side):
+        xs = d[0].clone().requires_grad_()
+        px, pqo = smg.dqb(xs, d[1], (d[2], d[3]), d[4], d[5], d[6], d[7], d[8], d[9])
+        (px.sum() + pqo.sum()).backward()
+    torch.cuda.current_stream().wait_stream(side)
+    xc = x.clone().requires_grad_()
+    px_c, pqo_c = smg.dqb(xc, q, (idx, w), pts, pq, anchor, t_ref, t_query, sigma)
+    (px_c.sum() + pqo_c.sum()).backward()
+    assert _rel(px.cpu(), px_c.detach()) <= 1e-12
+    assert _rel(xs.grad.cpu(), xc.grad) <= 1e-12
+
+
+def test_cuda_dqb_errors():
+    scene = [t.cuda() for t in _skin_scene(torch.float32)]
+    x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma = scene
+
+    def call(**kw):
+        a = dict(node_positions=x, node_quats=q, g=(idx, w), points=pts, point_quats=pq,
+                 anchor=anchor, t_ref=t_ref, t_query=t_query, sigma=sigma)
+        a.update(kw)
+        return smg.dqb(**a)
+
+    with pytest.raises(ValueError, match="points"):
+        call(points=pts.cpu())
+    with pytest.raises(ValueError, match="sigma"):
+        call(sigma=sigma.cpu())
+    with pytest.raises(ValueError, match="anchor"):
+        call(anchor=anchor.cpu())
+    with pytest.raises(ValueError, match="graph.indices"):
+        call(g=(idx.cpu(), w))
+    with pytest.raises(ValueError, match="node_positions"):  # CPU positions, a CUDA input
+        call(node_positions=x.cpu(), node_quats=q.cpu(), points=pts.cpu(), point_quats=pq.cpu(),
+             g=(idx.cpu(), w.cpu()), anchor=anchor.cpu(), t_ref=t_ref.cpu(),
+             t_query=t_query.cpu(), sigma=sigma)
+    with pytest.raises(ValueError, match="node_quats"):
+        call(node_quats=q.double())
+    # contents: the CPU operator's messages
+    cpu = [t.cpu() for t in scene]
+    names = ("node_positions", "node_quats", "g", "points", "point_quats", "anchor", "t_ref",
+             "t_query", "sigma")
+
+    def args(ts):
+        return dict(zip(names, (ts[0], ts[1], (ts[2], ts[3])) + tuple(ts[4:])))
+
+    def with_value(t, i, v):
+        t = t.clone()
+        t[i] = v
+        return t
+
+    bad = [(6, 7, 10 ** 6), (8, 1, -1), (7, 3, 99), (9, 2, -1.0), (2, 0, 10 ** 4)]
+    for k, i, v in bad:
+        ts_cpu, ts_gpu = list(cpu), list(scene)
+        ts_cpu[k], ts_gpu[k] = with_value(cpu[k], i, v), with_value(scene[k], i, v)
+        with pytest.raises(ValueError) as e_cpu:
+            smg.dqb(**args(ts_cpu))
+        with pytest.raises(ValueError) as e_gpu:
+            smg.dqb(**args(ts_gpu))
+        assert str(e_gpu.value) == str(e_cpu.value)

@@ -27,7 +27,7 @@ __all__ = ["Graph", "has_cuda", "build_graph", "node_confidences", "carap", "ara
 version = _C.version
 
 #: True when the extension was built with its CUDA operators (smg_torch_cuda.cu): then
-#: node_confidences, carap, arap and lrm also take CUDA tensors (all on one device) and run on the
+#: node_confidences, carap, arap, lrm and dqb also take CUDA tensors (all on one device) and run on the
 #: device's current stream with the same equations and gradients.
 has_cuda = bool(getattr(_C, "has_cuda", False))
 
@@ -229,8 +229,9 @@ class _DqbFunction(torch.autograd.Function):
                 sigma, lbs):
         xs, qs, ps = node_positions.detach(), node_quats.detach(), points.detach()
         pqs = None if point_quats is None else point_quats.detach()
-        out_x, out_q, drivers, weights = _C.dqb_forward(xs, qs, idx, w.detach(), ps, pqs, anchor,
-                                                        t_ref, t_query, sigma.detach(), lbs)
+        op = _C.cuda_dqb_forward if xs.is_cuda else _C.dqb_forward
+        out_x, out_q, drivers, weights = op(xs, qs, idx, w.detach(), ps, pqs, anchor, t_ref,
+                                            t_query, sigma.detach(), lbs)
         # The backward recomputes the blend (as cheap as reading a cache, per the library).
         # saved through autograd, so that an in-place change before backward raises
         ctx.save_for_backward(node_positions, node_quats, points, point_quats)
@@ -243,8 +244,9 @@ class _DqbFunction(torch.autograd.Function):
         xs, qs, ps, pqs = (None if t is None else t.detach() for t in ctx.saved_tensors)
         t_ref, t_query, drivers, weights, lbs = ctx.inputs
         nx, nq, np_, npq = ctx.needs_input_grad[:4]
-        gx, gq, gp, gpq = _C.dqb_backward(xs, qs, ps, pqs, t_ref, t_query, drivers, weights, grad_x,
-                                          grad_q, lbs, nx, nq, np_, npq and pqs is not None)
+        op = _C.cuda_dqb_backward if xs.is_cuda else _C.dqb_backward
+        gx, gq, gp, gpq = op(xs, qs, ps, pqs, t_ref, t_query, drivers, weights, grad_x, grad_q, lbs,
+                             nx, nq, np_, npq and pqs is not None)
         return (gx, gq, gp, gpq) + (None,) * 7
 
 
@@ -256,11 +258,21 @@ def dqb(node_positions: torch.Tensor, node_quats: torch.Tensor, g: GraphLike, po
     driven by its anchor node [P] and the anchor's graph neighbours with distance-aware weights
     (sigma [N]; the weights are constants for the gradient), to the frames t_query [Q].
     Returns positions [Q, P, 3] and unit quaternions [Q, P, 4]; differentiable w.r.t.
-    node_positions, the raw node_quats, points and the raw point_quats."""
+    node_positions, the raw node_quats, points and the raw point_quats.
+    CUDA tensors (all on node_positions' device; index arrays of any integer dtype; the other
+    float tensors of node_positions' dtype) run on the device's current stream: index ranges and
+    sigma > 0 are checked with one synchronising copy; the backward synchronises the stream (it
+    reads t_query and the driver table on the host)."""
     idx, w = _graph(g)
-    _check(node_positions=node_positions, node_quats=node_quats, points=points,
-           point_quats=point_quats, indices=idx, weights=w, anchor=anchor, t_ref=t_ref,
-           t_query=t_query, sigma=sigma)
+    tensors = dict(node_positions=node_positions, node_quats=node_quats, points=points,
+                   point_quats=point_quats, indices=idx, weights=w, anchor=anchor, t_ref=t_ref,
+                   t_query=t_query, sigma=sigma)
+    _check_cuda_ok(**tensors)
+    if not node_positions.is_cuda:  # the CUDA operator checks the devices itself
+        for name, t in tensors.items():
+            if t is not None and t.is_cuda:
+                raise ValueError(f"{name}: expected a tensor on {node_positions.device} like "
+                                 f"node_positions, got {t.device}")
     return _DqbFunction.apply(node_positions, node_quats, points, point_quats, idx, w, anchor, t_ref,
                               t_query, sigma, bool(lbs))
 
