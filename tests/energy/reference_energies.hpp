@@ -51,56 +51,59 @@ std::vector<Matrix3<S>> rotations_of(const Scene<double>& s) {
 }
 
 // ---- Confidence (E2)-(E6), with row-normalised topology weights. ----
-inline void confidence(const Scene<double>& s, const ConfidenceOptions& o, bool use_visibility,
-                       std::vector<double>& c, std::vector<double>& cm, std::vector<double>& cr) {
+// Computed in R (long double gives a reference whose own rounding is far below double's: the
+// differences of edge lengths in (E4) cancel), returned in double.
+template <class R = double>
+void confidence(const Scene<double>& s, const ConfidenceOptions& o, bool use_visibility,
+                std::vector<double>& c, std::vector<double>& cm, std::vector<double>& cr) {
   const Index T = s.T, N = s.N, K = s.K;
-  const auto X = positions_of<double>(s);
-  std::vector<double> e(static_cast<std::size_t>(T * N), 0.0);
+  const auto X = positions_of<R>(s);
+  std::vector<R> e(static_cast<std::size_t>(T * N), R(0));
   auto length = [&](Index t, Index i, Index j) { return (X[t * N + j] - X[t * N + i]).norm(); };
   for (Index t = 0; t < T; ++t)
     for (Index i = 0; i < N; ++i) {
-      double W = 0, acc = 0;
+      R W = 0, acc = 0;
       for (Index k = 0; k < K && s.idx[i * K + k] >= 0; ++k) {
         const Index j = s.idx[i * K + k];
-        double change = 0;
+        R change = 0;
         if (T >= 2) {
           const Index a = t < T - 1 ? t + 1 : T - 1, b = t < T - 1 ? t : T - 2;
           change = std::abs(length(a, i, j) - length(b, i, j));
         }
-        acc += s.w[i * K + k] * change;
-        W += s.w[i * K + k];
+        acc += R(s.w[i * K + k]) * change;
+        W += R(s.w[i * K + k]);
       }
-      e[t * N + i] = W > 0 ? acc / W : 0.0;
+      e[t * N + i] = W > 0 ? acc / W : R(0);
     }
   c.assign(static_cast<std::size_t>(T * N), 0.0);
   cm = c;
   cr = c;
   for (Index t = 0; t < T; ++t)
     for (Index i = 0; i < N; ++i) {
-      double W = 0;
-      for (Index k = 0; k < K && s.idx[i * K + k] >= 0; ++k) W += s.w[i * K + k];
-      Vector3<double> vbar = Vector3<double>::Zero();
-      double ebar = 0, sv = 0, sl = 0;
+      R W = 0;
+      for (Index k = 0; k < K && s.idx[i * K + k] >= 0; ++k) W += R(s.w[i * K + k]);
+      Vector3<R> vbar = Vector3<R>::Zero();
+      R ebar = 0, sv = 0, sl = 0;
       if (W > 0) {
         for (Index k = 0; k < K && s.idx[i * K + k] >= 0; ++k) {
           const Index j = s.idx[i * K + k];
-          vbar += s.w[i * K + k] / W * velocity(X, T, N, t, j);
-          ebar += s.w[i * K + k] / W * e[t * N + j];
+          vbar += R(s.w[i * K + k]) / W * velocity(X, T, N, t, j);
+          ebar += R(s.w[i * K + k]) / W * e[t * N + j];
         }
         for (Index k = 0; k < K && s.idx[i * K + k] >= 0; ++k) {
           const Index j = s.idx[i * K + k];
-          sv += s.w[i * K + k] / W * (velocity(X, T, N, t, j) - vbar).norm();
-          sl += s.w[i * K + k] / W * std::abs(e[t * N + j] - ebar);
+          sv += R(s.w[i * K + k]) / W * (velocity(X, T, N, t, j) - vbar).norm();
+          sl += R(s.w[i * K + k]) / W * std::abs(e[t * N + j] - ebar);
         }
       }
-      const double rv = (velocity(X, T, N, t, i) - vbar).norm();
-      const double rl = std::abs(e[t * N + i] - ebar);
-      const double m = std::exp(-std::pow(rv / (o.kappa_m * (sv + o.eps)), 2));
-      const double r = std::exp(-std::pow(rl / (o.kappa_r * (sl + o.eps)), 2));
-      cm[t * N + i] = m;
-      cr[t * N + i] = r;
-      const double vis = use_visibility ? double(s.v[t * N + i]) : 1.0;
-      c[t * N + i] = vis * std::pow(m, o.lambda_m) * std::pow(r, o.lambda_r);
+      const R rv = (velocity(X, T, N, t, i) - vbar).norm();
+      const R rl = std::abs(e[t * N + i] - ebar);
+      const R m = std::exp(-std::pow(rv / (R(o.kappa_m) * (sv + R(o.eps))), 2));
+      const R r = std::exp(-std::pow(rl / (R(o.kappa_r) * (sl + R(o.eps))), 2));
+      cm[t * N + i] = double(m);
+      cr[t * N + i] = double(r);
+      const R vis = use_visibility ? R(s.v[t * N + i]) : R(1);
+      c[t * N + i] = double(vis * std::pow(m, R(o.lambda_m)) * std::pow(r, R(o.lambda_r)));
     }
 }
 

@@ -62,11 +62,16 @@ TEST_CASE("confidence matches the reference, with and without visibility") {
       CAPTURE(T);
       CAPTURE(vis);
       std::vector<double> c, m, r;
-      smg::test::ref::confidence(s, o, vis, c, m, r);
+      // The reference in long double: (E4) differences lengths that barely change, so a double
+      // reference would carry cancellation errors of its own (~5e-14 in c^r here).
+      smg::test::ref::confidence<long double>(s, o, vis, c, m, r);
       const Conf got = run(s, o, vis);
       CHECK(max_abs_diff(got.c, c) < 1e-14);
       CHECK(max_abs_diff(got.m, m) < 1e-14);
-      CHECK(max_abs_diff(got.r, r) < 1e-14);
+      // c^r divides |e_i − ē_i| by the spread of the e_j: near-rigid neighbourhoods make that
+      // ill-conditioned, and double lands ~3e-14 from the long-double value here (2.4e-14 with
+      // the plain difference of lengths, 3.2e-14 with the cancellation-free one: both rounding).
+      CHECK(max_abs_diff(got.r, r) < 1e-13);
     }
   }
 }
@@ -169,9 +174,23 @@ TEST_CASE("confidence: float agrees with double") {
   CAPTURE(rng.seed);
   const Scene<double> s = smg::test::random_scene(8, 100, 8, rng);
   const Conf d = run<double>(s, {}), f = run<float>(s, {});
+  // c^r divides a difference of edge-length changes (E4) by their spread: where the motion is
+  // near rigid that ratio is ill-conditioned, and one entry of 800 sits near 1e-4 in float
+  // whatever the rounding order (measured 1.2e-4 with correctly rounded square roots, 6e-5 with
+  // Eigen's approximate packet sqrt). The mean error says whether the float path is accurate:
+  // 6.0e-7 (c^r), 2.5e-7 (c), 2.7e-8 (c^m) with the cancellation-free ℓ⁺ − ℓ⁻ of
+  // confidence_edge_change, against 1.1e-6 / 6.0e-7 / 2.7e-8 before it.
+  auto mean_abs_diff = [](const std::vector<double>& a, const auto& b) {
+    double sum = 0;
+    for (std::size_t k = 0; k < a.size(); ++k) sum += std::abs(a[k] - double(b[k]));
+    return sum / double(a.size());
+  };
   CHECK(max_abs_diff(d.c, f.c) < 1e-4);
   CHECK(max_abs_diff(d.m, f.m) < 1e-4);
-  CHECK(max_abs_diff(d.r, f.r) < 1e-4);
+  CHECK(max_abs_diff(d.r, f.r) < 2e-4);
+  CHECK(mean_abs_diff(d.c, f.c) < 5e-7);
+  CHECK(mean_abs_diff(d.m, f.m) < 1e-7);
+  CHECK(mean_abs_diff(d.r, f.r) < 1e-6);
 }
 
 TEST_CASE("confidence: validation names the argument") {

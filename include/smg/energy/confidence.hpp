@@ -99,12 +99,18 @@ SMG_HOST_DEVICE inline S confidence_edge_change(PositionsView<const S> positions
     const Index j = graph.indices(i, k);
     const S* pj = positions.ptr(f.plus, j);
     const S* mj = positions.ptr(f.minus, j);
-    S a(0), b(0);
+    // ℓ⁺ − ℓ⁻ = (‖a‖² − ‖b‖²) / (‖a‖ + ‖b‖) with ‖a‖² − ‖b‖² = (a − b)·(a + b): the same value
+    // as sqrt(‖a‖²) − sqrt(‖b‖²) without its cancellation (edges change little between frames,
+    // so the plain difference of two lengths loses most of float's digits).
+    S aa(0), bb(0), ab(0);
     for (int c = 0; c < 3; ++c) {
-      a += (pj[c] - pi[c]) * (pj[c] - pi[c]);
-      b += (mj[c] - mi[c]) * (mj[c] - mi[c]);
+      const S ac = pj[c] - pi[c], bc = mj[c] - mi[c];
+      aa += ac * ac;
+      bb += bc * bc;
+      ab += (ac - bc) * (ac + bc);
     }
-    e += graph.weights(i, k) * abs(sqrt(a) - sqrt(b));
+    const S sum = sqrt(aa) + sqrt(bb);
+    e += graph.weights(i, k) * (sum > S(0) ? S(abs(ab) / sum) : S(0));
   }
   return e * inv_w;
 }
