@@ -1,4 +1,5 @@
-"""smg_torch — smg's Semantic Motion Graph regularisers as PyTorch operators (CPU).
+"""smg_torch — smg's Semantic Motion Graph regularisers as PyTorch operators (CPU tensors; with a CUDA
+build, also CUDA tensors for node_confidences, carap, arap, lrm and dqb: docs/cuda.md).
 
     import smg_torch as smg
     c = smg.node_confidences(positions, g)                        # [T, N], no grad
