@@ -51,46 +51,9 @@ struct Config {
 };
 Config cfg;
 
-// Several rigid bodies moving smoothly (rotation + translation), each node with a little
-// non-rigid noise, some nodes corrupted: a scene where every factor and Huber's both zones
-// are exercised. K nearest neighbours by frame-0 distance, weights 1/K.
-Scene<double> make_scene(Index T, Index N) {
-  smg::test::Rng rng(2024);
-  Scene<double> s;
-  s.resize(T, N);
-  s.v.assign(s.v.size(), 1);
-  s.c.assign(s.c.size(), 1.0);
-  const int bodies = 12;
-  std::vector<Vector3<double>> centre, spin, vel;
-  for (int b = 0; b < bodies; ++b) {
-    centre.push_back(rng.vec3(2.0));
-    spin.push_back(rng.vec3(0.03));
-    vel.push_back(rng.vec3(0.01));
-  }
-  for (Index i = 0; i < N; ++i) {
-    const int b = static_cast<int>(i % bodies);
-    const Vector3<double> p = centre[b] + rng.vec3(0.4);
-    const smg::Quaternion<double> r0 = rng.quaternion();
-    const bool corrupted = rng.uniform(0, 1) < 0.02;
-    for (Index t = 0; t < T; ++t) {
-      const smg::Quaternion<double> Q = smg::so3::exp(Vector3<double>(double(t) * spin[b]));
-      Vector3<double> x = Q * (p - centre[b]) + centre[b] + double(t) * vel[b] + rng.vec3(0.002);
-      if (corrupted) x += rng.vec3(0.03);
-      s.set_pos(t, i, x);
-      s.set_rot(t, i, Q * r0 * smg::so3::exp(rng.vec3(0.01)));
-      s.v[static_cast<std::size_t>(t * N + i)] = rng.uniform(0, 1) < 0.95 ? 1 : 0;
-    }
-  }
-  smg::test::knn_graph(s, cfg.K);
-  std::vector<double> c(s.v.size());
-  smg::node_confidences<double>(s.positions(), s.visibility(), s.graph(), {},
-                                {c.data(), s.T, s.N});
-  s.c = c;
-  return s;
-}
-
 const Scene<double>& scene() {
-  static const Scene<double> s = make_scene(cfg.T, cfg.N);
+  // tests/energy/scene.hpp: rigid bodies with noise, K nearest neighbours, confidences.
+  static const Scene<double> s = smg::test::rigid_bodies_scene(cfg.T, cfg.N, cfg.K);
   return s;
 }
 template <class S>
