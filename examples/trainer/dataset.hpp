@@ -12,6 +12,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "smg/core/parallel.hpp"
@@ -33,6 +34,21 @@ struct DatasetTiming {  // seconds (wall clock)
   double scene = 0, render_train = 0, render_test = 0, covisibility = 0, priors = 0, total = 0;
 };
 
+// A validation frame of a scene read from disk (data_scene.hpp): its own camera and image, the
+// covisible mask of Dycheck's protocol, and the training frame whose time it shows.
+struct EvalFrame {
+  std::string name;                     // "{camera}_{time:05d}"
+  int time_id = 0;                      // the split's time id
+  int frame = 0;                        // training frame index rendered for it (nearest time id)
+  Camera camera;                        // at 2x
+  Image rgb;                            // [H][W][3]
+  std::vector<std::uint8_t> covisible;  // [H][W] 0/1
+};
+
+// The procedural scene (make_dataset) fills scene, train, test, test_covisible and priors, with
+// ground truth everywhere. A scene read from disk (dataset_from_dycheck) fills scene with the
+// training cameras, image size and frame count only (no bodies), train[t].rgb, priors (tracks
+// without truth), and eval; has_truth is false and test / test_covisible are empty.
 struct Dataset {
   Scene scene;
   std::vector<RenderOutput> train;                          // [T]
@@ -40,6 +56,12 @@ struct Dataset {
   std::vector<std::vector<std::uint8_t>> test_covisible;    // [views] [T][H][W] (if requested)
   Priors priors;
   DatasetTiming seconds;
+
+  bool has_truth = true;                 // analytic ground truth available (procedural scene)
+  std::string source = "procedural";     // or the scene folder it was read from
+  std::vector<int> time_ids;             // [T] time id of each training frame (procedural: t)
+  std::vector<std::string> frame_names;  // [T] training frame names (procedural: "0_{t:05d}")
+  std::vector<EvalFrame> eval;           // validation frames of a scene from disk
 };
 
 // Validates both configs (std::invalid_argument with a one-line message) and builds the dataset.

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <stdexcept>
+#include <utility>
 
 #include "trainer/frames.hpp"
 
@@ -33,22 +35,72 @@ void resolve_frames(TrainerConfig& c) {
   if (c.init.dynamic_frames.empty()) c.init.dynamic_frames = spread_frames(T, 8);
 }
 
-TrainerResult run_stage0(const TrainerConfig& config_in, const Progress& progress) {
-  TrainerConfig config = config_in;
-  resolve_frames(config);
-  const smg::ParallelOptions par{config.threads, 0};
-  TrainerResult r;
+void resolve_frames(TrainerConfig& c, int T, const std::vector<std::uint8_t>& has_mask) {
+  std::vector<int> masked;
+  for (int t = 0; t < T; ++t)
+    if (has_mask.empty() || has_mask[static_cast<std::size_t>(t)]) masked.push_back(t);
+  const auto pick = [&](int n) {
+    std::vector<int> out;
+    for (int i : spread_frames(static_cast<int>(masked.size()), n)) out.push_back(masked[static_cast<std::size_t>(i)]);
+    return out;
+  };
+  if (c.init.static_frames.empty()) c.init.static_frames = pick(4);
+  if (c.init.dynamic_frames.empty()) c.init.dynamic_frames = pick(8);
+}
 
-  auto t0 = std::chrono::steady_clock::now();
-  r.data = make_dataset(config.dataset, par);
-  r.seconds_dataset = seconds_since(t0);
-  const Scene& scene = r.data.scene;
+void scale_lengths(TrainerConfig& c, double f) {
+  c.nodes.unit *= f;
+  c.node_loss.data_huber *= f;
+  c.node_loss.lrm_huber *= f;
+  c.node_loss.confidence.eps *= f;
+  c.stage1.lr_position *= f;
+  c.stage1.lr_position_final *= f;
+  c.stage2.lr_means *= f;
+  c.stage2.lr_means_final *= f;
+  c.stage2.lr_node_position *= f;
+  c.stage2.lr_node_position_final *= f;
+  c.stage2.prune_scale *= f;
+}
+
+TrainerResult run_stage0(const TrainerConfig& config, const Progress& progress) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Dataset data = make_dataset(config.dataset, smg::ParallelOptions{config.threads, 0});
+  const double seconds = seconds_since(t0);
+  const Scene& scene = data.scene;
   progress.line("data", format("scene seed %llu: T=%d %dx%d, %d tracks, extent %.3f m (%.1fs)",
                                static_cast<unsigned long long>(scene.config.seed), scene.frames(), scene.width(),
-                               scene.height(), r.data.priors.tracks.count, scene.extent, r.seconds_dataset));
+                               scene.height(), data.priors.tracks.count, scene.extent, seconds));
+  TrainerResult r = run_stage0(config, std::move(data), progress);
+  r.seconds_dataset = seconds;
+  return r;
+}
 
+TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Progress& progress) {
+  TrainerResult r;
+  r.config = config_in;
+  TrainerConfig& config = r.config;
+  r.data = std::move(data);
+  const smg::ParallelOptions par{config.threads, 0};
+  auto t0 = std::chrono::steady_clock::now();
+  if (r.data.has_truth) {
+    resolve_frames(config);
+  } else {
+    // A scene from disk: its scale decides every length (docs/data.md section 5).
+    resolve_frames(config, r.data.scene.frames(), r.data.priors.has_mask);
+    const double extent = lifted_extent(lift_tracks(r.data.scene, r.data.priors, config.lift));
+    if (!(extent > 0))
+      throw std::runtime_error("too few lifted object tracks to measure the scene's extent (fewer than 16 samples "
+                               "of tracks starting in the dynamic masks have depth)");
+    r.data.scene.extent = extent;
+    r.length_factor = extent / kReferenceExtent;
+    scale_lengths(config, r.length_factor);
+    progress.line("data", format("%s: T=%d %dx%d, %d tracks, %d validation frames, extent %.3f m (lengths x %.3f)",
+                                 r.data.source.c_str(), r.data.scene.frames(), r.data.scene.width(),
+                                 r.data.scene.height(), r.data.priors.tracks.count,
+                                 static_cast<int>(r.data.eval.size()), extent, r.length_factor));
+  }
+  const Scene& scene = r.data.scene;
   // Stage 0: lifting, nodes, graph, rotations.
-  t0 = std::chrono::steady_clock::now();
   r.lifted = lift_tracks(scene, r.data.priors, config.lift);
   r.nodes = make_nodes(r.lifted, config.nodes, config.variant.semantic_graph, par);
   init_rotations(r.nodes);
@@ -63,25 +115,30 @@ TrainerResult run_stage0(const TrainerConfig& config_in, const Progress& progres
                                    static_cast<long long>(gs.gate_removed_edges),
                                    static_cast<long long>(gs.isolated_nodes), r.seconds_stage0));
   }
-  r.tracks_lifted = track_metrics(scene, r.nodes);
+  if (r.data.has_truth) r.tracks_lifted = track_metrics(scene, r.nodes);
   return r;
 }
 
-TrainerResult run_trainer(const TrainerConfig& config_in, const Progress& progress) {
-  const auto start = std::chrono::steady_clock::now();
-  TrainerConfig config = config_in;
-  resolve_frames(config);
+namespace {
+
+// Stages 1 and 2 and the evaluation, after run_stage0.
+TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point start, const Progress& progress) {
+  const TrainerConfig& config = r.config;
   const smg::ParallelOptions par{config.threads, 0};
-  TrainerResult r = run_stage0(config, progress);
   const Scene& scene = r.data.scene;
+  const bool truth = r.data.has_truth;
 
   // Stage 1.
   NodeObjective objective(config.variant, config.node_loss, par);
   r.stage1 = fit_nodes(r.nodes, objective, config.stage1, progress);
-  r.tracks_stage1 = track_metrics(scene, r.nodes);
-  progress.line("stage1", format("done in %.1fs: node EPE %.4f m (lifted %.4f), box %.4f, hidden %.4f",
+  if (!truth) {
+    progress.line("stage1", format("done in %.1fs", r.stage1.seconds));
+  } else {
+    r.tracks_stage1 = track_metrics(scene, r.nodes);
+    progress.line("stage1", format("done in %.1fs: node EPE %.4f m (lifted %.4f), box %.4f, hidden %.4f",
                                  r.stage1.seconds, r.tracks_stage1.all.epe, r.tracks_lifted.all.epe,
                                  r.tracks_stage1.box.epe, r.tracks_stage1.hidden.epe));
+  }
 
   // Stage 2.
   auto t0 = std::chrono::steady_clock::now();
@@ -95,6 +152,15 @@ TrainerResult run_trainer(const TrainerConfig& config_in, const Progress& progre
                                  1e3 * r.stage2.seconds / std::max(1, r.stage2.iterations)));
 
   // Evaluation.
+  if (!truth) {
+    r.data_evaluation = evaluate_frames(r.data, r.nodes, r.model, par, &r.eval_renders);
+    const FrameScore& m = r.data_evaluation.mean;
+    progress.line("eval", format("%d validation frames: mPSNR %.2f dB, mSSIM %.4f (covisible %.4f), PSNR %.2f dB (%.1fs)",
+                                 static_cast<int>(r.data_evaluation.frames.size()), m.mpsnr, m.mssim,
+                                 m.mssim_covisible, m.psnr, r.data_evaluation.seconds));
+    r.seconds_total = seconds_since(start);
+    return r;
+  }
   r.evaluation = evaluate(r.data, r.nodes, r.model, par, &r.renders);
   const Evaluation& e = r.evaluation;
   progress.line("eval", format("test PSNR %.2f dB (masked %.2f), SSIM %.4f, box PSNR %.2f; node EPE %.4f m, "
@@ -103,6 +169,20 @@ TrainerResult run_trainer(const TrainerConfig& config_in, const Progress& progre
                                e.tracks.all.within_5, e.tracks.all.within_10, e.tracks.box.epe, e.seconds));
   r.seconds_total = seconds_since(start);
   return r;
+}
+
+}  // namespace
+
+TrainerResult run_trainer(const TrainerConfig& config, const Progress& progress) {
+  const auto start = std::chrono::steady_clock::now();
+  TrainerResult r = run_stage0(config, progress);
+  return run_stages(std::move(r), start, progress);
+}
+
+TrainerResult run_trainer(const TrainerConfig& config, Dataset data, const Progress& progress) {
+  const auto start = std::chrono::steady_clock::now();
+  TrainerResult r = run_stage0(config, std::move(data), progress);
+  return run_stages(std::move(r), start, progress);
 }
 
 }  // namespace trainer

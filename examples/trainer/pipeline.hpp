@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "trainer/data_scene.hpp"
 #include "trainer/dataset.hpp"
 #include "trainer/evaluate.hpp"
 #include "trainer/gaussians.hpp"
@@ -36,8 +37,15 @@ struct TrainerConfig {
 TrainerConfig default_config(bool quick = false);
 
 // Fills empty InitOptions frame lists from the frame count: static Gaussians from 4 frames
-// spread over the training orbit, dynamic ones from 8 reference frames.
+// spread over the training orbit, dynamic ones from 8 reference frames. With `has_mask` ([T],
+// a scene from disk) the frames are spread over the frames that have a mask.
 void resolve_frames(TrainerConfig& config);
+void resolve_frames(TrainerConfig& config, int frames, const std::vector<std::uint8_t>& has_mask);
+
+// Multiplies every length of the configuration that is in metres (node unit, Huber widths,
+// confidence epsilon, position learning rates, prune scale) by `factor`: the scene's extent over
+// kReferenceExtent for a scene from disk (data_scene.hpp).
+void scale_lengths(TrainerConfig& config, double factor);
 
 struct TrainerResult {
   Dataset data;
@@ -51,15 +59,31 @@ struct TrainerResult {
   Evaluation evaluation;       // after stage 2
   std::vector<std::vector<Image>> renders;  // [test views + 1][T], the training view last
   double seconds_dataset = 0, seconds_stage0 = 0, seconds_total = 0;
+
+  // The configuration the stages ran with (frame lists resolved; lengths scaled for a scene from
+  // disk by length_factor = extent / kReferenceExtent, 1 for the procedural scene).
+  TrainerConfig config;
+  double length_factor = 1.0;
+  // A scene from disk: the validation frames' scores and renders (evaluation/renders above stay
+  // empty; there is no ground truth to track against).
+  DataEvaluation data_evaluation;
+  std::vector<Image> eval_renders;
 };
 
 // The dataset and stage 0 only (lifting, node selection, graph, initial rotations): fills
 // data, lifted, nodes (the stage-1 starting point), tracks_lifted, seconds_dataset and
 // seconds_stage0 of the result; run_trainer starts with it. Throws like run_trainer.
 TrainerResult run_stage0(const TrainerConfig& config, const Progress& progress);
+// The same on a given dataset (a scene from disk: dataset_from_dycheck). For a dataset without
+// truth the scene extent is measured on the lifted object tracks (lifted_extent) and the
+// configuration's lengths are scaled by extent / kReferenceExtent.
+TrainerResult run_stage0(const TrainerConfig& config, Dataset data, const Progress& progress);
 
 // Runs everything. Throws std::invalid_argument on a bad configuration (the dataset's
 // validation), std::runtime_error if the optimisation fails.
 TrainerResult run_trainer(const TrainerConfig& config, const Progress& progress);
+// The same on a given dataset; a dataset without truth is evaluated on its validation frames
+// (evaluate_frames) instead of the procedural test views.
+TrainerResult run_trainer(const TrainerConfig& config, Dataset data, const Progress& progress);
 
 }  // namespace trainer

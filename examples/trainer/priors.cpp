@@ -359,8 +359,16 @@ Priors make_priors(const Scene& scene, const std::vector<RenderOutput>& train, c
 }
 
 void sample_features(const Priors& p, int t, double u, double v, double* out) {
-  const int W = p.width, H = p.height, C = p.feature_dim;
-  const double gx = std::clamp(u - 0.5, 0.0, W - 1.0), gy = std::clamp(v - 0.5, 0.0, H - 1.0);
+  const int C = p.feature_dim;
+  if (!p.has_features.empty() && !p.has_features[sz(t)]) {
+    std::fill(out, out + C, 0.0);
+    return;
+  }
+  // Grid coordinates of the pixel position: cell centres at ((b + 0.5) W/w, (a + 0.5) H/h).
+  const int W = p.feature_width > 0 ? p.feature_width : p.width;
+  const int H = p.feature_height > 0 ? p.feature_height : p.height;
+  const double gu = W == p.width ? u : u * W / p.width, gv = H == p.height ? v : v * H / p.height;
+  const double gx = std::clamp(gu - 0.5, 0.0, W - 1.0), gy = std::clamp(gv - 0.5, 0.0, H - 1.0);
   const int x0 = std::min(static_cast<int>(gx), W - 1), y0 = std::min(static_cast<int>(gy), H - 1);
   const int x1 = std::min(x0 + 1, W - 1), y1 = std::min(y0 + 1, H - 1);
   const double ax = gx - x0, ay = gy - y0;
@@ -404,9 +412,14 @@ LiftedTracks lift_tracks(const Scene& scene, const Priors& p, const LiftOptions&
   for (int i = 0; i < N0; ++i) {
     if (lifted_count[sz(i)] < options.min_visible_frames) continue;
     if (options.objects_only) {
+      // The query pixel decides (its true position where known: the query is given, not
+      // tracked). A query frame without a mask (a scene from disk) cannot tell: dropped.
       const int q = tr.query_frame[sz(i)];
+      if (!p.has_mask.empty() && !p.has_mask[sz(q)]) continue;
       const std::size_t s = sz(q) * N0 + i;
-      const int x = static_cast<int>(tr.uv_true[s * 2]), y = static_cast<int>(tr.uv_true[s * 2 + 1]);
+      const std::vector<double>& quv = tr.uv_true.empty() ? tr.uv : tr.uv_true;
+      const int x = std::clamp(static_cast<int>(quv[s * 2]), 0, W - 1);
+      const int y = std::clamp(static_cast<int>(quv[s * 2 + 1]), 0, H - 1);
       if (!p.object_mask[(sz(q) * H + y) * W + x]) continue;
     }
     out.track.push_back(i);
@@ -417,13 +430,18 @@ LiftedTracks lift_tracks(const Scene& scene, const Priors& p, const LiftOptions&
   out.feature_samples.assign(sz(T) * N * C, 0.0);
   out.positions_true.assign(sz(T) * N * 3, 0.0);
   out.rotations_true.assign(sz(T) * N * 4, 0.0);
+  const bool truth = !tr.positions_true.empty();  // a scene from disk has none: zeros
   for (int j = 0; j < N; ++j) {
     const int i = out.track[sz(j)];
-    out.body.push_back(tr.body[sz(i)]);
+    out.body.push_back(truth ? tr.body[sz(i)] : -1);
     for (int t = 0; t < T; ++t) {
       const std::size_t s = sz(t) * N0 + i, d = sz(t) * N + j;
-      for (int c = 0; c < 3; ++c) out.positions_true[d * 3 + c] = tr.positions_true[s * 3 + c];
-      for (int c = 0; c < 4; ++c) out.rotations_true[d * 4 + c] = tr.rotations_true[s * 4 + c];
+      if (truth) {
+        for (int c = 0; c < 3; ++c) out.positions_true[d * 3 + c] = tr.positions_true[s * 3 + c];
+        for (int c = 0; c < 4; ++c) out.rotations_true[d * 4 + c] = tr.rotations_true[s * 4 + c];
+      } else {
+        out.rotations_true[d * 4] = 1.0;
+      }
       if (!vis[s]) continue;
       out.visible[d] = 1;
       for (int c = 0; c < 3; ++c) out.positions[d * 3 + c] = pos[s * 3 + c];

@@ -89,8 +89,15 @@ struct Priors {
   int frames = 0, width = 0, height = 0, feature_dim = 0;
   Tracks tracks;
   std::vector<float> depth;               // [T][H][W] metres (z), 0 = no depth
-  std::vector<float> features;            // [T][H][W][C], unit norm
+  // Feature maps on a grid of feature_width x feature_height cells per frame, [T][h][w][C]; cell
+  // (a, b) covers pixels [b W/w, (b+1) W/w) x [a H/h, (a+1) H/h) (docs/data.md section 2). 0 means
+  // one cell per pixel (the procedural priors: [T][H][W][C], unit norm).
+  int feature_width = 0, feature_height = 0;
+  std::vector<float> features;
   std::vector<std::uint8_t> object_mask;  // [T][H][W]
+  // [T] 0 where a frame has no mask / no feature map (a scene from disk may lack them; those
+  // slices are zero). Empty: every frame has both.
+  std::vector<std::uint8_t> has_mask, has_features;
   std::vector<double> body_embedding;     // [bodies][C] clean embedding of each body
   std::vector<double> void_embedding;     // [C] where nothing is hit
 };
@@ -146,8 +153,8 @@ struct LiftedTracks {
 
 LiftedTracks lift_tracks(const Scene& scene, const Priors& priors, const LiftOptions& options = {});
 
-// Feature map sample at a continuous pixel position (bilinear between pixel centres, clamped at
-// the border), renormalised; writes C values.
+// Feature map sample at a continuous pixel position (bilinear between cell centres, clamped at
+// the border), renormalised; writes C values (zeros where the frame has no feature map).
 void sample_features(const Priors& priors, int t, double u, double v, double* out);
 
 // Summary statistics of the reported tracks over the tracked samples (the query sample of each

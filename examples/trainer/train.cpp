@@ -8,10 +8,18 @@
 // output folder that cannot be written: one line on stderr and exit code 2, before any work.
 // A failure during training: one line on stderr and exit code 1.
 //
+// --data SCENE trains on a scene on disk in the Dycheck iPhone layout plus priors (docs/data.md):
+// OUT/renders/<frame>.png for every validation frame, OUT/metrics.json with Dycheck's mPSNR and
+// mSSIM, and with --track-queries Q.json OUT/tracks3d.npy [M][T][3]. A missing or inconsistent
+// file: exit 2 with one line naming it, before any training. --export-dycheck DIR writes the
+// procedural scene in that layout (plus queries.json and queries_tracks3d.npy, the true tracks).
+//
 // --export-case DIR stops after stage 0 (lifting, node selection, graph, initial rotations) and
 // writes stage 1's problem as .npy files and case.json into DIR instead of training
 // (docs/trainer.md, "Exporting the stage-1 problem"; examples/torch/fit_nodes.py reads it).
 #include <array>
+#include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <exception>
@@ -22,9 +30,14 @@
 #include <string>
 #include <vector>
 
+#include <sys/resource.h>
+
 #include "json_line.hpp"
 #include "npy.hpp"
+#include "trainer/data_scene.hpp"
+#include "trainer/dycheck.hpp"
 #include "trainer/flags.hpp"
+#include "trainer/image_io.hpp"
 #include "trainer/pictures.hpp"
 #include "trainer/pipeline.hpp"
 
@@ -55,6 +68,12 @@ std::vector<cli::FlagSpec> flags() {
           {"w-lrm", "", "weight of the LRM term (default 0.1)"},
           {"export-case", "", "write the stage-1 problem (lifted node tracks, visibility, ground truth, rotations, "
                               "graph: .npy + case.json) into this folder and exit without training"},
+          {"data", "", "train on this scene folder (Dycheck iPhone layout plus priors/, docs/data.md) instead of "
+                       "the generated scene"},
+          {"track-queries", "", "with --data: query pixels (Q.json) whose 3D tracks go to OUT/tracks3d.npy"},
+          {"track-truth", "", "with --track-queries: true tracks [M][T][3] (.npy) to report the 3D EPE against"},
+          {"export-dycheck", "", "write the generated scene in the Dycheck layout (docs/data.md) into this folder, "
+                                 "with queries.json and their true tracks queries_tracks3d.npy, and exit"},
           {"no-pictures", "", "skip the PNG output", true},
           {"quiet", "", "no progress lines", true},
           {"help", "", "print this help", true}};
@@ -149,12 +168,124 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
   return line;
 }
 
+
+double peak_memory_mib() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return static_cast<double>(u.ru_maxrss) / 1024.0;  // Linux: KiB
+}
+
+// --data: trains on a scene from disk and writes renders, tracks3d.npy and metrics.json.
+int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double seconds_read,
+             const trainer::TrackQueries* queries, const std::vector<float>* truth, const fs::path& out,
+             bool quiet) {
+  const trainer::Progress progress(stderr, quiet);
+  progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", scene " + data.source +
+                             ", output " + out.string());
+  const trainer::TrainerResult r = trainer::run_trainer(cfg, std::move(data), progress);
+  const auto t0 = std::chrono::steady_clock::now();
+  fs::create_directories(out / "renders");
+  for (std::size_t v = 0; v < r.eval_renders.size(); ++v)
+    trainer::write_png((out / "renders" / (r.data.eval[v].name + ".png")).string(), r.eval_renders[v]);
+  cli::JsonLine j;
+  j.add("program", "smg_trainer")
+      .add("scene", r.data.source)
+      .add("variant", trainer::to_string(cfg.variant.variant))
+      .add("T", r.data.scene.frames())
+      .add("width", r.data.scene.width())
+      .add("height", r.data.scene.height())
+      .add("threads", cfg.threads > 0 ? cfg.threads : smg::num_threads());
+  const trainer::DataEvaluation& e = r.data_evaluation;
+  j.add("val_frames", static_cast<long long>(e.frames.size()))
+      .add("mpsnr", e.mean.mpsnr)
+      .add("mssim", e.mean.mssim)
+      .add("mssim_covisible", e.mean.mssim_covisible)
+      .add("psnr", e.mean.psnr)
+      .add("ssim", e.mean.ssim);
+  std::string frames = "[";
+  for (const trainer::FrameScore& f : e.frames) {
+    cli::JsonLine fj;
+    fj.add("frame", f.name).add("mpsnr", f.mpsnr).add("mssim", f.mssim).add("mssim_covisible", f.mssim_covisible)
+        .add("psnr", f.psnr).add("ssim", f.ssim);
+    frames += (frames.size() > 1 ? "," : "") + fj.str();
+  }
+  j.add_raw("per_frame", frames + "]");
+  if (queries) {
+    const std::vector<float> tracks = trainer::carry_queries(*queries, r.data, r.nodes, r.model);
+    npy::write((out / "tracks3d.npy").string(), tracks.data(),
+               {queries->count(), r.data.scene.frames(), 3});
+    j.add("queries", queries->count());
+    if (truth) {
+      const trainer::QueryTrackError te = trainer::query_track_error(tracks, *truth);
+      j.add("epe", te.epe).add("delta_5cm", te.within_5cm).add("delta_10cm", te.within_10cm);
+      progress.line("eval", trainer::format("%d query tracks: EPE %.4f m, within 5 cm %.3f, within 10 cm %.3f",
+                                            queries->count(), te.epe, te.within_5cm, te.within_10cm));
+    }
+  }
+  j.add("extent", r.data.scene.extent)
+      .add("length_factor", r.length_factor)
+      .add("unit", r.nodes.unit)
+      .add("lifted_tracks", r.lifted.count)
+      .add("nodes", r.nodes.count)
+      .add("edges", static_cast<long long>(r.nodes.graph.stats.edges))
+      .add("gate_removed_edges", static_cast<long long>(r.nodes.graph.stats.gate_removed_edges))
+      .add("gaussians", r.model.count())
+      .add("gaussians_static", r.model.fixed)
+      .add("gaussians_dynamic", r.model.dynamic())
+      .add("pruned", r.stage2.pruned)
+      .add("stage1_iterations", r.stage1.iterations)
+      .add("stage2_iterations", r.stage2.iterations)
+      .add("seconds_read", seconds_read)
+      .add("seconds_stage0", r.seconds_stage0)
+      .add("seconds_stage1", r.stage1.seconds)
+      .add("seconds_stage2", r.stage2.seconds)
+      .add("seconds_eval", e.seconds)
+      .add("seconds_write", trainer::seconds_since(t0))
+      .add("seconds_total", seconds_read + r.seconds_total + trainer::seconds_since(t0))
+      .add("peak_memory_mib", peak_memory_mib())
+      .add("out", out.string());
+  const std::string line = j.str();
+  {
+    std::ofstream f(out / "metrics.json");
+    f << line << "\n";
+    if (!f) throw std::runtime_error("cannot write " + (out / "metrics.json").string());
+  }
+  progress.line("done", std::to_string(r.eval_renders.size()) + " renders and metrics.json in " + out.string() + "/");
+  std::cout << line << std::endl;
+  return 0;
+}
+
+// --export-dycheck: the generated scene in the Dycheck layout, with 3D query tracks.
+int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, bool quiet) {
+  const trainer::Progress progress(stderr, quiet);
+  const auto t0 = std::chrono::steady_clock::now();
+  const trainer::Dataset d = trainer::make_dataset(cfg.dataset, smg::ParallelOptions{cfg.threads, 0});
+  trainer::write_dycheck(dir.string(), trainer::to_dycheck(d));
+  trainer::TrackQueries q;
+  std::vector<float> truth;
+  trainer::export_queries(d, 256, &q, &truth);
+  trainer::write_track_queries((dir / "queries.json").string(), q);
+  npy::write((dir / "queries_tracks3d.npy").string(), truth.data(), {q.count(), d.scene.frames(), 3});
+  progress.line("done", trainer::format("scene seed %llu (T=%d %dx%d, %d tracks, %d queries) in %s/ (%.1fs)",
+                                        static_cast<unsigned long long>(cfg.dataset.scene.seed), d.scene.frames(),
+                                        d.scene.width(), d.scene.height(), d.priors.tracks.count, q.count(),
+                                        dir.string().c_str(), trainer::seconds_since(t0)));
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   trainer::TrainerConfig cfg;
-  fs::path out, export_dir;
+  fs::path out, export_dir, dycheck_dir;
   bool pictures = true, quiet = false;
+  // --data: the scene, read and validated before anything is trained.
+  trainer::Dataset data;
+  bool have_data = false;
+  double seconds_read = 0;
+  trainer::TrackQueries queries;
+  std::vector<float> truth;
+  bool have_queries = false, have_truth = false;
   try {
     cli::Args args(flags());
     if (!trainer::flags::parse(args, argc, argv, "smg_trainer",
@@ -181,13 +312,53 @@ int main(int argc, char** argv) {
     pictures = !args.get_switch("no-pictures");
     quiet = args.get_switch("quiet");
     trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
-    if (args.given("export-case")) {
+    if (args.given("data")) {
+      for (const char* f : {"frames", "width", "height", "tracks", "seed", "export-case", "export-dycheck"})
+        if (args.given(f)) throw cli::UsageError(std::string("--") + f + " cannot be used with --data");
+    } else {
+      for (const char* f : {"track-queries", "track-truth"})
+        if (args.given(f)) throw cli::UsageError(std::string("--") + f + " needs --data");
+    }
+    if (args.given("track-truth") && !args.given("track-queries"))
+      throw cli::UsageError("--track-truth needs --track-queries");
+    if (args.given("export-dycheck")) {
+      dycheck_dir = args.get("export-dycheck");
+      if (dycheck_dir.empty()) throw cli::UsageError("--export-dycheck needs a folder");
+      cli::ensure_writable_dir(dycheck_dir);
+    } else if (args.given("export-case")) {
       export_dir = args.get("export-case");
       if (export_dir.empty()) throw cli::UsageError("--export-case needs a folder");
       cli::ensure_writable_dir(export_dir);
     } else {
       out = args.get("out");
       cli::ensure_writable_dir(out);
+    }
+    if (args.given("data")) {
+      // Every file is validated here: a bad scene exits 2 with one line naming the file.
+      const auto t0 = std::chrono::steady_clock::now();
+      if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
+      data = trainer::dataset_from_dycheck(trainer::read_dycheck(args.get("data")));
+      have_data = true;
+      if (args.given("track-queries")) {
+        queries = trainer::read_track_queries(args.get("track-queries"), data);
+        have_queries = true;
+      }
+      if (args.given("track-truth")) {
+        const std::string path = args.get("track-truth");
+        try {
+          const npy::Array a = npy::read(path);
+          const std::vector<std::int64_t> want{queries.count(), data.scene.frames(), 3};
+          if (a.shape != want)
+            throw npy::Error("shape " + npy::shape_string(a.shape) + ", expected " + npy::shape_string(want));
+          truth = a.as<float>(path);
+        } catch (const npy::Error& e) {
+          throw trainer::DataError(path + ": " + e.what());
+        }
+        for (float v : truth)
+          if (!std::isfinite(v)) throw trainer::DataError(path + ": not finite");
+        have_truth = true;
+      }
+      seconds_read = trainer::seconds_since(t0);
     }
   } catch (const std::exception& e) {
     std::cerr << "smg_trainer: error: " << e.what() << "\n";
@@ -196,6 +367,10 @@ int main(int argc, char** argv) {
 
   try {
     if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
+    if (have_data)
+      return run_data(cfg, std::move(data), seconds_read, have_queries ? &queries : nullptr,
+                      have_truth ? &truth : nullptr, out, quiet);
+    if (!dycheck_dir.empty()) return export_dycheck(cfg, dycheck_dir, quiet);
     const trainer::Progress progress(stderr, quiet);
     if (!export_dir.empty()) {
       progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", seed " +
