@@ -2,13 +2,15 @@
 //
 // Part of the examples, not the library: smg itself works on views over caller memory; this is
 // how smg_cli and the example programs get such memory from NumPy files.
-// Supported: little-endian float32/float64/int32/int64/uint8/bool, C order. Everything else
-// (big-endian, Fortran order, object arrays, truncated or over-long files, bad headers) is an
-// npy::Error whose message names the file and the problem.
+// Supported: little-endian float16 (read only, converted to float)/float32/float64/int32/int64/
+// uint8/bool, C order. Everything else (big-endian, Fortran order, object arrays, truncated or
+// over-long files, bad headers) is an npy::Error whose message names the file and the problem.
+// parse() reads an .npy image already in memory (a member of an .npz archive).
 #pragma once
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -31,10 +33,11 @@ class Error : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-enum class DType { f32, f64, i32, i64, u8, b1 };
+enum class DType { f16, f32, f64, i32, i64, u8, b1 };
 
 inline const char* dtype_name(DType d) {
   switch (d) {
+    case DType::f16: return "float16";
     case DType::f32: return "float32";
     case DType::f64: return "float64";
     case DType::i32: return "int32";
@@ -46,13 +49,14 @@ inline const char* dtype_name(DType d) {
 }
 inline std::size_t dtype_size(DType d) {
   switch (d) {
+    case DType::f16: return 2;
     case DType::f32: case DType::i32: return 4;
     case DType::f64: case DType::i64: return 8;
     case DType::u8: case DType::b1: return 1;
   }
   return 0;
 }
-inline bool is_float(DType d) { return d == DType::f32 || d == DType::f64; }
+inline bool is_float(DType d) { return d == DType::f16 || d == DType::f32 || d == DType::f64; }
 inline bool is_integer(DType d) { return d == DType::i32 || d == DType::i64; }
 inline bool is_boolish(DType d) { return d == DType::u8 || d == DType::b1; }
 
@@ -63,6 +67,16 @@ template <> constexpr DType dtype_of<std::int32_t>() { return DType::i32; }
 template <> constexpr DType dtype_of<std::int64_t>() { return DType::i64; }
 template <> constexpr DType dtype_of<std::uint8_t>() { return DType::u8; }
 template <> constexpr DType dtype_of<bool>() { return DType::b1; }
+
+// IEEE 754 binary16 (bit pattern) to float, exactly (every half value is a float).
+inline float half_to_float(std::uint16_t h) {
+  const unsigned exponent = (h >> 10) & 0x1fu, mantissa = h & 0x3ffu;
+  float v;
+  if (exponent == 0) v = std::ldexp(static_cast<float>(mantissa), -24);  // zero, subnormal
+  else if (exponent == 31) v = mantissa ? std::numeric_limits<float>::quiet_NaN() : std::numeric_limits<float>::infinity();
+  else v = std::ldexp(static_cast<float>(mantissa | 0x400u), static_cast<int>(exponent) - 25);
+  return (h & 0x8000u) ? -v : v;
+}
 
 inline std::string shape_string(const std::vector<std::int64_t>& shape) {
   std::ostringstream s;
@@ -95,6 +109,12 @@ struct Array {
     const unsigned char* p = bytes.data();
     for (std::size_t k = 0; k < out.size(); ++k) {
       switch (dtype) {
+        case DType::f16: {
+          std::uint16_t v;
+          std::memcpy(&v, p + 2 * k, 2);
+          out[k] = static_cast<T>(half_to_float(v));
+          break;
+        }
         case DType::f32: { float v; std::memcpy(&v, p + 4 * k, 4); out[k] = static_cast<T>(v); break; }
         case DType::f64: { double v; std::memcpy(&v, p + 8 * k, 8); out[k] = static_cast<T>(v); break; }
         case DType::i32: {
@@ -188,6 +208,7 @@ inline DType parse_descr(const std::string& v, const std::string& path) {
   if (v.size() < 3 || (v.front() != '\'' && v.front() != '"'))
     throw Error(path + ": corrupt header (descr " + v + ")");
   const std::string d = v.substr(1, v.size() - 2);
+  if (d == "<f2") return DType::f16;
   if (d == "<f4") return DType::f32;
   if (d == "<f8") return DType::f64;
   if (d == "<i4") return DType::i32;
@@ -197,7 +218,7 @@ inline DType parse_descr(const std::string& v, const std::string& path) {
   if (!d.empty() && d[0] == '>')
     throw Error(path + ": big-endian dtype " + d + " is not supported (use little-endian)");
   throw Error(path + ": unsupported dtype " + d +
-              " (supported: float32, float64, int32, int64, uint8, bool)");
+              " (supported: float16, float32, float64, int32, int64, uint8, bool)");
 }
 inline std::vector<std::int64_t> parse_shape(const std::string& v, const std::string& path) {
   if (v.size() < 2 || v.front() != '(' || v.back() != ')')
@@ -216,6 +237,21 @@ inline std::vector<std::int64_t> parse_shape(const std::string& v, const std::st
     shape.push_back(std::stoll(item));
   }
   return shape;
+}
+// dtype and shape from the header dict text (C order required). Throws Error("<path>: ...").
+inline void parse_header_dict(const std::string& header, const std::string& path, Array& a) {
+  if (header.find('{') == std::string::npos || header.find('}') == std::string::npos)
+    throw Error(path + ": corrupt header (no dict)");
+  a.dtype = parse_descr(dict_value(header, "descr", path), path);
+  const std::string fo = dict_value(header, "fortran_order", path);
+  if (fo == "True") throw Error(path + ": Fortran-order arrays are not supported (save C-order)");
+  if (fo != "False") throw Error(path + ": corrupt header (fortran_order " + fo + ")");
+  a.shape = parse_shape(dict_value(header, "shape", path), path);
+}
+inline void check_bool_bytes(const Array& a, const std::string& path) {
+  if (a.dtype == DType::b1)
+    for (auto c : a.bytes)
+      if (c > 1) throw Error(path + ": corrupt bool data (byte value " + std::to_string(c) + ")");
 }
 }  // namespace detail
 
@@ -258,15 +294,8 @@ inline Array read(const std::string& path, std::uint64_t max_bytes = 0) {
   if (preamble + header_len > file_size) throw Error(path + ": truncated header");
   std::string header(header_len, '\0');
   if (!f.read(header.data(), header_len)) throw Error(path + ": truncated header");
-  if (header.find('{') == std::string::npos || header.find('}') == std::string::npos)
-    throw Error(path + ": corrupt header (no dict)");
-
   Array a;
-  a.dtype = detail::parse_descr(detail::dict_value(header, "descr", path), path);
-  const std::string fo = detail::dict_value(header, "fortran_order", path);
-  if (fo == "True") throw Error(path + ": Fortran-order arrays are not supported (save C-order)");
-  if (fo != "False") throw Error(path + ": corrupt header (fortran_order " + fo + ")");
-  a.shape = detail::parse_shape(detail::dict_value(header, "shape", path), path);
+  detail::parse_header_dict(header, path, a);
 
   const std::int64_t count = detail::checked_count(a.shape, dtype_size(a.dtype), path);
   const std::uint64_t nbytes = static_cast<std::uint64_t>(count) * dtype_size(a.dtype);
@@ -283,9 +312,44 @@ inline Array read(const std::string& path, std::uint64_t max_bytes = 0) {
   a.bytes.resize(static_cast<std::size_t>(nbytes));
   if (nbytes > 0 && !f.read(reinterpret_cast<char*>(a.bytes.data()), static_cast<std::streamsize>(nbytes)))
     throw Error(path + ": read error");
-  if (a.dtype == DType::b1)
-    for (auto c : a.bytes)
-      if (c > 1) throw Error(path + ": corrupt bool data (byte value " + std::to_string(c) + ")");
+  detail::check_bool_bytes(a, path);
+  return a;
+}
+
+// Parses a whole .npy image held in memory (`size` bytes at `data`, e.g. an .npz member), with
+// the same checks as read(); messages are "<what>: <problem>".
+inline Array parse(const unsigned char* data, std::size_t size, const std::string& what) {
+  if (!detail::host_is_little_endian()) throw Error(what + ": this reader needs a little-endian host");
+  if (size < 10) throw Error(what + ": truncated (no npy preamble)");
+  if (std::memcmp(data, "\x93NUMPY", 6) != 0) throw Error(what + ": not an .npy file (bad magic)");
+  const int major = data[6];
+  std::uint64_t header_len = 0, preamble = 0;
+  if (major == 1) {
+    header_len = data[8] | (data[9] << 8);
+    preamble = 10;
+  } else if (major == 2 || major == 3) {
+    if (size < 12) throw Error(what + ": truncated header");
+    header_len = data[8] | (data[9] << 8) | (data[10] << 16) | (static_cast<std::uint64_t>(data[11]) << 24);
+    preamble = 12;
+  } else {
+    throw Error(what + ": unsupported npy version " + std::to_string(major));
+  }
+  if (preamble + header_len > size) throw Error(what + ": truncated header");
+  const std::string header(reinterpret_cast<const char*>(data) + preamble, static_cast<std::size_t>(header_len));
+  Array a;
+  detail::parse_header_dict(header, what, a);
+  const std::int64_t count = detail::checked_count(a.shape, dtype_size(a.dtype), what);
+  const std::uint64_t nbytes = static_cast<std::uint64_t>(count) * dtype_size(a.dtype);
+  const std::uint64_t available = size - (preamble + header_len);
+  if (available < nbytes)
+    throw Error(what + ": truncated data (" + std::to_string(available) + " of " + std::to_string(nbytes) +
+                " bytes for shape " + shape_string(a.shape) + ")");
+  if (available > nbytes)
+    throw Error(what + ": corrupt file (" + std::to_string(available - nbytes) + " bytes after the data of shape " +
+                shape_string(a.shape) + ")");
+  const unsigned char* begin = data + preamble + header_len;
+  a.bytes.assign(begin, begin + nbytes);
+  detail::check_bool_bytes(a, what);
   return a;
 }
 
@@ -335,6 +399,16 @@ void write(const std::string& path, const T* data, const std::vector<std::int64_
     f.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(count * static_cast<std::int64_t>(sizeof(T))));
   f.flush();
   if (!f) throw Error(path + ": write error");
+}
+
+// The complete .npy file (version 1.0, C order) for `count` = product(shape) values at `data`,
+// as bytes in memory (an .npz member). T as for write.
+template <class T>
+std::string to_bytes(const T* data, const std::vector<std::int64_t>& shape) {
+  std::int64_t count = 0;
+  std::string out = detail::header_bytes<T>("array", shape, count);
+  if (count > 0) out.append(reinterpret_cast<const char*>(data), static_cast<std::size_t>(count) * sizeof(T));
+  return out;
 }
 
 // Like write, but creates a new file: open(O_CREAT | O_EXCL | O_NOFOLLOW), so an existing file

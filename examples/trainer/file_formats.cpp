@@ -1,0 +1,254 @@
+// examples/trainer/file_formats.cpp — whole files, PNG decoding, .npz archives.
+//
+// The one translation unit of the trainer library that compiles stb_image (Debian's
+// libstb-dev), static, for PNG decoding and for its raw-deflate decoder
+// (stbi_zlib_decode_noheader_buffer), which reads the compressed members of an .npz archive
+// without another dependency. ZIP structures: PKWARE APPNOTE.TXT sections 4.3 and 4.5.
+#include "trainer/file_formats.hpp"
+
+#if !__has_include(<stb/stb_image.h>)
+#error "the example trainer needs stb_image.h (Debian: apt-get install libstb-dev)"
+#endif
+
+#define STB_IMAGE_IMPLEMENTATION
+#define STB_IMAGE_STATIC
+#define STBI_ONLY_PNG
+#include <stb/stb_image.h>
+
+#include <array>
+#include <climits>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <stdexcept>
+
+namespace trainer::files {
+
+std::vector<unsigned char> read_bytes(const std::string& path, const std::string& label) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st)) throw std::runtime_error(label + ": file is missing");
+  if (!fs::is_regular_file(st)) throw std::runtime_error(label + ": not a regular file");
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw std::runtime_error(label + ": cannot open");
+  std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  if (f.bad()) throw std::runtime_error(label + ": cannot read");
+  return bytes;
+}
+
+Png8 decode_png(const std::vector<unsigned char>& bytes, const std::string& label) {
+  if (bytes.size() > static_cast<std::size_t>(INT_MAX)) throw std::runtime_error(label + ": file too large");
+  const auto* data = reinterpret_cast<const stbi_uc*>(bytes.data());
+  const int len = static_cast<int>(bytes.size());
+  int w = 0, h = 0, c = 0;
+  if (!stbi_info_from_memory(data, len, &w, &h, &c))
+    throw std::runtime_error(label + ": not a PNG image (" + stbi_failure_reason() + ")");
+  if (stbi_is_16_bit_from_memory(data, len)) throw std::runtime_error(label + ": 16-bit PNG (8-bit expected)");
+  std::unique_ptr<stbi_uc, void (*)(void*)> pixels(stbi_load_from_memory(data, len, &w, &h, &c, 0), stbi_image_free);
+  if (!pixels) throw std::runtime_error(label + ": corrupt PNG (" + stbi_failure_reason() + ")");
+  Png8 out;
+  out.width = w;
+  out.height = h;
+  out.channels = c;
+  out.pixels.assign(pixels.get(), pixels.get() + static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * static_cast<std::size_t>(c));
+  return out;
+}
+
+std::uint32_t crc32(const unsigned char* data, std::size_t n, std::uint32_t crc) {
+  static const std::array<std::uint32_t, 256> table = [] {
+    std::array<std::uint32_t, 256> t{};
+    for (std::uint32_t i = 0; i < 256; ++i) {
+      std::uint32_t c = i;
+      for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+      t[i] = c;
+    }
+    return t;
+  }();
+  crc = ~crc;
+  for (std::size_t i = 0; i < n; ++i) crc = table[(crc ^ data[i]) & 0xFFu] ^ (crc >> 8);
+  return ~crc;
+}
+
+namespace {
+
+// Little-endian reads with bounds checks against the whole archive.
+class Reader {
+ public:
+  Reader(const std::vector<unsigned char>& b, const std::string& label) : b_(b), label_(label) {}
+  [[noreturn]] void fail(const std::string& what) const { throw npy::Error(label_ + ": " + what); }
+  void need(std::uint64_t at, std::uint64_t n, const char* what) const {
+    if (at > b_.size() || n > b_.size() - at) fail(std::string("truncated archive (") + what + " past the end)");
+  }
+  std::uint64_t u(std::uint64_t at, int bytes) const {
+    need(at, static_cast<std::uint64_t>(bytes), "field");
+    std::uint64_t v = 0;
+    for (int k = bytes - 1; k >= 0; --k) v = (v << 8) | b_[static_cast<std::size_t>(at) + static_cast<std::size_t>(k)];
+    return v;
+  }
+  std::size_t size() const { return b_.size(); }
+  const unsigned char* at(std::uint64_t p) const { return b_.data() + p; }
+
+ private:
+  const std::vector<unsigned char>& b_;
+  const std::string& label_;
+};
+
+constexpr std::uint32_t kLocalSig = 0x04034b50, kCentralSig = 0x02014b50, kEndSig = 0x06054b50;
+constexpr std::uint32_t kZip64EndSig = 0x06064b50, kZip64LocatorSig = 0x07064b50;
+
+}  // namespace
+
+std::map<std::string, npy::Array> parse_npz(const std::vector<unsigned char>& bytes, const std::string& label) {
+  const Reader r(bytes, label);
+  // End of central directory record: the last signature within 22 + 65535 bytes of the end.
+  if (bytes.size() < 22) r.fail("not an .npz archive (too short for a ZIP file)");
+  std::uint64_t eocd = UINT64_MAX;
+  const std::uint64_t lowest = bytes.size() > 22 + 65535 ? bytes.size() - 22 - 65535 : 0;
+  for (std::uint64_t p = bytes.size() - 22 + 1; p-- > lowest;)
+    if (r.u(p, 4) == kEndSig && p + 22 + r.u(p + 20, 2) == bytes.size()) {
+      eocd = p;
+      break;
+    }
+  if (eocd == UINT64_MAX) {
+    if (bytes.size() >= 4 && r.u(0, 4) == kLocalSig) r.fail("truncated archive (no end of central directory)");
+    r.fail("not an .npz archive (no ZIP end of central directory)");
+  }
+  if (r.u(eocd + 4, 2) != 0 || r.u(eocd + 6, 2) != 0) r.fail("multi-disk archives are not supported");
+  std::uint64_t entries = r.u(eocd + 10, 2), cd_size = r.u(eocd + 12, 4), cd_offset = r.u(eocd + 16, 4);
+  if (entries == 0xFFFF || cd_size == 0xFFFFFFFF || cd_offset == 0xFFFFFFFF) {
+    if (eocd < 20 || r.u(eocd - 20, 4) != kZip64LocatorSig) r.fail("corrupt archive (ZIP64 locator missing)");
+    const std::uint64_t z = r.u(eocd - 20 + 8, 8);
+    if (r.u(z, 4) != kZip64EndSig) r.fail("corrupt archive (bad ZIP64 end of central directory)");
+    entries = r.u(z + 32, 8);
+    cd_size = r.u(z + 40, 8);
+    cd_offset = r.u(z + 48, 8);
+  }
+  r.need(cd_offset, cd_size, "central directory");
+
+  std::map<std::string, npy::Array> out;
+  std::uint64_t p = cd_offset;
+  for (std::uint64_t e = 0; e < entries; ++e) {
+    if (r.u(p, 4) != kCentralSig) r.fail("corrupt archive (bad central directory entry " + std::to_string(e) + ")");
+    const std::uint64_t flags = r.u(p + 8, 2), method = r.u(p + 10, 2), crc = r.u(p + 16, 4);
+    std::uint64_t csize = r.u(p + 20, 4), usize = r.u(p + 24, 4), local = r.u(p + 42, 4);
+    const std::uint64_t name_len = r.u(p + 28, 2), extra_len = r.u(p + 30, 2), comment_len = r.u(p + 32, 2);
+    r.need(p + 46, name_len + extra_len + comment_len, "central directory entry");
+    const std::string name(reinterpret_cast<const char*>(r.at(p + 46)), static_cast<std::size_t>(name_len));
+    // ZIP64 extended information (header 0x0001): the 64-bit values of the fields set to all ones.
+    for (std::uint64_t x = p + 46 + name_len; x + 4 <= p + 46 + name_len + extra_len;) {
+      const std::uint64_t id = r.u(x, 2), len = r.u(x + 2, 2);
+      if (x + 4 + len > p + 46 + name_len + extra_len) r.fail("corrupt archive (extra field of '" + name + "')");
+      if (id == 0x0001) {
+        std::uint64_t q = x + 4;
+        const std::uint64_t end = q + len;
+        auto take = [&](std::uint64_t& field) {
+          if (field != 0xFFFFFFFF) return;
+          if (q + 8 > end) r.fail("corrupt archive (short ZIP64 field of '" + name + "')");
+          field = r.u(q, 8);
+          q += 8;
+        };
+        take(usize);
+        take(csize);
+        take(local);
+      }
+      x += 4 + len;
+    }
+    p += 46 + name_len + extra_len + comment_len;
+
+    const std::string what = label + " member '" + name + "'";
+    if (flags & 1u) r.fail("member '" + name + "' is encrypted");
+    if (method != 0 && method != 8)
+      r.fail("member '" + name + "' uses compression method " + std::to_string(method) + " (only stored and deflate are supported)");
+    if (name.size() < 5 || name.compare(name.size() - 4, 4, ".npy") != 0) r.fail("member '" + name + "' is not an .npy file");
+    const std::string key = name.substr(0, name.size() - 4);
+    if (out.count(key)) r.fail("duplicate member '" + name + "'");
+
+    if (r.u(local, 4) != kLocalSig) r.fail("corrupt archive (bad local header of '" + name + "')");
+    const std::uint64_t data_at = local + 30 + r.u(local + 26, 2) + r.u(local + 28, 2);
+    r.need(data_at, csize, "member data");
+    std::vector<unsigned char> data;
+    if (method == 0) {
+      if (csize != usize) r.fail("corrupt archive (stored member '" + name + "' with different sizes)");
+      data.assign(r.at(data_at), r.at(data_at) + csize);
+    } else {
+      if (csize > static_cast<std::uint64_t>(INT_MAX) || usize > static_cast<std::uint64_t>(INT_MAX))
+        r.fail("member '" + name + "' is too large to decompress (2 GiB)");
+      data.resize(static_cast<std::size_t>(usize));
+      // stb's decoder into a buffer of exactly the recorded size (it fails if the data is longer).
+      const int n = stbi_zlib_decode_noheader_buffer(reinterpret_cast<char*>(data.data()), static_cast<int>(usize),
+                                                     reinterpret_cast<const char*>(r.at(data_at)), static_cast<int>(csize));
+      if (n < 0 || static_cast<std::uint64_t>(n) != usize)
+        r.fail("corrupt deflate data in member '" + name + "'");
+    }
+    if (crc32(data.data(), data.size()) != crc) r.fail("CRC-32 mismatch in member '" + name + "' (corrupt archive)");
+    out.emplace(key, npy::parse(data.data(), data.size(), what));
+  }
+  return out;
+}
+
+namespace {
+void put(std::string& s, std::uint64_t v, int bytes) {
+  for (int k = 0; k < bytes; ++k) s += static_cast<char>((v >> (8 * k)) & 0xFFu);
+}
+}  // namespace
+
+std::string npz_bytes(const std::vector<std::pair<std::string, std::string>>& members) {
+  std::string out, central;
+  for (const auto& [key, data] : members) {
+    const std::string name = key + ".npy";
+    if (data.size() >= 0xFFFFFFFFu || out.size() >= 0xFFFFFFFFu)
+      throw std::runtime_error("npz: member '" + name + "' too large for an archive without ZIP64");
+    const std::uint32_t crc = crc32(reinterpret_cast<const unsigned char*>(data.data()), data.size());
+    const std::uint64_t offset = out.size();
+    // Local file header: version 2.0, no flags, stored, 1980-01-01 00:00.
+    put(out, kLocalSig, 4);
+    put(out, 20, 2);
+    put(out, 0, 2);
+    put(out, 0, 2);
+    put(out, 0, 2);
+    put(out, 0x21, 2);
+    put(out, crc, 4);
+    put(out, data.size(), 4);
+    put(out, data.size(), 4);
+    put(out, name.size(), 2);
+    put(out, 0, 2);
+    out += name;
+    out += data;
+    // Its central directory entry.
+    put(central, kCentralSig, 4);
+    put(central, 20, 2);  // made by: MS-DOS attributes, version 2.0
+    put(central, 20, 2);
+    put(central, 0, 2);
+    put(central, 0, 2);
+    put(central, 0, 2);
+    put(central, 0x21, 2);
+    put(central, crc, 4);
+    put(central, data.size(), 4);
+    put(central, data.size(), 4);
+    put(central, name.size(), 2);
+    put(central, 0, 2);  // extra
+    put(central, 0, 2);  // comment
+    put(central, 0, 2);  // disk
+    put(central, 0, 2);  // internal attributes
+    put(central, 0, 4);  // external attributes
+    put(central, offset, 4);
+    central += name;
+  }
+  if (members.size() >= 0xFFFF || out.size() >= 0xFFFFFFFFu)
+    throw std::runtime_error("npz: archive too large for a ZIP file without ZIP64");
+  const std::uint64_t cd_offset = out.size();
+  out += central;
+  put(out, kEndSig, 4);
+  put(out, 0, 2);
+  put(out, 0, 2);
+  put(out, members.size(), 2);
+  put(out, members.size(), 2);
+  put(out, central.size(), 4);
+  put(out, cd_offset, 4);
+  put(out, 0, 2);
+  return out;
+}
+
+}  // namespace trainer::files
