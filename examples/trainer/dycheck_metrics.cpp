@@ -113,15 +113,23 @@ std::vector<double> dycheck_ssim_map(const Image& a, const Image& b, const std::
     return mask.empty() ? std::uint8_t{1} : mask[static_cast<std::size_t>(y) * W + x];
   };
 
-  // Per pixel: the five filtered quantities z (x, y, x^2, y^2, x y per channel), each times the
-  // mask (convolve2d's z * m).
-  std::vector<double> zm(static_cast<std::size_t>(W) * H * Q);
-  for (int y = 0; y < H; ++y)
+  // Streaming over input rows: pass 1 (x) fills a ring of the last 11 filtered rows, pass 2 (y)
+  // combines them into one output row; memory is O(11 W), not O(H W).
+  const std::size_t rowQ = static_cast<std::size_t>(OW) * Q;
+  std::vector<double> zrow(static_cast<std::size_t>(W) * Q);  // one input row of z * m
+  std::vector<double> ring(rowQ * kSize, 0.0);                  // pass-1 rows y % 11
+  std::vector<std::uint8_t> ring_m(static_cast<std::size_t>(OW) * kSize, 0);
+  const double c1 = (kK1 * kMaxVal) * (kK1 * kMaxVal), c2 = (kK2 * kMaxVal) * (kK2 * kMaxVal);
+  std::vector<double> map(static_cast<std::size_t>(OW) * OH * C);
+  std::vector<double> acc(rowQ);
+  std::vector<int> count(static_cast<std::size_t>(OW));
+  for (int yin = 0; yin < H; ++yin) {
+    // The five quantities z (x, y, x^2, y^2, x y per channel) times the mask: convolve2d's z * m.
     for (int x = 0; x < W; ++x) {
-      const double m = mask_at(x, y);
-      double* z = &zm[(static_cast<std::size_t>(y) * W + x) * Q];
+      const double m = mask_at(x, yin);
+      double* z = &zrow[static_cast<std::size_t>(x) * Q];
       for (int c = 0; c < C; ++c) {
-        const double p = a.at(x, y, c), q = b.at(x, y, c);
+        const double p = a.at(x, yin, c), q = b.at(x, yin, c);
         z[c * kQuantities + 0] = p * m;
         z[c * kQuantities + 1] = q * m;
         z[c * kQuantities + 2] = p * p * m;
@@ -130,44 +138,39 @@ std::vector<double> dycheck_ssim_map(const Image& a, const Image& b, const std::
       }
     }
 
-  // Pass 1 (filt_fn2, filt[None, :]: along x), H x OW. convolve2d returns
-  // jnp.where(m_ != 0, z_ * ones_like(f).sum() / m_, 0) and the new mask (m_ != 0).
-  std::vector<double> h(static_cast<std::size_t>(OW) * H * Q, 0.0);
-  std::vector<std::uint8_t> hm(static_cast<std::size_t>(OW) * H, 0);
-  for (int y = 0; y < H; ++y)
+    // Pass 1 (filt_fn2, filt[None, :]: along x). convolve2d returns
+    // jnp.where(m_ != 0, z_ * ones_like(f).sum() / m_, 0) and the new mask (m_ != 0). As 11
+    // shifted axpys over the row (position x, quantity k at x * Q + k), which vectorise.
+    const auto slot = static_cast<std::size_t>(yin % kSize);
+    double* out = &ring[slot * rowQ];
+    std::uint8_t* out_m = &ring_m[slot * static_cast<std::size_t>(OW)];
+    std::fill(out, out + rowQ, 0.0);
+    for (int j = 0; j < kSize; ++j) {
+      const double fj = f[static_cast<std::size_t>(j)];
+      const double* z = zrow.data() + static_cast<std::size_t>(j) * Q;
+      for (std::size_t i = 0; i < rowQ; ++i) out[i] += fj * z[i];
+    }
     for (int x = 0; x < OW; ++x) {
       int n = 0;
-      for (int j = 0; j < kSize; ++j) n += mask_at(x + j, y);
-      if (n == 0) continue;  // where(m_ != 0, ..., 0): stays 0, mask 0
-      double* out = &h[(static_cast<std::size_t>(y) * OW + x) * Q];
-      for (int j = 0; j < kSize; ++j) {
-        const double fj = f[static_cast<std::size_t>(j)];
-        const double* z = &zm[(static_cast<std::size_t>(y) * W + x + j) * Q];
-        for (std::size_t k = 0; k < Q; ++k) out[k] += fj * z[k];
-      }
-      for (std::size_t k = 0; k < Q; ++k) out[k] = out[k] * kSize / n;
-      hm[static_cast<std::size_t>(y) * OW + x] = 1;
+      for (int j = 0; j < kSize; ++j) n += mask_at(x + j, yin);
+      double* o = out + static_cast<std::size_t>(x) * Q;
+      out_m[x] = n != 0 ? 1 : 0;
+      for (std::size_t k = 0; k < Q; ++k) o[k] = n != 0 ? o[k] * kSize / n : 0.0;  // where(m_ != 0, ..., 0)
     }
+    if (yin < kSize - 1) continue;
 
-  // Pass 2 (filt_fn1, filt[:, None]: along y) on pass 1's values and binarised mask, OH x OW;
-  // then the SSIM formula per channel.
-  const double c1 = (kK1 * kMaxVal) * (kK1 * kMaxVal), c2 = (kK2 * kMaxVal) * (kK2 * kMaxVal);
-  std::vector<double> map(static_cast<std::size_t>(OW) * OH * C);
-  std::vector<double> acc(static_cast<std::size_t>(OW) * Q);
-  std::vector<int> count(static_cast<std::size_t>(OW));
-  for (int y = 0; y < OH; ++y) {
+    // Pass 2 (filt_fn1, filt[:, None]: along y) over pass-1 rows y .. y+10 and their binarised
+    // mask; z * m needs no product as pass 1 left z = 0 where m = 0. Then SSIM per channel.
+    const int y = yin - (kSize - 1);
     std::fill(acc.begin(), acc.end(), 0.0);
     std::fill(count.begin(), count.end(), 0);
     for (int r = 0; r < kSize; ++r) {
       const double fr = f[static_cast<std::size_t>(r)];
-      for (int x = 0; x < OW; ++x) {
-        const std::size_t src = static_cast<std::size_t>(y + r) * OW + x;
-        if (hm[src] == 0) continue;  // z * m with m = 0 (and z is 0 there anyway)
-        ++count[static_cast<std::size_t>(x)];
-        const double* z = &h[src * Q];
-        double* out = &acc[static_cast<std::size_t>(x) * Q];
-        for (std::size_t k = 0; k < Q; ++k) out[k] += fr * z[k];
-      }
+      const auto src = static_cast<std::size_t>((y + r) % kSize);
+      const double* z = &ring[src * rowQ];
+      for (std::size_t i = 0; i < rowQ; ++i) acc[i] += fr * z[i];
+      const std::uint8_t* m = &ring_m[src * static_cast<std::size_t>(OW)];
+      for (int x = 0; x < OW; ++x) count[static_cast<std::size_t>(x)] += m[x];
     }
     for (int x = 0; x < OW; ++x) {
       const int n = count[static_cast<std::size_t>(x)];
