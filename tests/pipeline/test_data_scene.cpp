@@ -181,16 +181,27 @@ TEST_CASE("round trip: a quick run on the exported scene agrees with the in-memo
   const std::vector<float> est = trainer::carry_queries(q, disk.data, disk.nodes, disk.model);
   REQUIRE(est.size() == truth.size());
   const trainer::QueryTrackError err = trainer::query_track_error(est, truth);
-  MESSAGE("query tracks: EPE " << err.epe << " m, within 5 cm " << err.within_5cm);
-  CHECK(err.epe < 0.15);
-  // At the query frame the estimate is the lifted point: within the depth noise of the truth.
-  double at_query = 0;
-  for (int i = 0; i < q.count(); ++i)
-    for (int c = 0; c < 3; ++c) {
-      const std::size_t k = (sz(i) * disk.data.scene.frames()) * 3 + sz(c);
-      at_query = std::max(at_query, double(std::abs(est[k] - truth[k])));
-    }
-  CHECK(at_query < 0.5);
+  // Against the queries held still at their lifted position: carrying them must help.
+  const int T = disk.data.scene.frames(), M = q.count();
+  std::vector<float> still(est.size());
+  for (int i = 0; i < M; ++i)
+    for (int t = 0; t < T; ++t)
+      for (int c = 0; c < 3; ++c) still[(sz(i) * T + t) * 3 + c] = est[sz(i) * T * 3 + c];
+  const trainer::QueryTrackError still_err = trainer::query_track_error(still, truth);
+  MESSAGE("query tracks: EPE " << err.epe << " m (held still: " << still_err.epe << " m), within 5 cm "
+                               << err.within_5cm);
+  CHECK(err.epe < still_err.epe);
+  // At the query frame the estimate is the lifted point: the median error is the depth noise
+  // (flying pixels at object edges, many at this tiny size, make single points far worse).
+  std::vector<double> at_query;
+  for (int i = 0; i < M; ++i) {
+    double d2 = 0;
+    for (int c = 0; c < 3; ++c) d2 += std::pow(double(est[sz(i) * T * 3 + c]) - truth[sz(i) * T * 3 + c], 2);
+    at_query.push_back(std::sqrt(d2));
+  }
+  std::nth_element(at_query.begin(), at_query.begin() + M / 2, at_query.end());
+  MESSAGE("median error at the query frame " << at_query[sz(M / 2)] << " m");
+  CHECK(at_query[sz(M / 2)] < 0.05);
 }
 
 TEST_CASE("query_track_error: EPE and thresholds on a hand example") {
@@ -255,7 +266,7 @@ TEST_CASE("smg_trainer --export-dycheck and --data: renders, tracks3d.npy, metri
     std::string args, message;
   } cases[] = {
       {"--data " + scene.string(), "depth/2x/0_00005.npy"},
-      {"--data /nonexistent_scene_folder", "splits/train.json"},
+      {"--data /nonexistent_scene_folder", "/nonexistent_scene_folder: "},
       {"--data " + scene.string() + " --frames 8", "--frames cannot be used with --data"},
       {"--track-queries q.json", "--track-queries needs --data"},
   };
