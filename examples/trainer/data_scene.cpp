@@ -355,10 +355,11 @@ void export_queries(const Dataset& d, int count, TrackQueries* q, std::vector<fl
   std::vector<int> picked;
   for (int i = 0; i < N; ++i) {
     const int b = tr.body[sz(i)];
-    if (tr.query_frame[sz(i)] != 0 || !tr.visible_true[sz(i)] || b < 0 || !d.scene.bodies[sz(b)].foreground) continue;
+    // Any object track truly visible at frame 0 (its true pixel there is the query).
+    if (!tr.visible_true[sz(i)] || b < 0 || !d.scene.bodies[sz(b)].foreground) continue;
     picked.push_back(i);
   }
-  // Spread the choice over the candidates (they are in query order).
+  // Spread the choice over the candidates (they are in track order).
   std::vector<int> chosen;
   const int M = std::min(count, static_cast<int>(picked.size()));
   for (int k = 0; k < M; ++k) chosen.push_back(picked[sz(k) * picked.size() / sz(M)]);

@@ -28,7 +28,7 @@ namespace trainer {
 
 // The robust extent (metres) of the lifted object tracks measured on the default procedural
 // scene (seed 0) by lifted_extent: the reference that the metre-valued defaults were tuned at.
-constexpr double kReferenceExtent = 1.70;
+constexpr double kReferenceExtent = 1.63;
 
 // Turns a scene read by read_dycheck into the trainer's Dataset (moves the images out of
 // `scene`). Throws DataError when the scene cannot be trained: no training frame with a mask,
@@ -95,9 +95,9 @@ QueryTrackError query_track_error(const std::vector<float>& estimate, const std:
 // and covisibility (make_dataset's defaults).
 DycheckScene to_dycheck(const Dataset& data, int val_gap = 4, int feature_cell = 4);
 
-// Queries for the exported scene with their true 3D tracks: the pixel (true position) at frame 0
-// of up to `count` object tracks queried and visible at frame 0, and their true world positions
-// [M][T][3].
+// Queries for the exported scene with their true 3D tracks: the true pixel at frame 0 of up to
+// `count` object tracks (arm, box, ball) truly visible at frame 0, spread over the tracks, and
+// their true world positions [M][T][3].
 void export_queries(const Dataset& data, int count, TrackQueries* queries, std::vector<float>* truth);
 
 }  // namespace trainer

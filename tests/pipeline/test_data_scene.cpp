@@ -153,8 +153,14 @@ TEST_CASE("a scene from disk: its scale comes from the data (x10 scene -> x10 le
 
 TEST_CASE("round trip: a quick run on the exported scene agrees with the in-memory run") {
   const Exported& e = exported();
-  const trainer::TrainerResult mem = trainer::run_trainer(e.config, trainer::Dataset(e.memory), silent());
   const trainer::TrainerResult disk = trainer::run_trainer(e.config, read_back(e.dir), silent());
+  // The in-memory run with the lengths the disk run measured (at 64x48 flying depth pixels at
+  // object edges widen the measured extent: factor ~1.2 here, ~1.0 at the default 160x120), so
+  // that the comparison isolates what the files change: 8-bit images, float32 tracks, feature
+  // maps on 4x4-pixel cells.
+  trainer::TrainerConfig scaled = e.config;
+  trainer::scale_lengths(scaled, disk.length_factor);
+  const trainer::TrainerResult mem = trainer::run_trainer(scaled, trainer::Dataset(e.memory), silent());
   const trainer::DataEvaluation& de = disk.data_evaluation;
   REQUIRE(de.frames.size() == disk.data.eval.size());
   for (const trainer::FrameScore& f : de.frames) {
@@ -169,9 +175,9 @@ TEST_CASE("round trip: a quick run on the exported scene agrees with the in-memo
                                     << mem.model.count() << " Gaussians; from disk: mPSNR " << de.mean.mpsnr
                                     << " dB, mSSIM " << de.mean.mssim << ", " << disk.nodes.count << " nodes, "
                                     << disk.model.count() << " Gaussians, length factor " << disk.length_factor);
-  CHECK(std::abs(de.mean.mpsnr - mem.evaluation.mean.psnr_masked) < 1.5);
-  CHECK(std::abs(disk.nodes.count - mem.nodes.count) <= std::max(3, mem.nodes.count / 5));
-  CHECK(std::abs(disk.model.count() - mem.model.count()) <= mem.model.count() / 5);
+  CHECK(std::abs(de.mean.mpsnr - mem.evaluation.mean.psnr_masked) < 0.5);
+  CHECK(std::abs(disk.nodes.count - mem.nodes.count) <= std::max(2, mem.nodes.count / 20));
+  CHECK(std::abs(disk.model.count() - mem.model.count()) <= mem.model.count() / 33);
 
   // Query tracks carried by the disk run's nodes against the truth.
   trainer::TrackQueries q;
