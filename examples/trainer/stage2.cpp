@@ -123,13 +123,13 @@ Stage2Result train_gaussians(const Dataset& d, Nodes& nodes, NodeObjective& obje
     a_means.set_lr(log_lerp(o.lr_means, o.lr_means_final, p));
     a_nx.set_lr(log_lerp(o.lr_node_position, o.lr_node_position_final, p));
     a_nq.set_lr(log_lerp(o.lr_node_rotation, o.lr_node_rotation_final, p));
-    a_means.step(m.table.means.data(), g.table.means.data());
-    a_quats.step(m.table.quats.data(), g.table.quats.data());
-    a_scales.step(m.table.log_scales.data(), g.table.log_scales.data());
-    a_opacity.step(m.table.opacity.data(), g.table.opacity.data());
-    a_colors.step(m.table.colors.data(), g.table.colors.data());
-    a_nx.step(nodes.positions.data(), gx.data());
-    if (rotations_free) a_nq.step_rotations(nodes.rotations.data(), gq.data());
+    a_means.step(m.table.means.data(), g.table.means.data(), parallel);
+    a_quats.step(m.table.quats.data(), g.table.quats.data(), parallel);
+    a_scales.step(m.table.log_scales.data(), g.table.log_scales.data(), parallel);
+    a_opacity.step(m.table.opacity.data(), g.table.opacity.data(), parallel);
+    a_colors.step(m.table.colors.data(), g.table.colors.data(), parallel);
+    a_nx.step(nodes.positions.data(), gx.data(), parallel);
+    if (rotations_free) a_nq.step_rotations(nodes.rotations.data(), gq.data(), parallel);
     tm.adam += ms(c_adam, Clock::now());
 
     // Density control.
