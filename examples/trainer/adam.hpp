@@ -10,6 +10,9 @@
 // Moments of a rotation live in its tangent space at the current iterate (the usual
 // approximation of Riemannian Adam without transport; fine for the small steps used here).
 // compact() drops rows (density control) together with their moments.
+//
+// The steps run on smg's deterministic parallel loop: every value's update reads and writes
+// only its own moments (rows, for rotations), so the result is the same for any thread count.
 #pragma once
 
 #include <cmath>
@@ -20,6 +23,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "smg/core/parallel.hpp"
 #include "smg/core/quaternion.hpp"
 #include "smg/core/so3.hpp"
 
@@ -38,25 +42,36 @@ class Adam {
   std::size_t size() const { return m_.size(); }
 
   // x <- x - Adam step, for n = size() values.
-  void step(S* x, const S* grad) {
+  void step(S* x, const S* grad, smg::ParallelOptions parallel = {}) {
     advance();
-    const std::size_t n = m_.size();
-    for (std::size_t k = 0; k < n; ++k) x[k] -= direction(k, grad[k]);
+    const auto n = static_cast<smg::Index>(m_.size());
+    smg::parallel_for(
+        n,
+        [&](smg::Index begin, smg::Index end) {
+          for (auto k = static_cast<std::size_t>(begin); k < static_cast<std::size_t>(end); ++k)
+            x[k] -= direction(k, grad[k]);
+        },
+        parallel);
   }
 
   // Unit quaternions [n][4] (w, x, y, z) with right-tangent gradients [n][3]; size() = 3n.
-  void step_rotations(S* q, const S* grad_tangent) {
+  void step_rotations(S* q, const S* grad_tangent, smg::ParallelOptions parallel = {}) {
     advance();
-    const std::size_t n = m_.size() / 3;
-    for (std::size_t r = 0; r < n; ++r) {
-      Eigen::Matrix<S, 3, 1> s;
-      for (int c = 0; c < 3; ++c) s(c) = direction(3 * r + c, grad_tangent[3 * r + c]);
-      const Eigen::Quaternion<S> cur = smg::from_wxyz(q + 4 * r);
-      const Eigen::Matrix<S, 3, 1> minus = -s;
-      Eigen::Quaternion<S> next = cur * smg::so3::exp(minus);
-      next.normalize();
-      smg::to_wxyz(next, q + 4 * r);
-    }
+    const auto n = static_cast<smg::Index>(m_.size() / 3);
+    smg::parallel_for(
+        n,
+        [&](smg::Index begin, smg::Index end) {
+          for (auto r = static_cast<std::size_t>(begin); r < static_cast<std::size_t>(end); ++r) {
+            Eigen::Matrix<S, 3, 1> s;
+            for (int c = 0; c < 3; ++c) s(c) = direction(3 * r + c, grad_tangent[3 * r + c]);
+            const Eigen::Quaternion<S> cur = smg::from_wxyz(q + 4 * r);
+            const Eigen::Matrix<S, 3, 1> minus = -s;
+            Eigen::Quaternion<S> next = cur * smg::so3::exp(minus);
+            next.normalize();
+            smg::to_wxyz(next, q + 4 * r);
+          }
+        },
+        parallel);
   }
 
   // Keeps the rows (of `width` values) whose keep[row] is nonzero, in order.

@@ -2,16 +2,20 @@
 #include "trainer/gaussians.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <string>
 
+#include "trainer/progress.hpp"
 #include "trainer/util.hpp"
 
 namespace trainer {
 
 namespace {
+
+using Clock = std::chrono::steady_clock;
 
 template <class S>
 void keep_rows(std::vector<S>& v, const std::vector<std::uint8_t>& keep, std::size_t width) {
@@ -212,6 +216,7 @@ template <class S>
 void ModelRenderer<S>::render(const GaussianModel<S>& m, const NodeState<S>& n, int t,
                               const smg::splat::Camera<S>& cam, S* image, S* alpha, S* depth,
                               smg::ParallelOptions parallel) {
+  const auto t0 = Clock::now();
   const int G = m.count(), F = m.fixed, P = m.dynamic();
   t_ = t;
   means_.resize(sz(G) * 3);
@@ -230,6 +235,8 @@ void ModelRenderer<S>::render(const GaussianModel<S>& m, const NodeState<S>& n, 
     so.parallel = parallel;
     smg::skin_blend(n.skin_nodes(), pts, t_query, out, so);
   }
+  const auto t1 = Clock::now();
+  times_.skin_forward += std::chrono::duration<double>(t1 - t0).count();
   const smg::splat::GaussianParams<S> p = params(m);
   smg::splat::SplatSettings<S> settings;
   smg::splat::RenderImages<S> img;
@@ -238,12 +245,14 @@ void ModelRenderer<S>::render(const GaussianModel<S>& m, const NodeState<S>& n, 
   if (depth) img.depth = smg::SequenceView<S, 1>(depth, cam.height, cam.width);
   check(smg::splat::validate_render(p, cam, settings, img, 3), "render_forward");
   smg::splat::render_forward<3>(p, cam, settings, ws_, img, parallel);
+  times_.render_forward += seconds_since(t1);
 }
 
 template <class S>
 void ModelRenderer<S>::backward(const GaussianModel<S>& m, const NodeState<S>& n, const smg::splat::Camera<S>& cam,
                                 const S* grad_image, const S* grad_depth, ModelGrads<S>& out,
                                 smg::ParallelOptions parallel) {
+  const auto t0 = Clock::now();
   const int G = m.count(), F = m.fixed, P = m.dynamic();
   g_.resize(G);
   g_quats_tangent_.resize(sz(G) * 3);
@@ -269,6 +278,8 @@ void ModelRenderer<S>::backward(const GaussianModel<S>& m, const NodeState<S>& n
   for (std::size_t k = 0; k < sz(G); ++k) o.opacity[k] += g_.opacity[k];
   for (std::size_t k = 0; k < sz(F) * 3; ++k) o.means[k] += g_.means[k];
   for (std::size_t k = 0; k < sz(F) * 4; ++k) o.quats[k] += g_.quats[k];
+  const auto t1 = Clock::now();
+  times_.render_backward += std::chrono::duration<double>(t1 - t0).count();
   if (P == 0) return;
   const smg::SkinPoints<S> pts = skin_points(m);
   const std::int32_t tq[1] = {t_};
@@ -285,6 +296,7 @@ void ModelRenderer<S>::backward(const GaussianModel<S>& m, const NodeState<S>& n
   smg::SkinOptions so;
   so.parallel = parallel;
   smg::skin_blend_backward(n.skin_nodes(), pts, t_query, go, gs, skin_ws_, so);
+  times_.skin_backward += seconds_since(t1);
 }
 
 template <class S>

@@ -133,6 +133,13 @@ class ModelRenderer {
   void backward(const GaussianModel<S>& model, const NodeState<S>& nodes, const smg::splat::Camera<S>& camera,
                 const S* grad_image, const S* grad_depth, ModelGrads<S>& grads, smg::ParallelOptions parallel = {});
 
+  // Wall time spent in each library call since construction (seconds; stage 2 prints the means
+  // per iteration). steady_clock reads cost ~20 ns, nothing next to the calls they time.
+  struct Times {
+    double skin_forward = 0, render_forward = 0, render_backward = 0, skin_backward = 0;
+  };
+  const Times& times() const { return times_; }
+
   const smg::splat::RenderWorkspace<S>& workspace() const { return ws_; }
   // Positions [G][3] of every Gaussian at the last rendered frame.
   const std::vector<S>& posed_means() const { return means_; }
@@ -145,6 +152,7 @@ class ModelRenderer {
   smg::SkinWorkspace<S> skin_ws_;
   GaussianTable<S> g_;  // render gradients
   std::vector<S> g_quats_tangent_;
+  Times times_;
 };
 
 // Density control: removes Gaussians whose opacity is below min_opacity or whose largest scale

@@ -76,6 +76,12 @@ Stage2Result train_gaussians(const Dataset& d, Nodes& nodes, NodeObjective& obje
   int acc_n = 0;
   const int tail_from = o.iterations - std::max(1, o.iterations / 10);
   objective.update_confidences(nodes);
+  using Clock = std::chrono::steady_clock;
+  const auto ms = [](Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+  };
+  Stage2Timing& tm = r.timing;
+  const auto loop_start = Clock::now();
 
   for (int it = 0; it < o.iterations; ++it) {
     if (cursor >= order.size()) {  // a new epoch: Fisher-Yates shuffle of the frames
@@ -87,6 +93,7 @@ Stage2Result train_gaussians(const Dataset& d, Nodes& nodes, NodeObjective& obje
     const int t = order[cursor++];
     ns.assign(nodes);
     renderer.render(m, ns, t, cams[sz(t)], image.data(), nullptr, depth.data(), parallel);
+    const auto c_loss = Clock::now();
     double l1 = 0, dl1 = 0;
     photometric_loss<float>(image.data(), depth.data(), d.train[sz(t)].rgb.data(), d.priors.depth.data() + sz(t) * plane,
                             W, H, o.lambda_depth, gimage.data(), gdepth.data(), &l1, &dl1);
@@ -97,8 +104,10 @@ Stage2Result train_gaussians(const Dataset& d, Nodes& nodes, NodeObjective& obje
       dl1_acc += dl1;
       ++acc_n;
     }
+    tm.loss += ms(c_loss, Clock::now());
     g.zero(m.count(), T, N);
     renderer.backward(m, ns, cams[sz(t)], gimage.data(), gdepth.data(), g, parallel);
+    const auto c_reg = Clock::now();
 
     // Nodes: photometric gradient + the stage-1 objective.
     for (std::size_t k = 0; k < gx.size(); ++k) {
@@ -107,18 +116,21 @@ Stage2Result train_gaussians(const Dataset& d, Nodes& nodes, NodeObjective& obje
     }
     if (o.confidence_every > 0 && it > 0 && it % o.confidence_every == 0) objective.update_confidences(nodes);
     const NodeLossTerms nl = objective.evaluate(nodes, o.node_weight, gx.data(), gq.data());
+    const auto c_adam = Clock::now();
+    tm.regularisers += ms(c_reg, c_adam);
 
     const double p = o.iterations > 1 ? static_cast<double>(it) / (o.iterations - 1) : 1.0;
     a_means.set_lr(log_lerp(o.lr_means, o.lr_means_final, p));
     a_nx.set_lr(log_lerp(o.lr_node_position, o.lr_node_position_final, p));
     a_nq.set_lr(log_lerp(o.lr_node_rotation, o.lr_node_rotation_final, p));
-    a_means.step(m.table.means.data(), g.table.means.data());
-    a_quats.step(m.table.quats.data(), g.table.quats.data());
-    a_scales.step(m.table.log_scales.data(), g.table.log_scales.data());
-    a_opacity.step(m.table.opacity.data(), g.table.opacity.data());
-    a_colors.step(m.table.colors.data(), g.table.colors.data());
-    a_nx.step(nodes.positions.data(), gx.data());
-    if (rotations_free) a_nq.step_rotations(nodes.rotations.data(), gq.data());
+    a_means.step(m.table.means.data(), g.table.means.data(), parallel);
+    a_quats.step(m.table.quats.data(), g.table.quats.data(), parallel);
+    a_scales.step(m.table.log_scales.data(), g.table.log_scales.data(), parallel);
+    a_opacity.step(m.table.opacity.data(), g.table.opacity.data(), parallel);
+    a_colors.step(m.table.colors.data(), g.table.colors.data(), parallel);
+    a_nx.step(nodes.positions.data(), gx.data(), parallel);
+    if (rotations_free) a_nq.step_rotations(nodes.rotations.data(), gq.data(), parallel);
+    tm.adam += ms(c_adam, Clock::now());
 
     // Density control.
     const int done = it + 1;
@@ -142,6 +154,22 @@ Stage2Result train_gaussians(const Dataset& d, Nodes& nodes, NodeObjective& obje
       progress.line("stage2", format("it %5d/%d  frame %2d  L1 %.4f  depth %.4f  nodes %.3e  G %d", done, o.iterations,
                                      t, l1, dl1, nl.total(), m.count()));
   }
+  tm.total = ms(loop_start, Clock::now());
+  const ModelRenderer<float>::Times& rt = renderer.times();
+  tm.skin_forward = 1e3 * rt.skin_forward;
+  tm.render_forward = 1e3 * rt.render_forward;
+  tm.render_backward = 1e3 * rt.render_backward;
+  tm.skin_backward = 1e3 * rt.skin_backward;
+  tm.other = tm.total - (tm.skin_forward + tm.render_forward + tm.loss + tm.render_backward + tm.skin_backward +
+                         tm.regularisers + tm.adam);
+  if (o.iterations > 0)
+    for (double* v : {&tm.skin_forward, &tm.render_forward, &tm.loss, &tm.render_backward, &tm.skin_backward,
+                      &tm.regularisers, &tm.adam, &tm.other, &tm.total})
+      *v /= o.iterations;
+  progress.line("stage2", format("ms/iteration: skin fwd %.2f  render fwd %.2f  loss %.2f  render bwd %.2f  skin bwd "
+                                 "%.2f  regularisers %.2f  adam %.2f  other %.2f  total %.2f",
+                                 tm.skin_forward, tm.render_forward, tm.loss, tm.render_backward, tm.skin_backward,
+                                 tm.regularisers, tm.adam, tm.other, tm.total));
   objective.update_confidences(nodes);
   r.nodes_final = objective.evaluate(nodes);
   r.iterations = o.iterations;

@@ -43,6 +43,14 @@ struct Stage2Options {
   std::uint64_t seed = 0;
 };
 
+// Mean wall time per iteration of each part of a stage-2 iteration (milliseconds), measured
+// with steady_clock around the calls; `other` is the rest (node conversion, gradient zeroing,
+// density control).
+struct Stage2Timing {
+  double skin_forward = 0, render_forward = 0, loss = 0, render_backward = 0, skin_backward = 0;
+  double regularisers = 0, adam = 0, other = 0, total = 0;
+};
+
 struct Stage2Result {
   int iterations = 0;
   double seconds = 0;
@@ -50,6 +58,7 @@ struct Stage2Result {
   NodeLossTerms nodes_final;
   int pruned = 0;
   int gaussians = 0, fixed = 0;
+  Stage2Timing timing;
 };
 
 Stage2Result train_gaussians(const Dataset& data, Nodes& nodes, NodeObjective& objective, GaussianModel<float>& model,

@@ -162,25 +162,26 @@ inline Status check_drivers(SkinDriversView d, Index points, Index N, const std:
     return skin_error(s.str());
   }
   if (d.size() > 0 && d.data() == nullptr) return skin_error(name + ": null data pointer");
+  // The message is formatted only on failure: every skinning call validates its P·D entries,
+  // and building a stream per entry cost more than the blend itself (a trainer validates every
+  // iteration).
+  const auto fail = [&](Index p, Index k, const char* what, bool show_value) {
+    std::ostringstream s;
+    s << name << ": entry [p=" << p << "][k=" << k << "] ";
+    if (show_value) s << "= " << d(p, k) << " is out of range [-1, N=" << N << ")";
+    s << what;
+    return skin_error(s.str());
+  };
   for (Index p = 0; p < d.rows(); ++p) {
     bool padding = false;
     for (Index k = 0; k < d.cols(); ++k) {
       const std::int32_t n = d(p, k);
-      std::ostringstream s;
-      s << name << ": entry [p=" << p << "][k=" << k << "] ";
-      if (n < -1 || n >= N) {
-        s << "= " << n << " is out of range [-1, N=" << N << ")";
-        return skin_error(s.str());
-      }
+      if (n < -1 || n >= N) return fail(p, k, "", true);
       if (n == -1) {
-        if (k == 0) {
-          s << "is -1: every point needs at least one driver";
-          return skin_error(s.str());
-        }
+        if (k == 0) return fail(p, k, "is -1: every point needs at least one driver", false);
         padding = true;
       } else if (padding) {
-        s << "is a driver after -1 padding";
-        return skin_error(s.str());
+        return fail(p, k, "is a driver after -1 padding", false);
       }
     }
   }
