@@ -360,8 +360,9 @@ void export_queries(const Dataset& d, int count, TrackQueries* q, std::vector<fl
     picked.push_back(i);
   }
   // Spread the choice over the candidates (they are in track order).
-  std::vector<int> chosen;
   const int M = std::min(count, static_cast<int>(picked.size()));
+  std::vector<int> chosen;
+  chosen.reserve(sz(M));
   for (int k = 0; k < M; ++k) chosen.push_back(picked[sz(k) * picked.size() / sz(M)]);
   q->frame = frame_name(0, 0);
   q->xy.clear();
