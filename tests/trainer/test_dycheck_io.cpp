@@ -589,3 +589,92 @@ TEST_CASE("npz: the writer's archive is a valid ZIP (CRC-32 check value, round t
   CHECK(arrays.at("a").shape == std::vector<std::int64_t>{2, 2});
   CHECK(arrays.at("b").as<float>() == std::vector<float>{1, 2, 3, 4});
 }
+
+namespace {
+void put_le(std::string& s, std::uint64_t v, int bytes) {
+  for (int k = 0; k < bytes; ++k) s += static_cast<char>((v >> (8 * k)) & 0xFFu);
+}
+// A one-member stored archive that uses every ZIP64 field: sizes and offset 0xFFFFFFFF in the
+// headers with their 64-bit values in the extra fields, a ZIP64 end of central directory record
+// and its locator, and 0xFFFF / 0xFFFFFFFF in the classic end record.
+std::string zip64_archive(const std::string& name, const std::string& data) {
+  const std::uint32_t crc = trainer::files::crc32(reinterpret_cast<const unsigned char*>(data.data()), data.size());
+  std::string z;
+  put_le(z, 0x04034b50, 4);
+  put_le(z, 45, 2);
+  put_le(z, 0, 2);
+  put_le(z, 0, 2);
+  put_le(z, 0, 4);  // time, date
+  put_le(z, crc, 4);
+  put_le(z, 0xFFFFFFFF, 4);
+  put_le(z, 0xFFFFFFFF, 4);
+  put_le(z, name.size(), 2);
+  put_le(z, 20, 2);
+  z += name;
+  put_le(z, 0x0001, 2);
+  put_le(z, 16, 2);
+  put_le(z, data.size(), 8);
+  put_le(z, data.size(), 8);
+  z += data;
+  const std::uint64_t cd_offset = z.size();
+  std::string cd;
+  put_le(cd, 0x02014b50, 4);
+  put_le(cd, 45, 2);
+  put_le(cd, 45, 2);
+  put_le(cd, 0, 2);
+  put_le(cd, 0, 2);
+  put_le(cd, 0, 4);
+  put_le(cd, crc, 4);
+  put_le(cd, 0xFFFFFFFF, 4);
+  put_le(cd, 0xFFFFFFFF, 4);
+  put_le(cd, name.size(), 2);
+  put_le(cd, 28, 2);  // extra: 4 + 24
+  put_le(cd, 0, 2);
+  put_le(cd, 0, 2);
+  put_le(cd, 0, 2);
+  put_le(cd, 0, 4);
+  put_le(cd, 0xFFFFFFFF, 4);
+  cd += name;
+  put_le(cd, 0x0001, 2);
+  put_le(cd, 24, 2);
+  put_le(cd, data.size(), 8);  // uncompressed
+  put_le(cd, data.size(), 8);  // compressed
+  put_le(cd, 0, 8);            // local header offset
+  z += cd;
+  const std::uint64_t z64 = z.size();
+  put_le(z, 0x06064b50, 4);
+  put_le(z, 44, 8);
+  put_le(z, 45, 2);
+  put_le(z, 45, 2);
+  put_le(z, 0, 4);
+  put_le(z, 0, 4);
+  put_le(z, 1, 8);
+  put_le(z, 1, 8);
+  put_le(z, cd.size(), 8);
+  put_le(z, cd_offset, 8);
+  put_le(z, 0x07064b50, 4);
+  put_le(z, 0, 4);
+  put_le(z, z64, 8);
+  put_le(z, 1, 4);
+  put_le(z, 0x06054b50, 4);
+  put_le(z, 0, 2);
+  put_le(z, 0, 2);
+  put_le(z, 0xFFFF, 2);
+  put_le(z, 0xFFFF, 2);
+  put_le(z, 0xFFFFFFFF, 4);
+  put_le(z, 0xFFFFFFFF, 4);
+  put_le(z, 0, 2);
+  return z;
+}
+}  // namespace
+
+TEST_CASE("npz: ZIP64 size, offset and end-of-directory fields are followed") {
+  const std::int32_t v[3] = {7, -8, 9};
+  const std::string z = zip64_archive("q.npy", npy::to_bytes(v, {3}));
+  const auto arrays = trainer::files::parse_npz(std::vector<unsigned char>(z.begin(), z.end()), "z64.npz");
+  CHECK(arrays.at("q").as<std::int32_t>() == std::vector<std::int32_t>{7, -8, 9});
+  // A member that is not an .npy file.
+  const std::string t = zip64_archive("readme.txt", "hello");
+  CHECK_THROWS_WITH_AS(trainer::files::parse_npz(std::vector<unsigned char>(t.begin(), t.end()), "t.npz"),
+                       "t.npz: member 'readme.txt' is not an .npy file", npy::Error);
+}
