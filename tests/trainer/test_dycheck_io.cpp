@@ -678,3 +678,29 @@ TEST_CASE("npz: ZIP64 size, offset and end-of-directory fields are followed") {
   CHECK_THROWS_WITH_AS(trainer::files::parse_npz(std::vector<unsigned char>(t.begin(), t.end()), "t.npz"),
                        "t.npz: member 'readme.txt' is not an .npy file", npy::Error);
 }
+
+TEST_CASE("npz: every truncation and every flipped byte is an error or a valid read, never a crash") {
+  const std::string fixture = std::string(SMG_TEST_DATA_DIR) + "/tracks_compressed.npz";
+  const float v[6] = {1, 2, 3, 4, 5, 6};
+  const std::string stored = trainer::files::npz_bytes({{"uv", npy::to_bytes(v, {3, 2})}});
+  for (const std::vector<unsigned char>& good :
+       {trainer::files::read_bytes(fixture, "fixture"), std::vector<unsigned char>(stored.begin(), stored.end())}) {
+    int errors = 0;
+    for (std::size_t n = 0; n < good.size(); ++n) {
+      try {
+        trainer::files::parse_npz(std::vector<unsigned char>(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(n)), "t");
+      } catch (const npy::Error&) {
+        ++errors;
+      }
+    }
+    CHECK(errors == static_cast<int>(good.size()));  // every proper prefix is refused
+    for (std::size_t i = 0; i < good.size(); ++i) {
+      std::vector<unsigned char> bad = good;
+      bad[i] ^= 0x5A;
+      try {
+        trainer::files::parse_npz(bad, "f");
+      } catch (const npy::Error&) {
+      }
+    }
+  }
+}
