@@ -11,7 +11,6 @@
 #include <fstream>
 #include <functional>
 #include <limits>
-#include <regex>
 #include <string>
 #include <vector>
 
@@ -39,11 +38,20 @@ void write_text(const fs::path& p, const std::string& s) {
   std::ofstream f(p, std::ios::binary | std::ios::trunc);
   f.write(s.data(), static_cast<std::streamsize>(s.size()));
 }
-void replace_in(const fs::path& p, const std::string& pattern, const std::string& by) {
-  const std::string before = read_text(p);
-  const std::string after = std::regex_replace(before, std::regex(pattern), by);
-  REQUIRE(after != before);
-  write_text(p, after);
+// Replaces the first occurrence of `from` in a file.
+void replace_in(const fs::path& p, const std::string& from, const std::string& by) {
+  std::string text = read_text(p);
+  const auto at = text.find(from);
+  REQUIRE(at != std::string::npos);
+  write_text(p, text.replace(at, from.size(), by));
+}
+// Replaces the text after `prefix` up to the next ',' (a number in a camera file).
+void replace_value(const fs::path& p, const std::string& prefix, const std::string& by) {
+  std::string text = read_text(p);
+  const auto at = text.find(prefix);
+  REQUIRE(at != std::string::npos);
+  const auto begin = at + prefix.size(), end = text.find(',', begin);
+  write_text(p, text.replace(begin, end - begin, by));
 }
 
 trainer::Camera camera(int index, int width, int height) {
@@ -276,28 +284,28 @@ TEST_CASE("dycheck: broken camera files name the camera file") {
   }
   {
     const fs::path d = fresh("cam_nan");
-    replace_in(d / "camera/0_00004.json", "\"focal_length\": [^,]*", "\"focal_length\": NaN");
+    replace_value(d / "camera/0_00004.json", "\"focal_length\": ", "NaN");
     CHECK(read_error(d) == "camera/0_00004.json: focal_length is NaN");
   }
   {
     const fs::path d = fresh("cam_position_inf");
-    replace_in(d / "camera/0_00000.json", "\"position\": \\[[^,]*", "\"position\": [-Infinity");
+    replace_value(d / "camera/0_00000.json", "\"position\": [", "-Infinity");
     CHECK(read_error(d) == "camera/0_00000.json: position[0] is infinite");
   }
   {
     const fs::path d = fresh("cam_distortion");
-    replace_in(d / "camera/0_00000.json", "\"radial_distortion\": \\[0, ", "\"radial_distortion\": [0.01, ");
+    replace_in(d / "camera/0_00000.json", "\"radial_distortion\": [0, ", "\"radial_distortion\": [0.01, ");
     CHECK(read_error(d) ==
           "camera/0_00000.json: non-zero radial_distortion (distortion is not supported; undistort the images)");
   }
   {
     const fs::path d = fresh("cam_tangential");
-    replace_in(d / "camera/0_00000.json", "\"tangential_distortion\": \\[0, 0\\]", "\"tangential_distortion\": [0, 1e-4]");
+    replace_in(d / "camera/0_00000.json", "\"tangential_distortion\": [0, 0]", "\"tangential_distortion\": [0, 1e-4]");
     CHECK_ERROR(d, "camera/0_00000.json: non-zero tangential_distortion");
   }
   {
     const fs::path d = fresh("cam_no_distortion_keys");  // absent distortion keys are zero
-    replace_in(d / "camera/0_00000.json", "\"tangential_distortion\": \\[0, 0\\],", "");
+    replace_in(d / "camera/0_00000.json", "\"tangential_distortion\": [0, 0],", "");
     CHECK(read_error(d) == "no error");
   }
   {
@@ -321,7 +329,7 @@ TEST_CASE("dycheck: broken camera files name the camera file") {
   }
   {
     const fs::path d = fresh("cam_size");  // another size than the other training frames
-    replace_in(d / "camera/0_00004.json", "\"image_size\": \\[16, 12\\]", "\"image_size\": [18, 12]");
+    replace_in(d / "camera/0_00004.json", "\"image_size\": [16, 12]", "\"image_size\": [18, 12]");
     CHECK_ERROR(d, "camera/0_00004.json: image size 9x6 at 2x differs");
   }
 }
@@ -330,13 +338,13 @@ TEST_CASE("dycheck: the 2x size rounds like Dycheck (Python's round, halves to e
   const fs::path d = fresh("half_even");
   // 1x 17x13 -> 8.5 -> 8, 6.5 -> 6; the 8x6 images still fit. 1x 19 -> 9.5 -> 10.
   for (const char* f : {"0_00000", "0_00002", "0_00004"})
-    replace_in(d / ("camera/" + std::string(f) + ".json"), "\"image_size\": \\[16, 12\\]", "\"image_size\": [17, 13]");
+    replace_in(d / ("camera/" + std::string(f) + ".json"), "\"image_size\": [16, 12]", "\"image_size\": [17, 13]");
   CHECK(read_error(d) == "no error");
-  replace_in(d / "camera/1_00001.json", "\"image_size\": \\[20, 16\\]", "\"image_size\": [19, 15]");
+  replace_in(d / "camera/1_00001.json", "\"image_size\": [20, 16]", "\"image_size\": [19, 15]");
   CHECK(read_error(d) == "no error");  // 10x8, as the image
-  replace_in(d / "camera/1_00001.json", "\"image_size\": \\[19, 15\\]", "\"image_size\": [21, 17]");
+  replace_in(d / "camera/1_00001.json", "\"image_size\": [19, 15]", "\"image_size\": [21, 17]");
   CHECK(read_error(d) == "no error");  // 10.5 -> 10, 8.5 -> 8
-  replace_in(d / "camera/1_00001.json", "\"image_size\": \\[21, 17\\]", "\"image_size\": [23, 17]");
+  replace_in(d / "camera/1_00001.json", "\"image_size\": [21, 17]", "\"image_size\": [23, 17]");
   CHECK(read_error(d) == "rgb/2x/1_00001.png: image is 10x8, camera/1_00001.json gives 12x8 at 2x");
 }
 
@@ -702,5 +710,26 @@ TEST_CASE("npz: every truncation and every flipped byte is an error or a valid r
       } catch (const npy::Error&) {
       }
     }
+  }
+}
+
+TEST_CASE("dycheck: the writer names the file or folder it cannot write, and refuses an inconsistent scene") {
+  const fs::path d = temp_dir("write_errors");
+  fs::create_directories(d);
+  write_text(d / "rgb", "a file where the rgb folder should be");
+  try {
+    trainer::write_dycheck(d.string(), synthetic());
+    FAIL("no error");
+  } catch (const DataError& e) {
+    CHECK(starts_with(e.what(), "rgb/2x: cannot create the folder"));
+  }
+  DycheckScene s = synthetic();
+  s.depth.pop_back();
+  try {
+    trainer::write_dycheck(temp_dir("write_inconsistent").string(), s);
+    FAIL("no error");
+  } catch (const DataError& e) {
+    CHECK(std::string(e.what()) ==
+          "depth/2x: the scene to write is inconsistent: depth holds 143 values, expected 144 (frames x height x width)");
   }
 }
