@@ -3,7 +3,8 @@
 //
 // Part of the examples, not the library. parse() builds a Value tree from the whole text:
 // objects, arrays, numbers, strings (with \uXXXX escapes and surrogate pairs, emitted as UTF-8),
-// true, false, null. Anything else — NaN/Infinity literals, trailing commas, comments, leading
+// true, false, null. Anything else — NaN/Infinity literals (unless parse() is asked to accept
+// the ones Python's json module writes), trailing commas, comments, leading
 // zeros, unescaped control characters, duplicate keys, numbers outside double's range, text after
 // the value, nesting deeper than max_depth — is a json::Error whose message gives the line and
 // column ("line 3, column 14: expected ',' or '}'"). The get_* helpers read one member of an

@@ -5,7 +5,8 @@
 // Supported: little-endian float16 (read only, converted to float)/float32/float64/int32/int64/
 // uint8/bool, C order. Everything else (big-endian, Fortran order, object arrays, truncated or
 // over-long files, bad headers) is an npy::Error whose message names the file and the problem.
-// parse() reads an .npy image already in memory (a member of an .npz archive).
+// parse() reads an .npy image already in memory (a member of an .npz archive); to_bytes() makes
+// one.
 #pragma once
 
 #include <algorithm>

@@ -553,10 +553,11 @@ void write_dycheck(const std::string& dir, const DycheckScene& s) {
   const std::size_t T = s.train.size(), V = s.val.size();
   const std::size_t HW = static_cast<std::size_t>(s.width) * static_cast<std::size_t>(s.height);
   const std::string train_rel = "splits/train.json";
-  need(s.train_cameras.size() == T && s.train_rgb.size() == T && s.depth.size() == T * HW, train_rel,
-       "train_cameras, train_rgb or depth do not match the training frames");
-  need(s.val_cameras.size() == V && s.val_rgb.size() == V && s.val_covisible.size() == V, "splits/val.json",
-       "val_cameras, val_rgb or val_covisible do not match the validation frames");
+  need(s.train_cameras.size() == T && s.val_cameras.size() == V, "camera", "one camera per training and validation frame");
+  need(s.train_rgb.size() == T && s.val_rgb.size() == V, "rgb/2x", "one image per training and validation frame");
+  need(s.depth.size() == T * HW, "depth/2x", "depth holds " + std::to_string(s.depth.size()) + " values, expected " +
+                                                 std::to_string(T * HW) + " (frames x height x width)");
+  need(s.val_covisible.size() == V, "covisible/2x/val", "one covisible mask per validation frame");
   for (const char* d : {"camera", "rgb/2x", "depth/2x", "covisible/2x/val", "splits", "priors/masks", "priors/features"})
     out.dir(d);
 

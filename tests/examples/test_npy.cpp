@@ -3,6 +3,7 @@
 // corrupt, truncated and unsupported files.
 #include <doctest/doctest.h>
 
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -206,4 +207,38 @@ TEST_CASE("OutputSet writes all files or none") {
   CHECK_FALSE(fs::exists(dir / "out" / "c.npy"));
   CHECK_FALSE(fs::exists(dir / "out" / ".c.npy.partial"));
   fs::remove_all(dir);
+}
+
+TEST_CASE("npy: float16 is read and converted to float exactly; parse() reads an image in memory") {
+  // 1.0, -2.5, 65504 (max half), 2^-24 (smallest subnormal), +inf, NaN, -0.
+  const std::uint16_t h[7] = {0x3C00, 0xC100, 0x7BFF, 0x0001, 0x7C00, 0x7E00, 0x8000};
+  const std::string file = numpy_file("{'descr': '<f2', 'fortran_order': False, 'shape': (7,), }",
+                                      std::string(reinterpret_cast<const char*>(h), sizeof h));
+  const auto* data = reinterpret_cast<const unsigned char*>(file.data());
+  const npy::Array a = npy::parse(data, file.size(), "mem.npy");
+  CHECK(a.dtype == npy::DType::f16);
+  const std::vector<float> v = a.as<float>();
+  CHECK(v[0] == 1.0f);
+  CHECK(v[1] == -2.5f);
+  CHECK(v[2] == 65504.0f);
+  CHECK(v[3] == std::ldexp(1.0f, -24));
+  CHECK(std::isinf(v[4]));
+  CHECK(std::isnan(v[5]));
+  CHECK((v[6] == 0.0f && std::signbit(v[6])));
+  CHECK_THROWS_WITH_AS(a.as<std::int32_t>("h"), "h: dtype float16 where an integer or bool array is expected", npy::Error);
+  // The same checks as read(): truncation, trailing bytes, Fortran order.
+  CHECK_THROWS_WITH_AS(npy::parse(data, file.size() - 1, "mem.npy"),
+                       "mem.npy: truncated data (13 of 14 bytes for shape [7])", npy::Error);
+  const std::string longer = file + "x";
+  CHECK_THROWS_WITH_AS(npy::parse(reinterpret_cast<const unsigned char*>(longer.data()), longer.size(), "m"),
+                       "m: corrupt file (1 bytes after the data of shape [7])", npy::Error);
+  const std::string f = numpy_file("{'descr': '<f4', 'fortran_order': True, 'shape': (1, 1), }", std::string(4, '\0'));
+  CHECK_THROWS_WITH_AS(npy::parse(reinterpret_cast<const unsigned char*>(f.data()), f.size(), "f.npy"),
+                       "f.npy: Fortran-order arrays are not supported (save C-order)", npy::Error);
+  CHECK_THROWS_WITH_AS(npy::parse(data, 5, "s.npy"), "s.npy: truncated (no npy preamble)", npy::Error);
+  // to_bytes writes what read() reads.
+  const float vals[3] = {1.5f, -2.0f, 3.25f};
+  const std::string bytes = npy::to_bytes(vals, {3});
+  const npy::Array b = npy::parse(reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size(), "b");
+  CHECK(b.as<float>() == std::vector<float>{1.5f, -2.0f, 3.25f});
 }
