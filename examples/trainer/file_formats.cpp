@@ -175,6 +175,11 @@ std::map<std::string, npy::Array> parse_npz(const std::vector<unsigned char>& by
     } else {
       if (csize > static_cast<std::uint64_t>(INT_MAX) || usize > static_cast<std::uint64_t>(INT_MAX))
         r.fail("member '" + name + "' is too large to decompress (2 GiB)");
+      // DEFLATE expands at most ~1032:1, so a larger recorded size is a corrupt field; checking it
+      // first keeps a flipped size byte from allocating gigabytes before the decoder fails.
+      if (usize > 1032 * csize + 1024)
+        r.fail("corrupt archive (member '" + name + "' records " + std::to_string(usize) + " bytes from " +
+               std::to_string(csize) + " compressed)");
       data.resize(static_cast<std::size_t>(usize));
       // stb's decoder into a buffer of exactly the recorded size (it fails if the data is longer).
       const int n = stbi_zlib_decode_noheader_buffer(reinterpret_cast<char*>(data.data()), static_cast<int>(usize),

@@ -225,6 +225,41 @@ TEST_CASE("Adam::step_rotations: unit quaternions, steps against the right-tange
   CHECK(loss() < 1e-3 * L0);
 }
 
+TEST_CASE("Adam: steps run in parallel chunks, bit-identical for any thread count and grain") {
+  // The steps are per value (per row for rotations), so splitting them differently must not
+  // change a bit (stage 2 relies on it: its metrics do not depend on --threads).
+  smg::test::Rng rng(7503);
+  CAPTURE(rng.seed);
+  const int n = 1001;  // rows: not a multiple of any grain used below
+  std::vector<float> x0(3 * n), g(3 * n);
+  std::vector<double> q0(4 * n), gq(3 * n);
+  for (auto& v : x0) v = static_cast<float>(rng.uniform(-1, 1));
+  for (auto& v : g) v = static_cast<float>(rng.uniform(-1, 1));
+  for (int r = 0; r < n; ++r) smg::to_wxyz(rng.quaternion(), q0.data() + 4 * r);
+  for (auto& v : gq) v = rng.uniform(-1, 1);
+  const auto run = [&](smg::ParallelOptions par, std::vector<float>& x, std::vector<double>& q) {
+    x = x0;
+    q = q0;
+    trainer::Adam<float> a(x.size(), 1e-2);
+    trainer::Adam<double> b(gq.size(), 1e-2);
+    for (int it = 0; it < 5; ++it) {
+      a.step(x.data(), g.data(), par);
+      b.step_rotations(q.data(), gq.data(), par);
+    }
+  };
+  std::vector<float> x1, x2;
+  std::vector<double> q1, q2;
+  run({1, 0}, x1, q1);
+  for (const smg::ParallelOptions par : {smg::ParallelOptions{2, 0}, smg::ParallelOptions{3, 7},
+                                         smg::ParallelOptions{2, 1}}) {
+    CAPTURE(par.threads);
+    CAPTURE(par.grain);
+    run(par, x2, q2);
+    CHECK(x1 == x2);
+    CHECK(q1 == q2);
+  }
+}
+
 TEST_CASE("prune: removes faint and huge Gaussians, compacts the table and the skinning rows") {
   // 4 static rows, 5 dynamic rows; every row tagged by its colour so moves can be followed.
   trainer::GaussianModel<double> m;
