@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # scripts/example.sh [TRAINER_FLAGS...] — the README's first command: builds the example scene
 # trainer and runs it (docs/trainer.md). With no flags: the default run (the full SMG variant,
-# seed 0, 32 frames at 160x120; about 2 minutes on 2 cores), pictures and metrics.json in
+# seed 0, 32 frames at 160x120; about 1 minute on 2 cores), pictures and metrics.json in
 # trainer_out/. `scripts/example.sh --quick` is the small run CI uses; `--help` lists the flags.
 # Only the library's own dependencies and Debian's libstb-dev (PNG output) are needed.
 set -euo pipefail
