@@ -129,10 +129,8 @@ class Parser {
       v.type = Value::Type::boolean;
     } else if (c == 'n') {
       expect_word("null");
-    } else if (c == '-' || (c >= '0' && c <= '9')) {
-      v.type = Value::Type::number;
-      v.number = number();
-    } else if (c == 'N' || c == 'I') {
+    } else if (c == '-' || (c >= '0' && c <= '9') || c == 'N' || c == 'I') {
+      // Numbers, and NaN / Infinity, which number() accepts only when allowed.
       v.type = Value::Type::number;
       v.number = number();
     } else {

@@ -110,7 +110,7 @@ DycheckScene synthetic() {
   s.has_mask = {1, 0, 1};
   for (int i = 0; i < HW; ++i) {
     s.dynamic_mask[static_cast<std::size_t>(i)] = i % 4 == 0;
-    s.dynamic_mask[static_cast<std::size_t>(2 * HW + i)] = i % 5 == 1;
+    s.dynamic_mask[2 * static_cast<std::size_t>(HW) + static_cast<std::size_t>(i)] = i % 5 == 1;
   }
   s.feature_height = 3;
   s.feature_width = 4;
@@ -163,8 +163,8 @@ bool starts_with(const std::string& s, const std::string& prefix) { return s.com
     CHECK(msg_.find('\n') == std::string::npos);  \
   } while (0)
 
-void write_tracks(const fs::path& dir, const std::vector<float>& uv, std::vector<std::int64_t> uv_shape,
-                  const std::vector<std::uint8_t>& vis, std::vector<std::int64_t> vis_shape,
+void write_tracks(const fs::path& dir, const std::vector<float>& uv, const std::vector<std::int64_t>& uv_shape,
+                  const std::vector<std::uint8_t>& vis, const std::vector<std::int64_t>& vis_shape,
                   const std::vector<std::int32_t>& qt) {
   const std::string npz = trainer::files::npz_bytes(
       {{"uv", npy::to_bytes(uv.data(), uv_shape)},
