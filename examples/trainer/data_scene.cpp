@@ -37,7 +37,7 @@ Dataset dataset_from_dycheck(DycheckScene&& s) {
   d.scene.config.frames = T;
   d.scene.config.width = W;
   d.scene.config.height = H;
-  d.scene.train_cameras = s.train_cameras;
+  d.scene.train_cameras = std::move(s.train_cameras);
   for (const DycheckFrame& f : s.train) {
     d.time_ids.push_back(f.time);
     d.frame_names.push_back(f.name);

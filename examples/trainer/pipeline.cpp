@@ -87,7 +87,9 @@ TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Pro
   } else {
     // A scene from disk: its scale decides every length (docs/data.md section 5).
     resolve_frames(config, r.data.scene.frames(), r.data.priors.has_mask);
-    const double extent = lifted_extent(lift_tracks(r.data.scene, r.data.priors, config.lift));
+    // Lifting depends on no length of the configuration, so this lifting is stage 0's too.
+    r.lifted = lift_tracks(r.data.scene, r.data.priors, config.lift);
+    const double extent = lifted_extent(r.lifted);
     if (!(extent > 0))
       throw std::runtime_error("too few lifted object tracks to measure the scene's extent (fewer than 16 samples "
                                "of tracks starting in the dynamic masks have depth)");
@@ -101,7 +103,7 @@ TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Pro
   }
   const Scene& scene = r.data.scene;
   // Stage 0: lifting, nodes, graph, rotations.
-  r.lifted = lift_tracks(scene, r.data.priors, config.lift);
+  if (r.data.has_truth) r.lifted = lift_tracks(scene, r.data.priors, config.lift);
   r.nodes = make_nodes(r.lifted, config.nodes, config.variant.semantic_graph, par);
   init_rotations(r.nodes);
   r.seconds_stage0 = seconds_since(t0);
