@@ -169,6 +169,19 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
 }
 
 
+// The graph and model statistics of a run, shared by both metrics.json layouts.
+void add_model_stats(cli::JsonLine& j, const trainer::TrainerResult& r) {
+  j.add("nodes", r.nodes.count)
+      .add("edges", static_cast<long long>(r.nodes.graph.stats.edges))
+      .add("gate_removed_edges", static_cast<long long>(r.nodes.graph.stats.gate_removed_edges))
+      .add("gaussians", r.model.count())
+      .add("gaussians_static", r.model.fixed)
+      .add("gaussians_dynamic", r.model.dynamic())
+      .add("pruned", r.stage2.pruned)
+      .add("stage1_iterations", r.stage1.iterations)
+      .add("stage2_iterations", r.stage2.iterations);
+}
+
 double peak_memory_mib() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
@@ -225,17 +238,9 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double se
   j.add("extent", r.data.scene.extent)
       .add("length_factor", r.length_factor)
       .add("unit", r.nodes.unit)
-      .add("lifted_tracks", r.lifted.count)
-      .add("nodes", r.nodes.count)
-      .add("edges", static_cast<long long>(r.nodes.graph.stats.edges))
-      .add("gate_removed_edges", static_cast<long long>(r.nodes.graph.stats.gate_removed_edges))
-      .add("gaussians", r.model.count())
-      .add("gaussians_static", r.model.fixed)
-      .add("gaussians_dynamic", r.model.dynamic())
-      .add("pruned", r.stage2.pruned)
-      .add("stage1_iterations", r.stage1.iterations)
-      .add("stage2_iterations", r.stage2.iterations)
-      .add("seconds_read", seconds_read)
+      .add("lifted_tracks", r.lifted.count);
+  add_model_stats(j, r);
+  j.add("seconds_read", seconds_read)
       .add("seconds_stage0", r.seconds_stage0)
       .add("seconds_stage1", r.stage1.seconds)
       .add("seconds_stage2", r.stage2.seconds)
@@ -411,17 +416,9 @@ int main(int argc, char** argv) {
     add_tracks(j, "", e.tracks);
     add_tracks(j, "_stage1", r.tracks_stage1);
     add_tracks(j, "_lifted", r.tracks_lifted);
-    j.add("extent", r.data.scene.extent)
-        .add("nodes", r.nodes.count)
-        .add("edges", static_cast<long long>(r.nodes.graph.stats.edges))
-        .add("gate_removed_edges", static_cast<long long>(r.nodes.graph.stats.gate_removed_edges))
-        .add("gaussians", r.model.count())
-        .add("gaussians_static", r.model.fixed)
-        .add("gaussians_dynamic", r.model.dynamic())
-        .add("pruned", r.stage2.pruned)
-        .add("stage1_iterations", r.stage1.iterations)
-        .add("stage2_iterations", r.stage2.iterations)
-        .add("seconds_dataset", r.seconds_dataset)
+    j.add("extent", r.data.scene.extent);
+    add_model_stats(j, r);
+    j.add("seconds_dataset", r.seconds_dataset)
         .add("seconds_stage0", r.seconds_stage0)
         .add("seconds_stage1", r.stage1.seconds)
         .add("seconds_stage2", r.stage2.seconds)
