@@ -1,89 +1,68 @@
 #!/usr/bin/env bash
-# scripts/ladder.sh [--seeds "0 1 2"] [--out DIR] [--doc docs/results.md] [-- TRAINER_FLAGS...]
+# scripts/ladder.sh [--seeds "0 1 2 3 4"] [--jobs J] [--out DIR] [--doc docs/results.md]
+#                   [--section NAME] [--report-only] [-- TRAINER_FLAGS...]
 #
-# The ablation ladder of issue 7 (the paper's Table 5): runs smg_trainer for every variant
-# (base, mosca, smg-only, no-carap, no-lrm, full) on every seed with the same flags, keeps each
-# run's metrics.json under OUT/<variant>_s<seed>/, and writes the table (mean and standard
-# deviation over the seeds) into the results page, whatever it shows. The flags after `--` go to
-# every run unchanged and are recorded in the page with the machine and the date.
+# The ablation ladder (the paper's Table 5): runs smg_trainer for every variant (base, mosca,
+# smg-only, no-carap, no-lrm, full) on every seed with the same flags, keeps each run's
+# metrics.json under OUT/<variant>_s<seed>/, and writes the tables (means with 95 % confidence
+# intervals, paired per-seed differences; scripts/ladder_report.py) into the section NAME of the
+# results page, whatever they show. The flags after `--` go to every run unchanged (for example
+# `--scene occluder`) and are recorded in the page with the machine and the date.
+#
+# --jobs J runs J trainers at once, each with nproc/J threads (results do not depend on the thread
+# count). A run whose OUT/<variant>_s<seed>/metrics.json exists with the same flags is not run
+# again, so an interrupted ladder resumes; --report-only only rewrites the page.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-seeds="0 1 2"
+seeds="0 1 2 3 4"
 out=build/ladder
 doc=docs/results.md
+section=default
+jobs=1
+report_only=0
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --seeds) seeds="$2"; shift 2 ;;
+    --jobs) jobs="$2"; shift 2 ;;
     --out) out="$2"; shift 2 ;;
     --doc) doc="$2"; shift 2 ;;
+    --section) section="$2"; shift 2 ;;
+    --report-only) report_only=1; shift ;;
     --) shift; break ;;
     *) echo "ladder.sh: unknown argument '$1' (use -- before trainer flags)" >&2; exit 2 ;;
   esac
 done
+[[ "$jobs" =~ ^[1-9][0-9]*$ ]] || { echo "ladder.sh: --jobs must be a positive integer, got '$jobs'" >&2; exit 2; }
 flags=("$@")
-scripts/deps.sh cmake make g++ libeigen3-dev libstb-dev python3
-build=${SMG_BUILD_DIR:-build/example}
-cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_BENCH=OFF \
-      -DSMG_BUILD_EXAMPLES=ON >/dev/null
-cmake --build "$build" -j"$(nproc)" --target smg_trainer
 variants="base mosca smg-only no-carap no-lrm full"
-mkdir -p "$out"
-for seed in $seeds; do
-  for v in $variants; do
-    dir="$out/${v}_s${seed}"
-    echo "ladder: variant $v, seed $seed ${flags[*]:-}" >&2
-    "$build/examples/smg_trainer" --variant "$v" --seed "$seed" --out "$dir" --quiet --no-pictures "${flags[@]}" \
-      > "$dir.json"
+if [[ $report_only == 0 ]]; then
+  scripts/deps.sh cmake make g++ libeigen3-dev libstb-dev python3
+  build=${SMG_BUILD_DIR:-build/example}
+  cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_BENCH=OFF \
+        -DSMG_BUILD_EXAMPLES=ON >/dev/null
+  cmake --build "$build" -j"$(nproc)" --target smg_trainer
+  threads=$(( $(nproc) / jobs )); (( threads >= 1 )) || threads=1
+  mkdir -p "$out"
+  todo=()
+  for seed in $seeds; do
+    for v in $variants; do
+      dir="$out/${v}_s${seed}"
+      if [[ -f "$dir/metrics.json" && -f "$dir/flags.txt" && "$(cat "$dir/flags.txt")" == "${flags[*]:-}" ]]; then
+        continue
+      fi
+      todo+=("$v $seed")
+    done
   done
-done
-python3 - "$out" "$doc" "$seeds" "$variants" "${flags[*]:-}" <<'PY'
-import json, math, os, platform, sys, datetime
-out, doc, seeds, variants, flags = sys.argv[1], sys.argv[2], sys.argv[3].split(), sys.argv[4].split(), sys.argv[5]
-cols = [("test_psnr", "test PSNR (dB)", 2), ("test_psnr_masked", "masked PSNR", 2), ("test_ssim", "SSIM", 4),
-        ("test_psnr_box", "box PSNR", 2), ("epe", "EPE (m)", 4), ("delta_5", "δ5", 3), ("delta_10", "δ10", 3),
-        ("epe_box", "box EPE", 4), ("epe_hidden", "hidden EPE", 4), ("seconds_total", "time (s)", 1)]
-rows, runs = [], {}
-for v in variants:
-    ms = [json.load(open(os.path.join(out, f"{v}_s{s}", "metrics.json"))) for s in seeds]
-    runs[v] = ms
-    cells = []
-    for key, _, nd in cols:
-        xs = [m[key] for m in ms]
-        mu = sum(xs) / len(xs)
-        sd = math.sqrt(sum((x - mu) ** 2 for x in xs) / (len(xs) - 1)) if len(xs) > 1 else 0.0
-        cells.append(f"{mu:.{nd}f} ± {sd:.{nd}f}")
-    rows.append(f"| {v} | " + " | ".join(cells) + " |")
-head = "| variant | " + " | ".join(c[1] for c in cols) + " |\n|---|" + "---|" * len(cols)
-per_seed = ["| variant | " + " | ".join(f"seed {s}: PSNR / EPE" for s in seeds) + " |",
-            "|---|" + "---|" * len(seeds)]
-for v in variants:
-    per_seed.append(f"| {v} | " + " | ".join(f"{m['test_psnr']:.2f} / {m['epe']:.4f}" for m in runs[v]) + " |")
-m0 = runs[variants[-1]][0]
-cmd = "scripts/ladder.sh --seeds \"" + " ".join(seeds) + "\"" + (" -- " + flags if flags else "")
-text = f"""# Results: the ablation ladder
-
-Generated by `{cmd}` on {datetime.date.today().isoformat()} ({platform.machine()}, {os.cpu_count()} cores; every
-run with {m0['threads']} threads, T = {m0['T']}, {m0['width']}x{m0['height']}, {m0['stage1_iterations']} stage-1 and
-{m0['stage2_iterations']} stage-2 iterations). Each cell is the mean ± standard deviation over seeds
-{", ".join(seeds)}; every seed is a different scene (layout, motion, textures, prior noise). The page is
-rewritten by the script; the discussion below the marker is kept.
-
-Test PSNR / SSIM: the two held-out cameras, every frame, whole image; masked PSNR: co-visible pixels
-only (Dycheck's protocol); box PSNR: the static box's pixels in the test views. EPE: 3D end-point
-error of the node trajectories against the ground-truth motion of their tracks, over all frames;
-δ5 / δ10: fraction of samples within 5% / 10% of the scene extent; box EPE: nodes on the static
-box; hidden EPE: samples where the node's track was not observed. Variants: docs/trainer.md.
-
-{head}
-""" + "\n".join(rows) + "\n\nPer seed (test PSNR dB / EPE m):\n\n" + "\n".join(per_seed) + "\n"
-marker = "<!-- discussion: kept by scripts/ladder.sh -->"
-tail = ""
-if os.path.exists(doc):
-    old = open(doc).read()
-    if marker in old:
-        tail = old[old.index(marker):]
-if not tail:
-    tail = marker + "\n"
-open(doc, "w").write(text + "\n" + tail)
-print(text)
-PY
+  echo "ladder: ${#todo[@]} runs, $jobs at a time with $threads threads each" >&2
+  # Flags travel as one word-split string (trainer flags and values hold no spaces).
+  export LADDER_BIN="$build/examples/smg_trainer" LADDER_OUT="$out" LADDER_THREADS="$threads" \
+         LADDER_FLAGS="${flags[*]:-}"
+  printf '%s\n' "${todo[@]+"${todo[@]}"}" | xargs -r -P "$jobs" -L 1 bash -c '
+    v=$1; seed=$2; dir="$LADDER_OUT/${v}_s${seed}"
+    echo "ladder: variant $v, seed $seed $LADDER_FLAGS" >&2
+    # shellcheck disable=SC2086
+    "$LADDER_BIN" --variant "$v" --seed "$seed" --threads "$LADDER_THREADS" --out "$dir" --quiet --no-pictures \
+      $LADDER_FLAGS > "$dir.json" && printf "%s" "$LADDER_FLAGS" > "$dir/flags.txt"' _
+fi
+python3 scripts/ladder_report.py --out "$out" --doc "$doc" --section "$section" --seeds "$seeds" \
+  --variants "$variants" --flags "${flags[*]:-}" --jobs "$jobs"

@@ -8,6 +8,13 @@
 
 namespace trainer {
 
+void apply_scene_layout(SceneLayout layout, DatasetConfig* config) {
+  config->scene.layout = layout;
+  const PriorConfig defaults;
+  config->priors.moving_depth_factor = layout == SceneLayout::occluder ? 3.0 : defaults.moving_depth_factor;
+  config->priors.depth_edge_outlier_rate = layout == SceneLayout::occluder ? 0.45 : defaults.depth_edge_outlier_rate;
+}
+
 Dataset make_dataset(const DatasetConfig& config, smg::ParallelOptions parallel) {
   if (smg::Status st = validate_scene_config(config.scene); !st) throw std::invalid_argument(st.message());
   if (smg::Status st = validate_prior_config(config.priors); !st) throw std::invalid_argument(st.message());

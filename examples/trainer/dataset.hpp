@@ -64,6 +64,11 @@ struct Dataset {
   std::vector<EvalFrame> eval;           // validation frames of a scene from disk
 };
 
+// Selects a scene layout and the priors that go with it: the occluder layout's depth prior is
+// three times noisier on moving bodies (6 % relative sigma) and mixes more edge pixels (45 %),
+// as a monocular depth estimator does on thin parts that leave and re-enter the view.
+void apply_scene_layout(SceneLayout layout, DatasetConfig* config);
+
 // Validates both configs (std::invalid_argument with a one-line message) and builds the dataset.
 // Deterministic for a seed and the same for any thread count.
 Dataset make_dataset(const DatasetConfig& config, smg::ParallelOptions parallel = {});

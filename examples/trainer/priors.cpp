@@ -97,9 +97,12 @@ void feature_maps(const std::vector<RenderOutput>& train, const PriorConfig& cfg
       parallel);
 }
 
-void depth_maps(const std::vector<RenderOutput>& train, const PriorConfig& cfg, std::uint64_t seed,
-                Priors* p, smg::ParallelOptions parallel) {
+void depth_maps(const Scene& scene, const std::vector<RenderOutput>& train, const PriorConfig& cfg,
+                std::uint64_t seed, Priors* p, smg::ParallelOptions parallel) {
   const int T = p->frames, W = p->width, H = p->height;
+  std::vector<double> sigma(scene.bodies.size(), cfg.depth_noise);  // relative noise per body
+  for (const Body& b : scene.bodies)
+    if (b.moves) sigma[sz(b.id)] = cfg.depth_noise * cfg.moving_depth_factor;
   p->depth.assign(sz(T) * H * W, 0.0f);
   smg::parallel_for_chunks(
       T,
@@ -141,7 +144,7 @@ void depth_maps(const std::vector<RenderOutput>& train, const PriorConfig& cfg, 
                 }
               }
               if (u_hole < cfg.depth_hole_rate) continue;
-              p->depth[sz(t) * H * W + pix] = static_cast<float>(d * scale * std::max(0.05, 1.0 + cfg.depth_noise * n));
+              p->depth[sz(t) * H * W + pix] = static_cast<float>(d * scale * std::max(0.05, 1.0 + sigma[sz(r.body[pix])] * n));
             }
         }
       },
@@ -307,6 +310,8 @@ smg::Status validate_prior_config(const PriorConfig& c) {
   if (c.depth_edge_outlier_rate + c.depth_edge_hole_rate > 1)
     return err("depth_edge_outlier_rate + depth_edge_hole_rate must be <= 1");
   if (!(c.depth_noise >= 0 && c.depth_noise <= 0.5)) return err("depth_noise must be in [0, 0.5]");
+  if (!(c.moving_depth_factor >= 0 && c.moving_depth_factor <= 10))
+    return err("moving_depth_factor must be in [0, 10]");
   if (!(c.depth_scale_jitter >= 0 && c.depth_scale_jitter <= 0.5)) return err("depth_scale_jitter must be in [0, 0.5]");
   if (c.feature_dim < classes::count + 1 || c.feature_dim > 1024)
     return err("feature_dim must be in [" + std::to_string(classes::count + 1) + ", 1024] (one direction per class plus void), got " +
@@ -348,7 +353,7 @@ Priors make_priors(const Scene& scene, const std::vector<RenderOutput>& train, c
     }
   }
   feature_maps(train, cfg, seed, &p, parallel);
-  depth_maps(train, cfg, seed, &p, parallel);
+  depth_maps(scene, train, cfg, seed, &p, parallel);
   object_mask(scene, train, cfg.mask_dilate_px, &p, parallel);
 
   p.tracks.frames = scene.frames();

@@ -40,6 +40,7 @@ struct PriorConfig {
 
   // Depth.
   double depth_noise = 0.02;             // relative sigma per pixel
+  double moving_depth_factor = 1.0;      // depth_noise times this on moving bodies (arm, ball)
   double depth_scale_jitter = 0.01;      // relative sigma of a per-frame scale error
   double depth_hole_rate = 0.01;         // pixels without depth (0)
   double depth_edge_outlier_rate = 0.3;  // edge pixels whose depth mixes both sides

@@ -366,20 +366,27 @@ Scene make_scene(const SceneConfig& config) {
 
   // Arm: two capsules from a shoulder left of the box. It swings from pointing towards the
   // training camera (the box in full view) to reaching in front of the box (hiding it).
-  s.arm.shoulder = Eigen::Vector3d(-0.55 + rng.uniform(-0.02, 0.02), -0.02, 0.25);
+  // Occluder layout: the shoulder sits behind the pillar's left edge and the arm sweeps about
+  // 155 degrees, from pointing right (behind the pillar) through pointing at the wall to pointing
+  // left, where the forearm leaves the training view; fewer cycles, so each stretch is long.
+  // Both layouts draw the same random numbers in the same order.
+  const bool occluder = config.layout == SceneLayout::occluder;
+  s.arm.shoulder = occluder ? Eigen::Vector3d(-0.42 + rng.uniform(-0.02, 0.02), 0.32, 0.30)
+                            : Eigen::Vector3d(-0.55 + rng.uniform(-0.02, 0.02), -0.02, 0.25);
   s.arm.upper_length = 0.30;
   s.arm.fore_length = 0.30;
   s.arm.upper_radius = 0.05;
   s.arm.fore_radius = 0.042;
   const double amp = rng.uniform(0.9, 1.1);
-  s.arm.yaw_mean = -0.25 + rng.uniform(-0.03, 0.03);
-  s.arm.yaw_amplitude = 0.42 * amp;
+  s.arm.yaw_mean = (occluder ? kPi / 2 : -0.25) + rng.uniform(-0.03, 0.03);
+  s.arm.yaw_amplitude = (occluder ? 1.3 : 0.42) * amp;
   s.arm.pitch_mean = 0.0;
-  s.arm.pitch_amplitude = 0.08 * amp;
-  s.arm.elbow_mean = 0.25;
+  s.arm.pitch_amplitude = (occluder ? 0.06 : 0.08) * amp;
+  s.arm.elbow_mean = occluder ? 0.3 : 0.25;
   s.arm.elbow_amplitude = 0.3 * amp;
   s.arm.elbow_lag = rng.uniform(0.5, 0.9);
-  s.arm.cycles = rng.uniform(1.3, 1.7);
+  const double cycles = rng.uniform(1.3, 1.7);
+  s.arm.cycles = occluder ? 1.0 + 0.625 * (cycles - 1.3) : cycles;  // occluder: [1, 1.25]
   s.arm.phase = rng.uniform(0, 2 * kPi);
   {
     Material m = draw_material(tex, Pattern::stripes, {0.90, 0.55, 0.25}, 0.05, {0.55, 0.20, 0.12}, 0.05,
@@ -395,12 +402,16 @@ Scene make_scene(const SceneConfig& config) {
 
   // Static box on the floor behind the arm's sweep, pushed back until the arm's closest
   // approach is config.box_gap: near enough to tempt a geometric graph, never touching.
+  // Occluder layout: a tall pillar in front of the sweep (between it and the training camera),
+  // pulled back towards the arm until its closest approach is config.box_gap.
   {
     const Material m = draw_material(tex, Pattern::checker, {0.15, 0.30, 0.75}, 0.05, {0.90, 0.92, 0.95}, 0.04,
                                      0.04, 0.05, 0.12);
-    const double h = 0.1;
-    add("box", classes::box, true, Motion::fixed, {ShapeKind::box, {h, h, h}}, m,
-        {rot_z(0.35 + rng.uniform(-0.15, 0.15)), {0.02 + rng.uniform(-0.02, 0.02), 0.1, h}});
+    const double turn = rng.uniform(-0.15, 0.15);
+    const double dx = rng.uniform(-0.02, 0.02);
+    const Eigen::Vector3d half = occluder ? Eigen::Vector3d(0.13, 0.05, 0.26) : Eigen::Vector3d(0.1, 0.1, 0.1);
+    add("box", classes::box, true, Motion::fixed, {ShapeKind::box, half}, m,
+        {rot_z(occluder ? 0.5 * turn : 0.35 + turn), {0.02 + dx, occluder ? -0.3 : 0.1, half.z()}});
     // The arm's axis samples at every checked time, computed once (same samples and slack as
     // min_gap, so the result equals pair_min_gap's); then a coarse and a fine scan in y.
     Body& box = s.bodies.back();
@@ -420,12 +431,17 @@ Scene make_scene(const SceneConfig& config) {
       return std::max(0.0, g);
     };
     double y = box.rest.t.y();
-    while (gap_at(y) < config.box_gap && y < 1.0) y += 0.02;
-    for (double fine = std::max(box.rest.t.y(), y - 0.02); fine <= y; fine += 0.005)
-      if (gap_at(fine) >= config.box_gap) {
-        y = fine;
-        break;
-      }
+    if (occluder) {
+      while (y < 1.0 && gap_at(y + 0.02) >= config.box_gap) y += 0.02;
+      while (y < 1.0 && gap_at(y + 0.005) >= config.box_gap) y += 0.005;
+    } else {
+      while (gap_at(y) < config.box_gap && y < 1.0) y += 0.02;
+      for (double fine = std::max(box.rest.t.y(), y - 0.02); fine <= y; fine += 0.005)
+        if (gap_at(fine) >= config.box_gap) {
+          y = fine;
+          break;
+        }
+    }
     box.rest.t.y() = y;
   }
 
@@ -474,7 +490,8 @@ Scene make_scene(const SceneConfig& config) {
   // Cameras: a training camera orbiting in front of the scene, two fixed test cameras far to the
   // sides (wide baselines: about 65-70 degrees of yaw from the training camera's mean direction).
   const double fov = config.fov_y_deg * kPi / 180.0;
-  s.train_path.target = Eigen::Vector3d(-0.04, 0.1, 0.14);
+  // Occluder layout: aimed right of the shoulder, so that the arm pointing left leaves the view.
+  s.train_path.target = occluder ? Eigen::Vector3d(0.2, 0.15, 0.2) : Eigen::Vector3d(-0.04, 0.1, 0.14);
   s.train_path.distance = 1.4;
   s.train_path.yaw_mean = rng.uniform(-0.05, 0.05);
   s.train_path.yaw_amplitude = 0.26;
@@ -498,6 +515,10 @@ Scene make_scene(const SceneConfig& config) {
   for (const TestView& v : s.test_views) {
     OrbitPath p = s.train_path;
     p.distance = 1.6;  // a little farther than the training camera: the whole scene in view
+    if (occluder) {    // the whole sweep in view, the left camera well clear of the arm
+      p.target = Eigen::Vector3d(-0.1, 0.15, 0.2);
+      p.distance = 2.0;
+    }
     p.yaw_mean = v.yaw;
     p.yaw_amplitude = 0;
     p.elevation_mean = v.elevation;

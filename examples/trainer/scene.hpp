@@ -9,6 +9,18 @@
 //   box                a small static textured box on the floor
 //   ball               a textured sphere rolling on its own path
 //
+// A second layout, SceneLayout::occluder (the harder scene of docs/trainer.md), keeps the bodies
+// and classes but rearranges them for long unobserved stretches:
+//
+//   box                a tall static pillar (26 x 10 x 52 cm) between the training camera and the
+//                      arm's sweep, config.box_gap in front of the arm at its closest
+//   arm                swings about the shoulder from behind the pillar (hidden) through pointing
+//                      at the wall to pointing left, where the forearm ("hand") leaves the
+//                      training camera's view
+//   ball               as before, right of the pillar
+//
+// and make_priors' depth is noisier on moving bodies there (apply_scene_layout in dataset.hpp).
+//
 // World frame: z up, metres; the floor is z = 0 and the wall is the plane y = wall_y, facing -y.
 // Every body is a rigid part with its own local frame; a surface point given in that frame is at
 // pose(t) * p in the world at frame t (see world_point). Poses are analytic functions of the
@@ -138,7 +150,27 @@ struct OrbitPath {
   Eigen::Vector3d eye(double u) const;
 };
 
+// Arrangement of the bodies (see the top of this file).
+enum class SceneLayout { standard, occluder };
+
+inline const std::vector<std::string>& scene_layout_names() {
+  static const std::vector<std::string> names = {"standard", "occluder"};
+  return names;
+}
+inline std::string to_string(SceneLayout layout) { return scene_layout_names()[static_cast<std::size_t>(layout)]; }
+// The layout by name; false if the name is unknown.
+inline bool parse_scene_layout(const std::string& name, SceneLayout* out) {
+  const auto& names = scene_layout_names();
+  for (std::size_t k = 0; k < names.size(); ++k)
+    if (names[k] == name) {
+      *out = static_cast<SceneLayout>(k);
+      return true;
+    }
+  return false;
+}
+
 struct SceneConfig {
+  SceneLayout layout = SceneLayout::standard;
   std::uint64_t seed = 0;   // varies textures, arm swing, ball path, camera phase
   int frames = 32;          // T
   int width = 160;          // pixels, every camera

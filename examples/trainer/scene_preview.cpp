@@ -33,6 +33,7 @@ using trainer::Image;
 std::vector<cli::FlagSpec> flags() {
   return {{"out", "scene_preview_out", "output folder (created if missing)"},
           {"seed", "0", "scene and prior seed"},
+          {"scene", "standard", "scene layout: standard | occluder"},
           {"frames", "32", "number of frames T"},
           {"width", "160", "image width (pixels)"},
           {"height", "120", "image height (pixels)"},
@@ -62,6 +63,9 @@ int main(int argc, char** argv) {
       return 0;
 
     trainer::DatasetConfig cfg;
+    trainer::SceneLayout layout = trainer::SceneLayout::standard;
+    trainer::parse_scene_layout(args.get_choice("scene", trainer::scene_layout_names()), &layout);
+    trainer::apply_scene_layout(layout, &cfg);
     cfg.scene.seed = static_cast<std::uint64_t>(int_in(args, "seed", 0, 2147483647));
     cfg.scene.frames = int_in(args, "frames", 2, 1000);
     cfg.scene.width = int_in(args, "width", 16, 4096);
@@ -172,6 +176,7 @@ int main(int argc, char** argv) {
     }
     cli::JsonLine j;
     j.add("program", "scene_preview")
+        .add("scene", trainer::to_string(cfg.scene.layout))
         .add("seed", static_cast<long long>(cfg.scene.seed))
         .add("T", T)
         .add("width", W)

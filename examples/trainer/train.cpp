@@ -50,7 +50,10 @@ using trainer::flags::int_in;
 std::vector<cli::FlagSpec> flags() {
   std::string variants;
   for (const auto& v : trainer::variant_names()) variants += (variants.empty() ? "" : " | ") + v;
+  std::string layouts;
+  for (const auto& l : trainer::scene_layout_names()) layouts += (layouts.empty() ? "" : " | ") + l;
   return {{"variant", "full", "ablation rung: " + variants},
+          {"scene", "standard", "generated scene: " + layouts + " (docs/trainer.md)"},
           {"seed", "0", "scene, prior and training seed"},
           {"out", "trainer_out", "output folder (created if missing): pictures and metrics.json"},
           {"quick", "", "small, fast run for CI (16 frames at 96x72, few iterations)", true},
@@ -301,6 +304,9 @@ int main(int argc, char** argv) {
     cfg = trainer::default_config(quick);
     if (!trainer::parse_variant(args.get_choice("variant", trainer::variant_names()), &cfg.variant))
       throw cli::UsageError("unknown variant");
+    trainer::SceneLayout layout = trainer::SceneLayout::standard;
+    trainer::parse_scene_layout(args.get_choice("scene", trainer::scene_layout_names()), &layout);
+    trainer::apply_scene_layout(layout, &cfg.dataset);
     cfg.dataset.scene.seed = static_cast<std::uint64_t>(int_in(args, "seed", 0, 2147483647));
     cfg.threads = int_in(args, "threads", 0, 1024);
     if (args.given("frames")) cfg.dataset.scene.frames = int_in(args, "frames", 4, 1000);
@@ -318,7 +324,7 @@ int main(int argc, char** argv) {
     quiet = args.get_switch("quiet");
     trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
     if (args.given("data")) {
-      for (const char* f : {"frames", "width", "height", "tracks", "seed", "export-case", "export-dycheck"})
+      for (const char* f : {"frames", "width", "height", "tracks", "seed", "scene", "export-case", "export-dycheck"})
         if (args.given(f)) throw cli::UsageError(std::string("--") + f + " cannot be used with --data");
     } else {
       for (const char* f : {"track-queries", "track-truth"})
@@ -398,6 +404,7 @@ int main(int argc, char** argv) {
     cli::JsonLine j;
     j.add("program", "smg_trainer")
         .add("variant", trainer::to_string(cfg.variant.variant))
+        .add("scene", trainer::to_string(cfg.dataset.scene.layout))
         .add("seed", static_cast<long long>(cfg.dataset.scene.seed))
         .add("T", r.data.scene.frames())
         .add("width", r.data.scene.width())

@@ -293,6 +293,42 @@ TEST_CASE("depth prior: relative noise as configured, holes, edges") {
   CHECK(edge_hole + between >= edge * 95 / 100);
 }
 
+TEST_CASE("depth prior: moving bodies get their own relative noise (the occluder layout's preset)") {
+  DatasetConfig cfg = test::small_config(5);
+  apply_scene_layout(SceneLayout::occluder, &cfg);
+  CHECK(cfg.scene.layout == SceneLayout::occluder);
+  CHECK(cfg.priors.moving_depth_factor == 3.0);
+  const Dataset d = make_dataset(cfg);
+  PriorConfig c = clean_config(50);
+  c.depth_noise = 0.01;
+  c.moving_depth_factor = 5.0;
+  const Priors p = make_priors(d.scene, d.train, c);
+  const int W = p.width, H = p.height;
+  double s2[2] = {0, 0};
+  long long n[2] = {0, 0};
+  for (int t = 0; t < p.frames; ++t)
+    for (int y = 1; y < H - 1; ++y)
+      for (int x = 1; x < W - 1; ++x) {
+        const std::size_t pix = static_cast<std::size_t>(y) * W + x;
+        const double z = d.train[t].depth[pix];
+        if (z <= 0) continue;
+        bool interior = true;  // same body and depth as the 4 neighbours: no edge treatment
+        for (auto [dx, dy] : {std::pair{-1, 0}, {1, 0}, {0, -1}, {0, 1}}) {
+          const std::size_t q = static_cast<std::size_t>(y + dy) * W + x + dx;
+          interior = interior && d.train[t].body[q] == d.train[t].body[pix] &&
+                     std::abs(d.train[t].depth[q] - z) <= 0.05 * std::max<double>(z, d.train[t].depth[q]);
+        }
+        const double zn = p.depth[static_cast<std::size_t>(t) * W * H + pix];
+        if (!interior || zn == 0) continue;
+        const int moving = d.scene.bodies[static_cast<std::size_t>(d.train[t].body[pix])].moves ? 1 : 0;
+        s2[moving] += (zn / z - 1) * (zn / z - 1);
+        ++n[moving];
+      }
+  REQUIRE(n[1] > 300);
+  CHECK(std::sqrt(s2[0] / n[0]) == doctest::Approx(0.01).epsilon(0.1));
+  CHECK(std::sqrt(s2[1] / n[1]) == doctest::Approx(0.05).epsilon(0.1));
+}
+
 TEST_CASE("semantic features: unit norm; arm links close, arm and box clearly different") {
   const Dataset& d = test::small_dataset();
   const Priors& p = d.priors;
@@ -472,6 +508,9 @@ TEST_CASE("validate_prior_config rejects bad values with a clear message") {
   c = PriorConfig();
   c.outlier_rate = 1.5;
   CHECK(validate_prior_config(c).message() == "priors: every rate must be in [0, 1]");
+  c = PriorConfig();
+  c.moving_depth_factor = std::nan("");
+  CHECK(validate_prior_config(c).message() == "priors: moving_depth_factor must be in [0, 10]");
   c = PriorConfig();
   c.tracks = 0;
   CHECK(validate_prior_config(c).message().find("tracks") != std::string::npos);

@@ -16,8 +16,9 @@ using Eigen::Vector3d;
 
 namespace {
 
-SceneConfig config(std::uint64_t seed, int frames = 16) {
+SceneConfig config(std::uint64_t seed, int frames = 16, SceneLayout layout = SceneLayout::standard) {
   SceneConfig c;
+  c.layout = layout;
   c.seed = seed;
   c.frames = frames;
   c.width = 96;
@@ -132,9 +133,11 @@ TEST_CASE("analytic motion: rotations are proper, the elbow joint holds, the tab
 }
 
 TEST_CASE("the arm never touches the box or the floor, the ball never touches the box (independent SDF check)") {
+  for (const SceneLayout layout : {SceneLayout::standard, SceneLayout::occluder})
   for (std::uint64_t seed : {0u, 1u, 5u}) {
+    CAPTURE(to_string(layout));
     CAPTURE(seed);
-    const Scene s = make_scene(config(seed, 24));
+    const Scene s = make_scene(config(seed, 24, layout));
     CHECK(s.min_gap >= s.config.clearance);
     const int box = s.find_body("box"), ball = s.find_body("ball");
     const Shape& box_shape = s.bodies[box].shape;
@@ -293,4 +296,102 @@ TEST_CASE("validate_scene_config names the bad field; make_scene throws its mess
   c.box_gap = c.clearance / 2;
   CHECK(validate_scene_config(c).message().find("box_gap") != std::string::npos);
   CHECK(validate_scene_config(SceneConfig()).is_ok());
+}
+
+namespace {
+
+// Per frame, whether a point on the forearm's tip (its end cap, facing up) is seen by the training
+// camera, hidden by another body, or outside the image.
+struct TipFrames {
+  int seen = 0, occluded = 0, outside = 0, longest_unseen = 0;
+};
+TipFrames forearm_tip(const Scene& s) {
+  const int fore = s.find_body("forearm");
+  const Vector3d tip(s.arm.fore_length, 0, s.arm.fore_radius);
+  TipFrames r;
+  int run = 0;
+  for (int t = 0; t < s.frames(); ++t) {
+    const Camera& cam = s.train_cameras[static_cast<std::size_t>(t)];
+    const Vector3d w = world_point(s, fore, tip, t);
+    const bool inside = cam.contains(cam.project(w));
+    const bool seen = point_visible(s, t, cam, w);
+    r.seen += seen;
+    r.outside += !inside;
+    r.occluded += inside && !seen;
+    run = seen ? 0 : run + 1;
+    r.longest_unseen = std::max(r.longest_unseen, run);
+  }
+  return r;
+}
+
+// Share of the arm's axis-top samples (both links, 10 each) hidden by the static box in frame t.
+double arm_hidden_by_box(const Scene& s, const Scene& no_box, int t) {
+  const Camera& cam = s.train_cameras[static_cast<std::size_t>(t)];
+  int behind = 0, total = 0;
+  for (const char* link : {"upper_arm", "forearm"}) {
+    const int b = s.find_body(link);
+    const Body& body = s.bodies[static_cast<std::size_t>(b)];
+    for (int i = 0; i < 10; ++i) {
+      const Vector3d w = world_point(s, b, Vector3d(body.shape.size.x() * (i + 0.5) / 10, 0, body.shape.size.y()), t);
+      if (!point_visible(no_box, t, cam, w)) continue;
+      ++total;
+      behind += !point_visible(s, t, cam, w);
+    }
+  }
+  return total > 0 ? static_cast<double>(behind) / total : 0.0;
+}
+
+}  // namespace
+
+TEST_CASE("occluder layout: the arm passes behind the pillar and the hand leaves the view, for long stretches") {
+  for (std::uint64_t seed : {0u, 1u, 2u, 3u, 4u}) {
+    CAPTURE(seed);
+    const Scene s = make_scene(config(seed, 32, SceneLayout::occluder));
+    const Scene standard = make_scene(config(seed, 32));
+    // The pillar: taller than it is wide, in front of the shoulder (between the arm and the
+    // training camera, whose centre is at negative y).
+    const Body& box = s.bodies[static_cast<std::size_t>(s.find_body("box"))];
+    CHECK(box.shape.size.z() > 1.5 * box.shape.size.x());
+    CHECK(box.rest.t.y() < s.arm.shoulder.y());
+    CHECK(s.train_cameras[0].center().y() < box.rest.t.y());
+    // The box hides a good part of the arm in some frames (and none in the standard layout,
+    // where the arm is in front of the box).
+    Scene no_box = s;
+    for (auto& frame : no_box.poses) frame[static_cast<std::size_t>(box.id)].t = Vector3d(100, 100, 100);
+    double most = 0;
+    for (int t = 0; t < s.frames(); ++t) most = std::max(most, arm_hidden_by_box(s, no_box, t));
+    CHECK(most > 0.3);
+    // The forearm's tip: out of the image in some frames, behind the pillar in others, and unseen
+    // for at least a quarter of the sequence in one stretch, longer than in the standard layout.
+    const TipFrames occ = forearm_tip(s), std_tip = forearm_tip(standard);
+    MESSAGE("seed " << seed << ": arm hidden by the pillar up to " << most << "; tip seen " << occ.seen << ", outside "
+                    << occ.outside << ", occluded " << occ.occluded << ", longest unseen " << occ.longest_unseen
+                    << " (standard layout " << std_tip.longest_unseen << ")");
+    CHECK(occ.outside >= 3);
+    CHECK(occ.occluded >= 2);
+    CHECK(occ.seen >= 4);
+    CHECK(occ.longest_unseen >= s.frames() / 4);
+    CHECK(occ.longest_unseen > std_tip.longest_unseen);
+  }
+}
+
+TEST_CASE("occluder layout: the same random draws as the standard layout, and the standard layout is unchanged") {
+  // Textures and the ball come from the same draws in both layouts.
+  const Scene a = make_scene(config(7, 16)), b = make_scene(config(7, 16, SceneLayout::occluder));
+  REQUIRE(a.body_count() == b.body_count());
+  for (int k = 0; k < a.body_count(); ++k) {
+    CHECK(a.bodies[k].name == b.bodies[k].name);
+    CHECK(a.bodies[k].material.seed == b.bodies[k].material.seed);
+  }
+  CHECK(a.ball.radius_x == b.ball.radius_x);
+  CHECK(a.ball.phase == b.ball.phase);
+  CHECK(a.arm.phase == b.arm.phase);
+  CHECK(a.arm.shoulder.y() != b.arm.shoulder.y());
+  // The default config is the standard layout.
+  CHECK(SceneConfig{}.layout == SceneLayout::standard);
+  SceneLayout parsed = SceneLayout::standard;
+  CHECK(parse_scene_layout("occluder", &parsed));
+  CHECK(parsed == SceneLayout::occluder);
+  CHECK_FALSE(parse_scene_layout("occluded", &parsed));
+  CHECK(to_string(SceneLayout::standard) == "standard");
 }

@@ -1,0 +1,157 @@
+#!/usr/bin/env python3
+"""Tables of an ablation ladder run by scripts/ladder.sh (docs/results.md).
+
+Reads OUT/<variant>_s<seed>/metrics.json for every variant and seed and writes, between the
+markers <!-- ladder:SECTION --> and <!-- /ladder:SECTION --> of the results page (appended at the
+end when missing; the rest of the page is kept):
+  * means with 95 % confidence intervals over the seeds (Student's t, n - 1 degrees of freedom);
+  * paired differences per seed for the comparisons the paper's order makes (A - B on the same
+    seed, so the scene's own difficulty cancels), with their 95 % intervals and on how many seeds A
+    is better, and a verdict per metric: better / tie (the interval holds 0) / worse;
+  * the per-seed values.
+Standard library only (the machines have no SciPy)."""
+import argparse
+import datetime
+import json
+import math
+import os
+import platform
+import sys
+
+# Two-sided 95 % quantiles of Student's t, by degrees of freedom.
+T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262,
+        10: 2.228, 11: 2.201, 12: 2.179, 13: 2.160, 14: 2.145, 15: 2.131, 16: 2.120, 17: 2.110,
+        18: 2.101, 19: 2.093, 20: 2.086, 25: 2.060, 30: 2.042}
+
+# (key, column title, decimals, +1 if higher is better, -1 if lower is better)
+METRICS = [("test_psnr_masked", "masked PSNR (dB)", 2, +1),
+           ("test_ssim", "SSIM", 4, +1),
+           ("test_ssim_masked", "masked SSIM", 4, +1),
+           ("epe", "3D EPE (m)", 4, -1),
+           ("epe_hidden", "EPE unobserved (m)", 4, -1),
+           ("delta_10", "δ10", 3, +1)]
+# Comparisons of the paper's order (full >= no-lrm >= no-carap ~ smg-only > base; full > mosca),
+# each as (A, B, what A - B isolates).
+PAIRS = [("full", "no-lrm", "LRM on top of C-ARAP"),
+         ("no-lrm", "smg-only", "C-ARAP against ARAP, no LRM"),
+         ("full", "no-carap", "C-ARAP against ARAP, with LRM"),
+         ("no-carap", "smg-only", "LRM on top of ARAP"),
+         ("smg-only", "mosca", "semantic gate (both plain ARAP)"),
+         ("smg-only", "base", "graph regulariser at all"),
+         ("full", "mosca", "SMG against MoSca's graph")]
+
+
+def t975(df):
+    if df in T975:
+        return T975[df]
+    below = [d for d in T975 if d < df]
+    return T975[max(below)] if df < 30 else 1.96
+
+
+def mean_ci(xs):
+    n = len(xs)
+    mu = sum(xs) / n
+    if n < 2:
+        return mu, float("nan")
+    sd = math.sqrt(sum((x - mu) ** 2 for x in xs) / (n - 1))
+    return mu, t975(n - 1) * sd / math.sqrt(n)
+
+
+def fmt(mu, half, nd):
+    return f"{mu:.{nd}f}" if math.isnan(half) else f"{mu:.{nd}f} ± {half:.{nd}f}"
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--doc", required=True)
+    ap.add_argument("--section", required=True)
+    ap.add_argument("--seeds", required=True)
+    ap.add_argument("--variants", required=True)
+    ap.add_argument("--flags", default="")
+    ap.add_argument("--jobs", default="1")
+    a = ap.parse_args()
+    seeds, variants = a.seeds.split(), a.variants.split()
+    runs = {}
+    for v in variants:
+        runs[v] = []
+        for s in seeds:
+            path = os.path.join(a.out, f"{v}_s{s}", "metrics.json")
+            if not os.path.exists(path):
+                sys.exit(f"ladder_report.py: {path}: missing (run scripts/ladder.sh without --report-only)")
+            runs[v].append(json.load(open(path)))
+    metrics = [m for m in METRICS if m[0] in runs[variants[0]][0]]
+    n = len(seeds)
+
+    head = "| variant | " + " | ".join(m[1] for m in metrics) + " | time (s) |\n|---|" + "---:|" * (len(metrics) + 1)
+    rows = []
+    for v in variants:
+        cells = [fmt(*mean_ci([r[k] for r in runs[v]]), nd) for k, _, nd, _ in metrics]
+        cells.append(f"{sum(r['seconds_total'] for r in runs[v]) / n:.0f}")
+        rows.append(f"| {v} | " + " | ".join(cells) + " |")
+
+    dhead = ("| A − B | isolates | " + " | ".join(m[1] for m in metrics) + " |\n|---|---|" +
+             "---:|" * len(metrics))
+    drows, verdicts = [], []
+    for A, B, what in PAIRS:
+        if A not in runs or B not in runs:
+            continue
+        cells, vcells = [], []
+        for k, _, nd, sign in metrics:
+            d = [ra[k] - rb[k] for ra, rb in zip(runs[A], runs[B])]
+            mu, half = mean_ci(d)
+            wins = sum(1 for x in d if sign * x > 0)
+            cells.append(f"{fmt(mu, half, nd)} ({wins}/{n})")
+            if math.isnan(half) or abs(mu) <= half:
+                vcells.append("tie")
+            else:
+                vcells.append("**better**" if sign * mu > 0 else "*worse*")
+        drows.append(f"| {A} − {B} | {what} | " + " | ".join(cells) + " |")
+        verdicts.append(f"| {A} vs {B} | " + " | ".join(vcells) + " |")
+    vhead = "| A vs B | " + " | ".join(m[1] for m in metrics) + " |\n|---|" + "---|" * len(metrics)
+
+    per_seed = ["| variant | " + " | ".join(f"seed {s}" for s in seeds) + " |", "|---|" + "---|" * n]
+    for v in variants:
+        per_seed.append(f"| {v} | " + " | ".join(f"{r['test_psnr_masked']:.2f} / {r['epe']:.4f} / {r['epe_hidden']:.4f}"
+                                                 for r in runs[v]) + " |")
+    m0 = runs[variants[-1]][0]
+    cmd = (f"scripts/ladder.sh --seeds \"{' '.join(seeds)}\" --jobs {a.jobs} --section {a.section}" +
+           (f" -- {a.flags}" if a.flags else ""))
+    text = f"""<!-- ladder:{a.section} -->
+Generated by `{cmd}` on {datetime.date.today().isoformat()} ({platform.machine()}, {os.cpu_count()} cores;
+every run with {m0['threads']} threads, T = {m0['T']}, {m0['width']}x{m0['height']}, {m0['stage1_iterations']} stage-1 and
+{m0['stage2_iterations']} stage-2 iterations, seeds {", ".join(seeds)}; every seed is a different scene).
+
+Means with 95 % confidence intervals over the seeds (t distribution, {n - 1} degrees of freedom);
+times are wall clock, {a.jobs} run(s) at a time:
+
+{head}
+""" + "\n".join(rows) + f"""
+
+Paired differences A − B over the same seeds, mean ± 95 % interval, and (in brackets) on how many
+seeds A is better (higher PSNR, SSIM and δ10; lower EPE):
+
+{dhead}
+""" + "\n".join(drows) + f"""
+
+Verdict per metric: **better** or *worse* when the interval of A − B excludes 0, tie otherwise:
+
+{vhead}
+""" + "\n".join(verdicts) + """
+
+Per seed (masked PSNR dB / 3D EPE m / EPE on unobserved samples m):
+
+""" + "\n".join(per_seed) + f"\n<!-- /ladder:{a.section} -->\n"
+
+    begin, end = f"<!-- ladder:{a.section} -->", f"<!-- /ladder:{a.section} -->"
+    old = open(a.doc).read() if os.path.exists(a.doc) else "# Results: the ablation ladder\n"
+    if begin in old and end in old:
+        new = old[:old.index(begin)] + text + old[old.index(end) + len(end) + 1:]
+    else:
+        new = old.rstrip("\n") + "\n\n" + text
+    open(a.doc, "w").write(new)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
