@@ -133,14 +133,131 @@ bool NodeObjective::uses_confidence() const {
   return variant_.rigidity == Rigidity::carap || variant_.lrm;
 }
 
+std::vector<double> node_confidences(const Nodes& n, const std::vector<double>& positions,
+                                     const smg::ConfidenceOptions& options, smg::ParallelOptions parallel) {
+  std::vector<double> out(sz(n.frames) * n.count, 0.0);
+  const smg::PositionsView<const double> x(positions.data(), n.frames, n.count);
+  smg::FrameScalarsView<double> c(out.data(), n.frames, n.count);
+  check(smg::validate_confidence<double>(x, n.visibility_view(), n.graph.view(), options, c), "node_confidences");
+  smg::node_confidences<double>(x, n.visibility_view(), n.graph.view(), options, c, {}, {}, nullptr, parallel);
+  return out;
+}
+
 void NodeObjective::update_confidences(const Nodes& n) {
   if (!uses_confidence()) return;
-  confidence_.assign(sz(n.frames) * n.count, 0.0);
-  smg::FrameScalarsView<double> c(confidence_.data(), n.frames, n.count);
-  check(smg::validate_confidence<double>(n.positions_view(), n.visibility_view(), n.graph.view(), options_.confidence, c),
-        "node_confidences");
-  smg::node_confidences<double>(n.positions_view(), n.visibility_view(), n.graph.view(), options_.confidence, c, {}, {},
-                                &ws_, parallel_);
+  switch (options_.confidence_source) {
+    case ConfidenceSource::estimate:
+      confidence_ = node_confidences(n, n.positions, options_.confidence, parallel_);
+      break;
+    case ConfidenceSource::lifted:
+      if (lifted_.empty()) lifted_ = n.positions;
+      confidence_ = node_confidences(n, lifted_, options_.confidence, parallel_);
+      break;
+    case ConfidenceSource::truth:
+      if (n.truth.size() != n.positions.size())
+        throw std::invalid_argument("confidences from the truth need the procedural scene's ground truth");
+      confidence_ = node_confidences(n, n.truth, options_.confidence, parallel_);
+      break;
+  }
+}
+
+namespace {
+
+// Ranks 1..n of xs, ties given their mean rank.
+std::vector<double> ranks(const std::vector<double>& xs) {
+  std::vector<std::size_t> order(xs.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return xs[a] < xs[b]; });
+  std::vector<double> r(xs.size());
+  for (std::size_t a = 0; a < order.size();) {
+    std::size_t b = a;
+    while (b + 1 < order.size() && xs[order[b + 1]] == xs[order[a]]) ++b;
+    for (std::size_t k = a; k <= b; ++k) r[order[k]] = 0.5 * static_cast<double>(a + b) + 1.0;
+    a = b + 1;
+  }
+  return r;
+}
+
+// Spearman's rank correlation (Pearson's of the ranks); 0 when either side is constant.
+double spearman(const std::vector<double>& a, const std::vector<double>& b) {
+  const std::vector<double> ra = ranks(a), rb = ranks(b);
+  const double n = static_cast<double>(a.size());
+  double ma = 0, mb = 0;
+  for (std::size_t k = 0; k < ra.size(); ++k) {
+    ma += ra[k] / n;
+    mb += rb[k] / n;
+  }
+  double sab = 0, saa = 0, sbb = 0;
+  for (std::size_t k = 0; k < ra.size(); ++k) {
+    sab += (ra[k] - ma) * (rb[k] - mb);
+    saa += (ra[k] - ma) * (ra[k] - ma);
+    sbb += (rb[k] - mb) * (rb[k] - mb);
+  }
+  return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : 0.0;
+}
+
+}  // namespace
+
+ConfidenceDiagnostics confidence_diagnostics(const Nodes& n, const std::vector<double>& positions,
+                                             const smg::ConfidenceOptions& options, double alpha,
+                                             smg::ParallelOptions parallel) {
+  ConfidenceDiagnostics d;
+  const int T = n.frames, N = n.count, K = n.graph.k;
+  if (n.truth.size() != positions.size() || N == 0) return d;
+  const std::vector<double> c = node_confidences(n, positions, options, parallel);
+  const auto dist = [](const double* a, const double* b) {
+    return (Eigen::Map<const Eigen::Vector3d>(a) - Eigen::Map<const Eigen::Vector3d>(b)).norm();
+  };
+  std::vector<double> conf, err, obs_err;
+  double sum[4] = {0, 0, 0, 0};
+  for (std::size_t s = 0; s < n.visible.size(); ++s) {
+    if (!n.visible[s]) continue;
+    conf.push_back(c[s]);
+    err.push_back(dist(positions.data() + 3 * s, n.truth.data() + 3 * s));
+    const double e = dist(n.observed.data() + 3 * s, n.truth.data() + 3 * s);
+    obs_err.push_back(e);
+    const int bin = e < 0.03 ? 0 : e < 0.10 ? 1 : e < 0.30 ? 2 : 3;
+    sum[bin] += c[s];
+    ++d.count_by_observation_error[bin];
+  }
+  for (int b = 0; b < 4; ++b)
+    d.mean_by_observation_error[b] = d.count_by_observation_error[b] > 0 ? sum[b] / d.count_by_observation_error[b] : 0;
+  d.spearman_error = spearman(conf, err);
+  d.spearman_observation = spearman(conf, obs_err);
+  // Weight acting on each sample under both readings, relative to plain ARAP.
+  const auto wt = [&](int t, int j) { return alpha + (1 - alpha) * c[sz(t) * N + j]; };
+  double sym[2] = {0, 0}, dir[2] = {0, 0};
+  long long cnt[2] = {0, 0}, low = 0;
+  for (int t = 0; t < T; ++t) {
+    std::vector<double> own(sz(N), 0.0), own_arap(sz(N), 0.0), in(sz(N), 0.0), in_arap(sz(N), 0.0);
+    for (int i = 0; i < N; ++i)
+      for (int k = 0; k < K; ++k) {
+        const int j = n.graph.indices[sz(i) * K + k];
+        if (j < 0) break;
+        const double w = n.graph.weights[sz(i) * K + k];
+        own[sz(i)] += w * wt(t, j);
+        own_arap[sz(i)] += w;
+        in[sz(j)] += w * wt(t, j);
+        in_arap[sz(j)] += w;
+      }
+    for (int i = 0; i < N; ++i) {
+      const double ci = c[sz(t) * N + i];
+      low += ci < 0.3;
+      if (ci >= 0.3 && ci < 0.7) continue;
+      const int g = ci < 0.3 ? 0 : 1;
+      const double arap = own_arap[sz(i)] + in_arap[sz(i)];
+      if (arap <= 0 || own_arap[sz(i)] <= 0) continue;
+      sym[g] += (own[sz(i)] + in[sz(i)]) / arap;
+      dir[g] += own[sz(i)] / own_arap[sz(i)];
+      ++cnt[g];
+    }
+  }
+  d.low_fraction = static_cast<double>(low) / (static_cast<double>(T) * N);
+  d.symmetric_low = cnt[0] ? sym[0] / cnt[0] : 0;
+  d.symmetric_high = cnt[1] ? sym[1] / cnt[1] : 0;
+  d.directed_low = cnt[0] ? dir[0] / cnt[0] : 0;
+  d.directed_high = cnt[1] ? dir[1] / cnt[1] : 0;
+  return d;
 }
 
 NodeLossTerms NodeObjective::evaluate(const Nodes& n, double scale, double* gp, double* gr) {
@@ -186,8 +303,11 @@ NodeLossTerms NodeObjective::evaluate(const Nodes& n, double scale, double* gp, 
     co.weight = w * scale;
     const auto c = variant_.rigidity == Rigidity::carap ? cview : smg::FrameScalarsView<const double>{};
     check(smg::validate_carap<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv, grv), "carap");
-    const double e = smg::carap<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv, grv, &ws_,
-                                        parallel_);
+    const bool directed = variant_.rigidity == Rigidity::carap && options_.carap_reading == CarapReading::directed;
+    const double e = directed ? smg::carap_directed<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co,
+                                                            gpv, grv, parallel_)
+                              : smg::carap<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv,
+                                                   grv, &ws_, parallel_);
     out.rigidity = scale != 0 ? e / scale : 0.0;
   }
   if (variant_.lrm) {

@@ -25,6 +25,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <string>
 #include <vector>
 
 #include "smg/core/parallel.hpp"
@@ -87,6 +88,24 @@ void build_graph(Nodes& nodes, const NodeOptions& options, bool semantic, smg::P
 // identity where the neighbourhood is degenerate (fewer than two neighbours or rank < 2).
 void init_rotations(Nodes& nodes);
 
+// How the C-ARAP term moves the nodes (docs/results.md, "C-ARAP"): `symmetric` follows the
+// gradient of (E9), every term moving both of its nodes (the paper's energy, the default);
+// `directed` follows smg::carap_directed's update (E18), term (i, j) moving node i only.
+enum class CarapReading { symmetric, directed };
+// What the confidences (E6) are computed from: the current estimate, every confidence_every
+// stage-1 iterations (the paper's reading, the default); the lifted trajectories stage 1 starts
+// from, once; or the ground-truth trajectories (an oracle for the procedural scene: what C-ARAP
+// does when the confidences are as good as they can be).
+enum class ConfidenceSource { estimate, lifted, truth };
+inline const std::vector<std::string>& carap_reading_names() {
+  static const std::vector<std::string> names = {"symmetric", "directed"};
+  return names;
+}
+inline const std::vector<std::string>& confidence_source_names() {
+  static const std::vector<std::string> names = {"estimate", "lifted", "truth"};
+  return names;
+}
+
 struct NodeLossOptions {
   double data_weight = 1.0;
   double data_huber = 0.02;        // metres: lifted depth noise is ~3 cm at 1.5 m
@@ -98,6 +117,8 @@ struct NodeLossOptions {
   double lrm_weight = 0.1;
   double lrm_huber = 0.01;         // metres per frame (smg::LrmOptions::huber_delta)
   double alpha = 0.6;              // confidence floor of C-ARAP and LRM (E7)
+  CarapReading carap_reading = CarapReading::symmetric;
+  ConfidenceSource confidence_source = ConfidenceSource::estimate;
   smg::GapList gaps = smg::default_gaps();
   smg::ConfidenceOptions confidence{};
 };
@@ -113,8 +134,9 @@ class NodeObjective {
  public:
   NodeObjective(const VariantSpec& variant, const NodeLossOptions& options, smg::ParallelOptions parallel = {});
 
-  // Recomputes the confidences c_{t,i} (E6) from the current positions and the observation
-  // visibility; a no-op for variants that do not use them.
+  // Recomputes the confidences c_{t,i} (E6) from the observation visibility and the trajectories
+  // options().confidence_source names (the current positions by default; the lifted ones are
+  // those of the first call); a no-op for variants that do not use them.
   void update_confidences(const Nodes& nodes);
   const std::vector<double>& confidences() const { return confidence_; }
 
@@ -131,8 +153,36 @@ class NodeObjective {
   NodeLossOptions options_;
   smg::ParallelOptions parallel_;
   std::vector<double> confidence_;  // [T][N]
+  std::vector<double> lifted_;      // [T][N][3] the positions of the first update (source lifted)
   smg::EnergyWorkspace<double> ws_;
 };
+
+// Confidences c_{t,i} (E6) of trajectories `positions` [T][N][3] with the nodes' visibility and
+// graph, [T][N].
+std::vector<double> node_confidences(const Nodes& nodes, const std::vector<double>& positions,
+                                     const smg::ConfidenceOptions& options, smg::ParallelOptions parallel = {});
+
+// What the confidences measure, against the ground truth (procedural scenes; docs/results.md).
+// Over the observed samples (t, i) of the nodes, with c the confidences (E6) of `positions`:
+//   spearman_error: rank correlation of c with the true error |x_i^t − truth| of `positions`;
+//   spearman_observation: the same with the error of the lifted observation y_i^t;
+//   mean_by_observation_error[b]: mean c over the samples whose observation error is below 3 cm,
+//     3-10 cm, 10-30 cm and above 30 cm (count_by_observation_error[b] samples);
+// and over all samples (observed or not), split into low (c < 0.3) and high (c >= 0.7)
+// confidence, the rigidity weight acting on a sample relative to plain ARAP (E7, uniform w):
+//   symmetric reading: Σ_{j∈N(i)} w̃_ij + Σ_{k: i∈N(k)} w̃_ki over Σ w_ij + Σ w_ki (own terms and
+//     the terms naming i as neighbour both move node i);
+//   directed reading: Σ_{j∈N(i)} w̃_ij over Σ w_ij (own terms only, E18).
+struct ConfidenceDiagnostics {
+  double spearman_error = 0, spearman_observation = 0;
+  double mean_by_observation_error[4] = {0, 0, 0, 0};
+  long long count_by_observation_error[4] = {0, 0, 0, 0};
+  double low_fraction = 0;  // samples with c < 0.3 (all samples)
+  double symmetric_low = 0, symmetric_high = 0, directed_low = 0, directed_high = 0;
+};
+ConfidenceDiagnostics confidence_diagnostics(const Nodes& nodes, const std::vector<double>& positions,
+                                             const smg::ConfidenceOptions& options, double alpha,
+                                             smg::ParallelOptions parallel = {});
 
 struct Stage1Options {
   int iterations = 500;

@@ -132,7 +132,13 @@ TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point 
 
   // Stage 1.
   NodeObjective objective(config.variant, config.node_loss, par);
+  if (truth)
+    r.confidence_lifted = confidence_diagnostics(r.nodes, r.nodes.positions, config.node_loss.confidence,
+                                                 config.node_loss.alpha, par);
   r.stage1 = fit_nodes(r.nodes, objective, config.stage1, progress);
+  if (truth)
+    r.confidence_stage1 = confidence_diagnostics(r.nodes, r.nodes.positions, config.node_loss.confidence,
+                                                 config.node_loss.alpha, par);
   if (!truth) {
     progress.line("stage1", format("done in %.1fs", r.stage1.seconds));
   } else {

@@ -56,6 +56,9 @@ struct TrainerResult {
   Stage2Result stage2;
   TrackMetrics tracks_lifted;  // the node trajectories as lifted (before stage 1)
   TrackMetrics tracks_stage1;  // after stage 1
+  // What the confidences (E6) measure (procedural scenes only): of the lifted trajectories stage 1
+  // starts from, and of its result (nodes.hpp, confidence_diagnostics).
+  ConfidenceDiagnostics confidence_lifted, confidence_stage1;
   Evaluation evaluation;       // after stage 2
   std::vector<std::vector<Image>> renders;  // [test views + 1][T], the training view last
   double seconds_dataset = 0, seconds_stage0 = 0, seconds_total = 0;

@@ -17,6 +17,7 @@
 // --export-case DIR stops after stage 0 (lifting, node selection, graph, initial rotations) and
 // writes stage 1's problem as .npy files and case.json into DIR instead of training
 // (docs/trainer.md, "Exporting the stage-1 problem"; examples/torch/fit_nodes.py reads it).
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -69,6 +70,12 @@ std::vector<cli::FlagSpec> flags() {
           {"w-data", "", "weight of the node data term (default 1)"},
           {"w-rigidity", "", "weight of the rigidity term, ARAP or C-ARAP (default 0.1)"},
           {"w-lrm", "", "weight of the LRM term (default 0.1)"},
+          {"alpha", "", "confidence floor alpha of C-ARAP and LRM, E7 (default 0.6; 1 makes C-ARAP plain ARAP)"},
+          {"carap-reading", "", "how C-ARAP moves the nodes: symmetric (the gradient of E9, default) | directed "
+                                "(term i-j moves node i only, E18; docs/results.md)"},
+          {"confidence-from", "", "trajectories the confidences E6 are computed from: estimate (the current one, "
+                                  "default) | lifted (stage 1's start, once) | truth (procedural ground truth, an "
+                                  "oracle)"},
           {"export-case", "", "write the stage-1 problem (lifted node tracks, visibility, ground truth, rotations, "
                               "graph: .npy + case.json) into this folder and exit without training"},
           {"data", "", "train on this scene folder (Dycheck iPhone layout plus priors/, docs/data.md) instead of "
@@ -91,6 +98,25 @@ std::string view_json(const trainer::ViewMetrics& v) {
       .add("psnr_box", v.psnr_box)
       .add("psnr_objects", v.psnr_objects);
   return j.str();
+}
+
+// Position of `name` in `names` (a value get_choice has already checked).
+std::size_t choice_index(const std::string& name, const std::vector<std::string>& names) {
+  return static_cast<std::size_t>(std::find(names.begin(), names.end(), name) - names.begin());
+}
+
+void add_confidence(cli::JsonLine& j, const std::string& suffix, const trainer::ConfidenceDiagnostics& d) {
+  j.add("conf_spearman_error" + suffix, d.spearman_error)
+      .add("conf_spearman_observation" + suffix, d.spearman_observation)
+      .add("conf_obs_err_below_3cm" + suffix, d.mean_by_observation_error[0])
+      .add("conf_obs_err_3_10cm" + suffix, d.mean_by_observation_error[1])
+      .add("conf_obs_err_10_30cm" + suffix, d.mean_by_observation_error[2])
+      .add("conf_obs_err_above_30cm" + suffix, d.mean_by_observation_error[3])
+      .add("conf_low_fraction" + suffix, d.low_fraction)
+      .add("conf_weight_symmetric_low" + suffix, d.symmetric_low)
+      .add("conf_weight_symmetric_high" + suffix, d.symmetric_high)
+      .add("conf_weight_directed_low" + suffix, d.directed_low)
+      .add("conf_weight_directed_high" + suffix, d.directed_high);
 }
 
 void add_tracks(cli::JsonLine& j, const std::string& suffix, const trainer::TrackMetrics& m) {
@@ -319,11 +345,20 @@ int main(int argc, char** argv) {
     if (args.given("w-data")) cfg.node_loss.data_weight = double_in(args, "w-data", 0.0, 1e6);
     if (args.given("w-rigidity")) cfg.node_loss.rigidity_weight = double_in(args, "w-rigidity", 0.0, 1e6);
     if (args.given("w-lrm")) cfg.node_loss.lrm_weight = double_in(args, "w-lrm", 0.0, 1e6);
+    if (args.given("alpha")) cfg.node_loss.alpha = double_in(args, "alpha", 0.0, 1.0);
+    if (args.given("carap-reading"))
+      cfg.node_loss.carap_reading = static_cast<trainer::CarapReading>(
+          choice_index(args.get_choice("carap-reading", trainer::carap_reading_names()), trainer::carap_reading_names()));
+    if (args.given("confidence-from"))
+      cfg.node_loss.confidence_source = static_cast<trainer::ConfidenceSource>(choice_index(
+          args.get_choice("confidence-from", trainer::confidence_source_names()), trainer::confidence_source_names()));
     if (args.given("lambda-depth")) cfg.stage2.lambda_depth = double_in(args, "lambda-depth", 0.0, 100.0);
     pictures = !args.get_switch("no-pictures");
     quiet = args.get_switch("quiet");
     trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
     if (args.given("data")) {
+      if (cfg.node_loss.confidence_source == trainer::ConfidenceSource::truth)
+        throw cli::UsageError("--confidence-from truth needs the generated scene's ground truth, not --data");
       for (const char* f : {"frames", "width", "height", "tracks", "seed", "scene", "export-case", "export-dycheck"})
         if (args.given(f)) throw cli::UsageError(std::string("--") + f + " cannot be used with --data");
     } else {
@@ -423,6 +458,12 @@ int main(int argc, char** argv) {
     add_tracks(j, "", e.tracks);
     add_tracks(j, "_stage1", r.tracks_stage1);
     add_tracks(j, "_lifted", r.tracks_lifted);
+    const trainer::NodeLossOptions& nl = cfg.node_loss;
+    j.add("alpha", nl.alpha)
+        .add("carap_reading", trainer::carap_reading_names()[static_cast<std::size_t>(nl.carap_reading)])
+        .add("confidence_from", trainer::confidence_source_names()[static_cast<std::size_t>(nl.confidence_source)]);
+    add_confidence(j, "", r.confidence_stage1);
+    add_confidence(j, "_lifted", r.confidence_lifted);
     j.add("extent", r.data.scene.extent);
     add_model_stats(j, r);
     j.add("seconds_dataset", r.seconds_dataset)

@@ -8,6 +8,7 @@
 #include "smg/core/quaternion_manifold.hpp"
 #include "smg/energy/arap.hpp"
 #include "smg/energy/carap.hpp"
+#include "smg/energy/carap_directed.hpp"
 #include "smg/energy/carap_residuals.hpp"
 #include "smg/energy/common.hpp"
 #include "smg/energy/confidence.hpp"

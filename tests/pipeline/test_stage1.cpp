@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <utility>
 #include <vector>
 
 #include "trainer/evaluate.hpp"
@@ -138,4 +139,102 @@ TEST_CASE("stage 0 + stage 1 are bit-identical for 1, 2 and 7 threads") {
   // The run moved the nodes (otherwise equality would be trivial).
   trainer::Nodes start = trainer::make_nodes(q.lifted, c.nodes, c.variant.semantic_graph, {1, 0});
   CHECK(start.positions != positions[0]);
+}
+
+TEST_CASE("C-ARAP options: the directed reading keeps the energy and rotation gradient, changes the positions'") {
+  const QuickStage0& q = quick();
+  const trainer::TrainerConfig& c = q.config;
+  const smg::ParallelOptions par{2, 0};
+  trainer::Nodes nodes = trainer::make_nodes(q.lifted, c.nodes, true, par);
+  trainer::init_rotations(nodes);
+  const trainer::VariantSpec no_lrm = trainer::variant_spec(trainer::Variant::no_lrm);
+  trainer::NodeLossOptions o = c.node_loss;
+  trainer::NodeObjective sym(no_lrm, o, par);
+  o.carap_reading = trainer::CarapReading::directed;
+  trainer::NodeObjective dir(no_lrm, o, par);
+  const std::size_t n = nodes.positions.size();
+  std::vector<double> gx_s(n, 0.0), gr_s(n, 0.0), gx_d(n, 0.0), gr_d(n, 0.0);
+  const trainer::NodeLossTerms es = sym.evaluate(nodes, 1.0, gx_s.data(), gr_s.data());
+  const trainer::NodeLossTerms ed = dir.evaluate(nodes, 1.0, gx_d.data(), gr_d.data());
+  CHECK(ed.rigidity == doctest::Approx(es.rigidity).epsilon(1e-12));
+  CHECK(ed.data == es.data);
+  double dr = 0, nr = 0, dx = 0, nx = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    dr += (gr_d[k] - gr_s[k]) * (gr_d[k] - gr_s[k]);
+    nr += gr_s[k] * gr_s[k];
+    dx += (gx_d[k] - gx_s[k]) * (gx_d[k] - gx_s[k]);
+    nx += gx_s[k] * gx_s[k];
+  }
+  CHECK(std::sqrt(dr / nr) < 1e-10);
+  CHECK(std::sqrt(dx / nx) > 1e-3);
+}
+
+TEST_CASE("C-ARAP options: confidences from the estimate follow it, from the lifted trajectories or the truth they do not") {
+  const QuickStage0& q = quick();
+  const trainer::TrainerConfig& c = q.config;
+  const smg::ParallelOptions par{2, 0};
+  trainer::Nodes nodes = trainer::make_nodes(q.lifted, c.nodes, true, par);
+  trainer::init_rotations(nodes);
+  const trainer::VariantSpec full = trainer::variant_spec(trainer::Variant::full);
+  const auto confidences_before_after = [&](trainer::ConfidenceSource source) {
+    trainer::Nodes n = nodes;
+    trainer::NodeLossOptions o = c.node_loss;
+    o.confidence_source = source;
+    trainer::NodeObjective obj(full, o, par);
+    obj.update_confidences(n);
+    const std::vector<double> before = obj.confidences();
+    for (std::size_t k = 0; k < n.positions.size(); ++k) n.positions[k] += 0.02 * std::sin(0.37 * static_cast<double>(k));
+    obj.update_confidences(n);
+    return std::pair{before, obj.confidences()};
+  };
+  const auto [est0, est1] = confidences_before_after(trainer::ConfidenceSource::estimate);
+  const auto [lift0, lift1] = confidences_before_after(trainer::ConfidenceSource::lifted);
+  const auto [tru0, tru1] = confidences_before_after(trainer::ConfidenceSource::truth);
+  CHECK(est0 == lift0);  // the lifted trajectories are the estimate at the first update
+  CHECK(est0 != est1);
+  CHECK(lift0 == lift1);
+  CHECK(tru0 == tru1);
+  CHECK(tru0 == trainer::node_confidences(nodes, nodes.truth, c.node_loss.confidence, par));
+  // Without ground truth (a scene from disk) the oracle is refused.
+  trainer::Nodes blind = nodes;
+  blind.truth.clear();
+  trainer::NodeLossOptions o = c.node_loss;
+  o.confidence_source = trainer::ConfidenceSource::truth;
+  trainer::NodeObjective obj(full, o, par);
+  CHECK_THROWS_WITH_AS(obj.update_confidences(blind), doctest::Contains("ground truth"), std::invalid_argument);
+}
+
+TEST_CASE("confidence diagnostics: rank correlations, bins and the weight ratios of both readings") {
+  const QuickStage0& q = quick();
+  const trainer::TrainerConfig& c = q.config;
+  const smg::ParallelOptions par{2, 0};
+  trainer::Nodes nodes = trainer::make_nodes(q.lifted, c.nodes, true, par);
+  const trainer::ConfidenceDiagnostics d =
+      trainer::confidence_diagnostics(nodes, nodes.positions, c.node_loss.confidence, 0.6, par);
+  long long observed = 0;
+  for (std::uint8_t v : nodes.visible) observed += v;
+  long long binned = 0;
+  for (long long k : d.count_by_observation_error) binned += k;
+  CHECK(binned == observed);
+  CHECK(d.spearman_error >= -1.0);
+  CHECK(d.spearman_error <= 1.0);
+  CHECK(d.low_fraction > 0.0);
+  // Every weight ratio lies in [alpha, 1]; the symmetric reading weakens low-confidence samples
+  // more than high-confidence ones (their incoming terms carry their own c).
+  for (double r : {d.symmetric_low, d.symmetric_high, d.directed_low, d.directed_high}) {
+    CHECK(r >= 0.6 - 1e-12);
+    CHECK(r <= 1.0 + 1e-12);
+  }
+  CHECK(d.symmetric_low < d.symmetric_high);
+  // With alpha = 1 every ratio is 1; the estimate at the truth has zero error everywhere.
+  const trainer::ConfidenceDiagnostics one =
+      trainer::confidence_diagnostics(nodes, nodes.positions, c.node_loss.confidence, 1.0, par);
+  CHECK(one.symmetric_low == doctest::Approx(1.0));
+  CHECK(one.directed_high == doctest::Approx(1.0));
+  // Observations equal to the truth all fall in the first bin.
+  trainer::Nodes exact = nodes;
+  exact.observed = exact.truth;
+  const trainer::ConfidenceDiagnostics e =
+      trainer::confidence_diagnostics(exact, exact.truth, c.node_loss.confidence, 0.6, par);
+  CHECK(e.count_by_observation_error[0] == observed);
 }

@@ -42,6 +42,13 @@ TEST_CASE("smg_trainer: usage errors are one line on stderr and exit code 2") {
       {"--width 8", "--width must be in [32, 4096]"},
       {"--stage1-iters -1", "--stage1-iters"},
       {"--threads abc", "--threads"},
+      {"--scene occluded", "scene"},
+      {"--alpha 1.5", "--alpha must be in [0.000000, 1.000000], got 1.5"},
+      {"--alpha nan", "--alpha"},
+      {"--carap-reading both", "carap-reading"},
+      {"--confidence-from oracle", "confidence-from"},
+      {"--data /nonexistent --confidence-from truth", "--confidence-from truth needs"},
+      {"--data /nonexistent --scene occluder", "--scene cannot be used with --data"},
       {"stray", "unexpected argument 'stray'"},
       {"--out /proc/forbidden_dir", "/proc/forbidden_dir"},
       {"--out " + (file / "sub").string(), "cannot create output folder"},
@@ -63,13 +70,16 @@ TEST_CASE("smg_trainer: a tiny run writes metrics.json and the pictures") {
   const fs::path out = fs::temp_directory_path() / "smg_test_pipeline_trainer_out";
   fs::remove_all(out);
   const Run r = run("--quick --stage1-iters 20 --stage2-iters 10 --frames 6 --width 48 --height 36 --tracks 200 "
-                    "--threads 2 --out " + out.string());
+                    "--threads 2 --scene occluder --alpha 0.5 --carap-reading directed --confidence-from lifted --out " +
+                    out.string());
   CAPTURE(r.err);
   REQUIRE(r.code == 0);
   REQUIRE(fs::exists(out / "metrics.json"));
   const std::string metrics = slurp(out / "metrics.json");
   CHECK(lines(metrics) == 1);
-  for (const char* key : {"\"program\":\"smg_trainer\"", "\"variant\":\"full\"", "\"T\":6", "\"width\":48",
+  for (const char* key : {"\"scene\":\"occluder\"", "\"alpha\":0.5", "\"carap_reading\":\"directed\"",
+                          "\"confidence_from\":\"lifted\"", "\"conf_spearman_error\":", "\"conf_weight_directed_low\":",
+                          "\"program\":\"smg_trainer\"", "\"variant\":\"full\"", "\"T\":6", "\"width\":48",
                           "\"height\":36", "\"threads\":2", "\"test_psnr\":", "\"epe\":", "\"epe_stage1\":",
                           "\"epe_lifted\":", "\"stage1_iterations\":20", "\"stage2_iterations\":10"}) {
     const std::string k = key;
