@@ -134,12 +134,16 @@ bool NodeObjective::uses_confidence() const {
 }
 
 std::vector<double> node_confidences(const Nodes& n, const std::vector<double>& positions,
-                                     const smg::ConfidenceOptions& options, smg::ParallelOptions parallel) {
+                                     const smg::ConfidenceOptions& options, smg::ParallelOptions parallel,
+                                     bool visibility) {
   std::vector<double> out(sz(n.frames) * n.count, 0.0);
   const smg::PositionsView<const double> x(positions.data(), n.frames, n.count);
   smg::FrameScalarsView<double> c(out.data(), n.frames, n.count);
-  check(smg::validate_confidence<double>(x, n.visibility_view(), n.graph.view(), options, c), "node_confidences");
-  smg::node_confidences<double>(x, n.visibility_view(), n.graph.view(), options, c, {}, {}, nullptr, parallel);
+  const std::vector<std::uint8_t> all(visibility ? 0 : n.visible.size(), 1);
+  const smg::VisibilityView<const std::uint8_t> v =
+      visibility ? n.visibility_view() : smg::VisibilityView<const std::uint8_t>(all.data(), n.frames, n.count);
+  check(smg::validate_confidence<double>(x, v, n.graph.view(), options, c), "node_confidences");
+  smg::node_confidences<double>(x, v, n.graph.view(), options, c, {}, {}, nullptr, parallel);
   return out;
 }
 
@@ -147,16 +151,16 @@ void NodeObjective::update_confidences(const Nodes& n) {
   if (!uses_confidence()) return;
   switch (options_.confidence_source) {
     case ConfidenceSource::estimate:
-      confidence_ = node_confidences(n, n.positions, options_.confidence, parallel_);
+      confidence_ = node_confidences(n, n.positions, options_.confidence, parallel_, options_.confidence_visibility);
       break;
     case ConfidenceSource::lifted:
       if (lifted_.empty()) lifted_ = n.positions;
-      confidence_ = node_confidences(n, lifted_, options_.confidence, parallel_);
+      confidence_ = node_confidences(n, lifted_, options_.confidence, parallel_, options_.confidence_visibility);
       break;
     case ConfidenceSource::truth:
       if (n.truth.size() != n.positions.size())
         throw std::invalid_argument("confidences from the truth need the procedural scene's ground truth");
-      confidence_ = node_confidences(n, n.truth, options_.confidence, parallel_);
+      confidence_ = node_confidences(n, n.truth, options_.confidence, parallel_, options_.confidence_visibility);
       break;
   }
 }

@@ -90,7 +90,7 @@ void init_rotations(Nodes& nodes);
 
 // How the C-ARAP term moves the nodes (docs/results.md, "C-ARAP"): `symmetric` follows the
 // gradient of (E9), every term moving both of its nodes (the paper's energy, the default);
-// `directed` follows smg::carap_directed's update (E18), term (i, j) moving node i only.
+// `directed` follows smg::carap_directed's update (E20), term (i, j) moving node i only.
 enum class CarapReading { symmetric, directed };
 // What the confidences (E6) are computed from: the current estimate, every confidence_every
 // stage-1 iterations (the paper's reading, the default); the lifted trajectories stage 1 starts
@@ -119,6 +119,9 @@ struct NodeLossOptions {
   double alpha = 0.6;              // confidence floor of C-ARAP and LRM (E7)
   CarapReading carap_reading = CarapReading::symmetric;
   ConfidenceSource confidence_source = ConfidenceSource::estimate;
+  // E6's visibility factor v_{t,i}: off computes the confidences as if every sample were
+  // observed (c = c^m c^r), so that an unobserved node keeps the weight its motion earns.
+  bool confidence_visibility = true;
   smg::GapList gaps = smg::default_gaps();
   smg::ConfidenceOptions confidence{};
 };
@@ -157,10 +160,11 @@ class NodeObjective {
   smg::EnergyWorkspace<double> ws_;
 };
 
-// Confidences c_{t,i} (E6) of trajectories `positions` [T][N][3] with the nodes' visibility and
-// graph, [T][N].
+// Confidences c_{t,i} (E6) of trajectories `positions` [T][N][3] with the nodes' graph and their
+// visibility (every sample visible when `visibility` is false), [T][N].
 std::vector<double> node_confidences(const Nodes& nodes, const std::vector<double>& positions,
-                                     const smg::ConfidenceOptions& options, smg::ParallelOptions parallel = {});
+                                     const smg::ConfidenceOptions& options, smg::ParallelOptions parallel = {},
+                                     bool visibility = true);
 
 // What the confidences measure, against the ground truth (procedural scenes; docs/results.md).
 // Over the observed samples (t, i) of the nodes, with c the confidences (E6) of `positions`:
@@ -172,7 +176,7 @@ std::vector<double> node_confidences(const Nodes& nodes, const std::vector<doubl
 // confidence, the rigidity weight acting on a sample relative to plain ARAP (E7, uniform w):
 //   symmetric reading: Σ_{j∈N(i)} w̃_ij + Σ_{k: i∈N(k)} w̃_ki over Σ w_ij + Σ w_ki (own terms and
 //     the terms naming i as neighbour both move node i);
-//   directed reading: Σ_{j∈N(i)} w̃_ij over Σ w_ij (own terms only, E18).
+//   directed reading: Σ_{j∈N(i)} w̃_ij over Σ w_ij (own terms only, E20).
 struct ConfidenceDiagnostics {
   double spearman_error = 0, spearman_observation = 0;
   double mean_by_observation_error[4] = {0, 0, 0, 0};

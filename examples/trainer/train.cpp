@@ -72,10 +72,12 @@ std::vector<cli::FlagSpec> flags() {
           {"w-lrm", "", "weight of the LRM term (default 0.1)"},
           {"alpha", "", "confidence floor alpha of C-ARAP and LRM, E7 (default 0.6; 1 makes C-ARAP plain ARAP)"},
           {"carap-reading", "", "how C-ARAP moves the nodes: symmetric (the gradient of E9, default) | directed "
-                                "(term i-j moves node i only, E18; docs/results.md)"},
+                                "(term i-j moves node i only, E20; docs/results.md)"},
           {"confidence-from", "", "trajectories the confidences E6 are computed from: estimate (the current one, "
                                   "default) | lifted (stage 1's start, once) | truth (procedural ground truth, an "
                                   "oracle)"},
+          {"confidence-visibility", "", "on (default) | off: leave out E6's visibility factor, as if every sample "
+                                        "were observed"},
           {"export-case", "", "write the stage-1 problem (lifted node tracks, visibility, ground truth, rotations, "
                               "graph: .npy + case.json) into this folder and exit without training"},
           {"data", "", "train on this scene folder (Dycheck iPhone layout plus priors/, docs/data.md) instead of "
@@ -352,6 +354,8 @@ int main(int argc, char** argv) {
     if (args.given("confidence-from"))
       cfg.node_loss.confidence_source = static_cast<trainer::ConfidenceSource>(choice_index(
           args.get_choice("confidence-from", trainer::confidence_source_names()), trainer::confidence_source_names()));
+    if (args.given("confidence-visibility"))
+      cfg.node_loss.confidence_visibility = args.get_choice("confidence-visibility", {"on", "off"}) == "on";
     if (args.given("lambda-depth")) cfg.stage2.lambda_depth = double_in(args, "lambda-depth", 0.0, 100.0);
     pictures = !args.get_switch("no-pictures");
     quiet = args.get_switch("quiet");
@@ -461,7 +465,8 @@ int main(int argc, char** argv) {
     const trainer::NodeLossOptions& nl = cfg.node_loss;
     j.add("alpha", nl.alpha)
         .add("carap_reading", trainer::carap_reading_names()[static_cast<std::size_t>(nl.carap_reading)])
-        .add("confidence_from", trainer::confidence_source_names()[static_cast<std::size_t>(nl.confidence_source)]);
+        .add("confidence_from", trainer::confidence_source_names()[static_cast<std::size_t>(nl.confidence_source)])
+        .add("confidence_visibility", nl.confidence_visibility);
     add_confidence(j, "", r.confidence_stage1);
     add_confidence(j, "_lifted", r.confidence_lifted);
     j.add("extent", r.data.scene.extent);

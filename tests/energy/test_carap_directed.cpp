@@ -1,4 +1,4 @@
-// The directed reading of C-ARAP (carap_directed.hpp, (E18)): node i's update is the gradient of
+// The directed reading of C-ARAP (carap_directed.hpp, (E20)): node i's update is the gradient of
 // its own terms with the neighbours held fixed. Checked against central finite differences and
 // Eigen's AutoDiffScalar of the independent reference energy restricted to node i's terms, its
 // rotation part and energy against carap(), and for thread-count independence and hard cases.

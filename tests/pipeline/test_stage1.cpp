@@ -195,6 +195,18 @@ TEST_CASE("C-ARAP options: confidences from the estimate follow it, from the lif
   CHECK(lift0 == lift1);
   CHECK(tru0 == tru1);
   CHECK(tru0 == trainer::node_confidences(nodes, nodes.truth, c.node_loss.confidence, par));
+  // Without the visibility factor: the same value where observed, the motion factors elsewhere.
+  const std::vector<double> all = trainer::node_confidences(nodes, nodes.positions, c.node_loss.confidence, par, false);
+  long long hidden_positive = 0;
+  for (std::size_t s = 0; s < all.size(); ++s) {
+    if (nodes.visible[s]) {
+      CHECK(all[s] == est0[s]);
+    } else {
+      CHECK(est0[s] == 0.0);
+      hidden_positive += all[s] > 0.0;
+    }
+  }
+  CHECK(hidden_positive > 0);
   // Without ground truth (a scene from disk) the oracle is refused.
   trainer::Nodes blind = nodes;
   blind.truth.clear();

@@ -1,5 +1,5 @@
 // smg/energy/carap_directed.hpp — the directed reading of C-ARAP's asymmetric edge weights, an
-// option beside carap() (docs/math/energy.md (E18); the paper's default is carap()).
+// option beside carap() (docs/math/energy.md (E20); the paper's default is carap()).
 //
 // carap() differentiates every term (i, j) of (E9) with respect to all its variables: lowering
 // w̃_ij (an unreliable neighbour j, E7) weakens the pull on both ends. The paper's wording, "the
@@ -8,7 +8,7 @@
 // held constant (a stop-gradient on the neighbour's side, PyTorch's `.detach()`). Then an
 // unreliable j barely moves a reliable i (small w̃_ij), while a reliable i moves an unreliable j
 // at full strength through j's own term (j, i), weighted by c_i. The update is
-//   u_{x_i} = Σ_{δ, t, j ∈ N(i)} ∂E_ij/∂x_i,   u_{φ_i} = Σ_{δ, t, j ∈ N(i)} ∂E_ij/∂φ_i      (E18)
+//   u_{x_i} = Σ_{δ, t, j ∈ N(i)} ∂E_ij/∂x_i,   u_{φ_i} = Σ_{δ, t, j ∈ N(i)} ∂E_ij/∂φ_i      (E20)
 // (φ_i the right tangent of R_i): node by node, the gradient of node i's own terms with its
 // neighbours held fixed. u is not the gradient of a single energy (the field is not
 // conservative: the energy no longer decreases along -u in general), so an optimiser that takes
@@ -29,7 +29,7 @@
 
 namespace smg {
 
-// Energy (E9), the same value as carap(), and the directed update (E18) *added* to
+// Energy (E9), the same value as carap(), and the directed update (E20) *added* to
 // update_positions [T][N][3] (world frame) and update_rotations [T][N][3] (right tangent); either
 // may be empty. Deterministic for any thread count (each node's rows are written by one chunk,
 // the energy summed in node order). Precondition: validate_carap() with the same arguments.
