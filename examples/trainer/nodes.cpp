@@ -212,10 +212,15 @@ ConfidenceDiagnostics confidence_diagnostics(const Nodes& n, const std::vector<d
   const auto dist = [](const double* a, const double* b) {
     return (Eigen::Map<const Eigen::Vector3d>(a) - Eigen::Map<const Eigen::Vector3d>(b)).norm();
   };
+  const std::vector<double> c_truth = node_confidences(n, n.truth, options, parallel);
   std::vector<double> conf, err, obs_err;
   double sum[4] = {0, 0, 0, 0};
   for (std::size_t s = 0; s < n.visible.size(); ++s) {
     if (!n.visible[s]) continue;
+    d.mean_observed += c[s];
+    d.low_observed += c[s] < 0.3;
+    d.mean_observed_truth += c_truth[s];
+    d.low_observed_truth += c_truth[s] < 0.3;
     conf.push_back(c[s]);
     err.push_back(dist(positions.data() + 3 * s, n.truth.data() + 3 * s));
     const double e = dist(n.observed.data() + 3 * s, n.truth.data() + 3 * s);
@@ -226,6 +231,13 @@ ConfidenceDiagnostics confidence_diagnostics(const Nodes& n, const std::vector<d
   }
   for (int b = 0; b < 4; ++b)
     d.mean_by_observation_error[b] = d.count_by_observation_error[b] > 0 ? sum[b] / d.count_by_observation_error[b] : 0;
+  if (!conf.empty()) {
+    const double m = static_cast<double>(conf.size());
+    d.mean_observed /= m;
+    d.low_observed /= m;
+    d.mean_observed_truth /= m;
+    d.low_observed_truth /= m;
+  }
   d.spearman_error = spearman(conf, err);
   d.spearman_observation = spearman(conf, obs_err);
   // Weight acting on each sample under both readings, relative to plain ARAP.

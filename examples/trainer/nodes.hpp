@@ -172,6 +172,8 @@ std::vector<double> node_confidences(const Nodes& nodes, const std::vector<doubl
 //   spearman_observation: the same with the error of the lifted observation y_i^t;
 //   mean_by_observation_error[b]: mean c over the samples whose observation error is below 3 cm,
 //     3-10 cm, 10-30 cm and above 30 cm (count_by_observation_error[b] samples);
+//   mean_observed / low_observed: mean c and the fraction with c < 0.3, and *_truth the same
+//     for the confidences of the true trajectories (what a perfect estimate would get);
 // and over all samples (observed or not), split into low (c < 0.3) and high (c >= 0.7)
 // confidence, the rigidity weight acting on a sample relative to plain ARAP (E7, uniform w):
 //   symmetric reading: Σ_{j∈N(i)} w̃_ij + Σ_{k: i∈N(k)} w̃_ki over Σ w_ij + Σ w_ki (own terms and
@@ -181,6 +183,7 @@ struct ConfidenceDiagnostics {
   double spearman_error = 0, spearman_observation = 0;
   double mean_by_observation_error[4] = {0, 0, 0, 0};
   long long count_by_observation_error[4] = {0, 0, 0, 0};
+  double mean_observed = 0, low_observed = 0, mean_observed_truth = 0, low_observed_truth = 0;
   double low_fraction = 0;  // samples with c < 0.3 (all samples)
   double symmetric_low = 0, symmetric_high = 0, directed_low = 0, directed_high = 0;
 };

@@ -249,4 +249,9 @@ TEST_CASE("confidence diagnostics: rank correlations, bins and the weight ratios
   const trainer::ConfidenceDiagnostics e =
       trainer::confidence_diagnostics(exact, exact.truth, c.node_loss.confidence, 0.6, par);
   CHECK(e.count_by_observation_error[0] == observed);
+  // At the truth, the estimate's and the truth's confidences coincide.
+  CHECK(e.mean_observed == e.mean_observed_truth);
+  CHECK(e.low_observed == e.low_observed_truth);
+  CHECK(e.mean_observed > 0.0);
+  CHECK(e.mean_observed < 1.0);
 }
