@@ -367,7 +367,7 @@ Scene make_scene(const SceneConfig& config) {
   // Arm: two capsules from a shoulder left of the box. It swings from pointing towards the
   // training camera (the box in full view) to reaching in front of the box (hiding it).
   // Occluder layout: the shoulder sits behind the pillar's left edge and the arm sweeps about
-  // 155 degrees, from pointing right (behind the pillar) through pointing at the wall to pointing
+  // 150 degrees, from pointing right (behind the pillar) through pointing at the wall to pointing
   // left, where the forearm leaves the training view; fewer cycles, so each stretch is long.
   // Both layouts draw the same random numbers in the same order.
   const bool occluder = config.layout == SceneLayout::occluder;

@@ -107,6 +107,14 @@ std::size_t choice_index(const std::string& name, const std::vector<std::string>
   return static_cast<std::size_t>(std::find(names.begin(), names.end(), name) - names.begin());
 }
 
+// The C-ARAP settings (docs/trainer.md, "C-ARAP options"), in both metrics.json layouts.
+void add_carap_settings(cli::JsonLine& j, const trainer::NodeLossOptions& nl) {
+  j.add("alpha", nl.alpha)
+      .add("carap_reading", trainer::carap_reading_names()[static_cast<std::size_t>(nl.carap_reading)])
+      .add("confidence_from", trainer::confidence_source_names()[static_cast<std::size_t>(nl.confidence_source)])
+      .add("confidence_visibility", nl.confidence_visibility);
+}
+
 void add_confidence(cli::JsonLine& j, const std::string& suffix, const trainer::ConfidenceDiagnostics& d) {
   j.add("conf_spearman_error" + suffix, d.spearman_error)
       .add("conf_spearman_observation" + suffix, d.spearman_observation)
@@ -243,6 +251,7 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double se
       .add("width", r.data.scene.width())
       .add("height", r.data.scene.height())
       .add("threads", cfg.threads > 0 ? cfg.threads : smg::num_threads());
+  add_carap_settings(j, cfg.node_loss);
   const trainer::DataEvaluation& e = r.data_evaluation;
   j.add("val_frames", static_cast<long long>(e.frames.size()))
       .add("mpsnr", e.mean.mpsnr)
@@ -466,11 +475,7 @@ int main(int argc, char** argv) {
     add_tracks(j, "", e.tracks);
     add_tracks(j, "_stage1", r.tracks_stage1);
     add_tracks(j, "_lifted", r.tracks_lifted);
-    const trainer::NodeLossOptions& nl = cfg.node_loss;
-    j.add("alpha", nl.alpha)
-        .add("carap_reading", trainer::carap_reading_names()[static_cast<std::size_t>(nl.carap_reading)])
-        .add("confidence_from", trainer::confidence_source_names()[static_cast<std::size_t>(nl.confidence_source)])
-        .add("confidence_visibility", nl.confidence_visibility);
+    add_carap_settings(j, cfg.node_loss);
     add_confidence(j, "", r.confidence_stage1);
     add_confidence(j, "_lifted", r.confidence_lifted);
     j.add("extent", r.data.scene.extent);

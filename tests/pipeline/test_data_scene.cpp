@@ -245,11 +245,11 @@ TEST_CASE("smg_trainer --export-dycheck and --data: renders, tracks3d.npy, metri
   CHECK_FALSE(fs::exists(scene / "rgb/2x/1_00003.png"));  // the validation gap
   r = trainer_run("--data " + scene.string() + " --track-queries " + (scene / "queries.json").string() +
                   " --track-truth " + (scene / "queries_tracks3d.npy").string() +
-                  " --quick --stage1-iters 30 --stage2-iters 20 --threads 2 --out " + out.string());
+                  " --quick --stage1-iters 30 --stage2-iters 20 --threads 2 --alpha 0.7 --out " + out.string());
   CAPTURE(r.err);
   REQUIRE(r.code == 0);
   const std::string metrics = smg::test::slurp(out / "metrics.json");
-  for (const char* key : {"\"mpsnr\":", "\"mssim\":", "\"mssim_covisible\":", "\"per_frame\":", "\"epe\":",
+  for (const char* key : {"\"alpha\":0.7", "\"carap_reading\":\"symmetric\"", "\"mpsnr\":", "\"mssim\":", "\"mssim_covisible\":", "\"per_frame\":", "\"epe\":",
                           "\"delta_5cm\":", "\"delta_10cm\":", "\"nodes\":", "\"peak_memory_mib\":",
                           "\"seconds_stage2\":", "\"length_factor\":", "\"stage2_iterations\":20"}) {
     CAPTURE(key);
