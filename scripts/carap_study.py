@@ -22,7 +22,7 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from ladder_report import mean_ci, fmt  # noqa: E402
+from ladder_report import fmt, mean_ci, write_section  # noqa: E402
 
 # (name, variant, extra flags, what it tests)
 CONFIGS = [
@@ -124,13 +124,7 @@ def main():
             "interval; \"vs ARAP\" is the paired difference to `arap` (negative = better) and the seeds on which "
             "the configuration is better. The diagnostics are means ± 95 % intervals over the seeds of the "
             "full variant's run.\n\n" + "\n".join(parts) + "<!-- /ladder:carap-study -->\n")
-    begin, end = "<!-- ladder:carap-study -->", "<!-- /ladder:carap-study -->"
-    old = open(a.doc).read() if os.path.exists(a.doc) else ""
-    if begin in old and end in old:
-        new = old[:old.index(begin)] + text + old[old.index(end) + len(end) + 1:]
-    else:
-        new = old.rstrip("\n") + "\n\n" + text
-    open(a.doc, "w").write(new)
+    write_section(a.doc, "carap-study", text)
     print(text)
 
 

@@ -62,6 +62,18 @@ def fmt(mu, half, nd):
     return f"{mu:.{nd}f}" if math.isnan(half) else f"{mu:.{nd}f} ± {half:.{nd}f}"
 
 
+def write_section(doc, section, text):
+    """Replaces the lines from <!-- ladder:SECTION --> to <!-- /ladder:SECTION --> of `doc` by
+    `text` (which carries both markers), or appends `text` when the markers are missing."""
+    begin, end = f"<!-- ladder:{section} -->", f"<!-- /ladder:{section} -->"
+    old = open(doc).read() if os.path.exists(doc) else "# Results\n"
+    if begin in old and end in old:
+        new = old[:old.index(begin)] + text + old[old.index(end) + len(end) + 1:]
+    else:
+        new = old.rstrip("\n") + "\n\n" + text
+    open(doc, "w").write(new)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", required=True)
@@ -144,13 +156,7 @@ Per seed (masked PSNR dB / 3D EPE m / EPE on unobserved samples m):
 
 """ + "\n".join(per_seed) + f"\n<!-- /ladder:{a.section} -->\n"
 
-    begin, end = f"<!-- ladder:{a.section} -->", f"<!-- /ladder:{a.section} -->"
-    old = open(a.doc).read() if os.path.exists(a.doc) else "# Results: the ablation ladder\n"
-    if begin in old and end in old:
-        new = old[:old.index(begin)] + text + old[old.index(end) + len(end) + 1:]
-    else:
-        new = old.rstrip("\n") + "\n\n" + text
-    open(a.doc, "w").write(new)
+    write_section(a.doc, a.section, text)
     print(text)
 
 
