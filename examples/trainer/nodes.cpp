@@ -135,7 +135,7 @@ bool NodeObjective::uses_confidence() const {
 
 std::vector<double> node_confidences(const Nodes& n, const std::vector<double>& positions,
                                      const smg::ConfidenceOptions& options, smg::ParallelOptions parallel,
-                                     bool visibility) {
+                                     bool visibility, smg::EnergyWorkspace<double>* workspace) {
   std::vector<double> out(sz(n.frames) * n.count, 0.0);
   const smg::PositionsView<const double> x(positions.data(), n.frames, n.count);
   smg::FrameScalarsView<double> c(out.data(), n.frames, n.count);
@@ -143,26 +143,24 @@ std::vector<double> node_confidences(const Nodes& n, const std::vector<double>& 
   const smg::VisibilityView<const std::uint8_t> v =
       visibility ? n.visibility_view() : smg::VisibilityView<const std::uint8_t>(all.data(), n.frames, n.count);
   check(smg::validate_confidence<double>(x, v, n.graph.view(), options, c), "node_confidences");
-  smg::node_confidences<double>(x, v, n.graph.view(), options, c, {}, {}, nullptr, parallel);
+  smg::node_confidences<double>(x, v, n.graph.view(), options, c, {}, {}, workspace, parallel);
   return out;
 }
 
 void NodeObjective::update_confidences(const Nodes& n) {
   if (!uses_confidence()) return;
-  switch (options_.confidence_source) {
-    case ConfidenceSource::estimate:
-      confidence_ = node_confidences(n, n.positions, options_.confidence, parallel_, options_.confidence_visibility);
-      break;
-    case ConfidenceSource::lifted:
-      if (lifted_.empty()) lifted_ = n.positions;
-      confidence_ = node_confidences(n, lifted_, options_.confidence, parallel_, options_.confidence_visibility);
-      break;
-    case ConfidenceSource::truth:
-      if (n.truth.size() != n.positions.size())
-        throw std::invalid_argument("confidences from the truth need the procedural scene's ground truth");
-      confidence_ = node_confidences(n, n.truth, options_.confidence, parallel_, options_.confidence_visibility);
-      break;
+  // The lifted and the true trajectories do not change: their confidences are computed once.
+  if (options_.confidence_source != ConfidenceSource::estimate && confidence_.size() == sz(n.frames) * n.count) return;
+  const std::vector<double>* from = &n.positions;
+  if (options_.confidence_source == ConfidenceSource::lifted) {
+    if (lifted_.empty()) lifted_ = n.positions;
+    from = &lifted_;
+  } else if (options_.confidence_source == ConfidenceSource::truth) {
+    if (n.truth.size() != n.positions.size())
+      throw std::invalid_argument("confidences from the truth need the procedural scene's ground truth");
+    from = &n.truth;
   }
+  confidence_ = node_confidences(n, *from, options_.confidence, parallel_, options_.confidence_visibility, &ws_);
 }
 
 namespace {
@@ -244,8 +242,9 @@ ConfidenceDiagnostics confidence_diagnostics(const Nodes& n, const std::vector<d
   const auto wt = [&](int t, int j) { return alpha + (1 - alpha) * c[sz(t) * N + j]; };
   double sym[2] = {0, 0}, dir[2] = {0, 0};
   long long cnt[2] = {0, 0}, low = 0;
+  std::vector<double> own(sz(N)), own_arap(sz(N)), in(sz(N)), in_arap(sz(N));
   for (int t = 0; t < T; ++t) {
-    std::vector<double> own(sz(N), 0.0), own_arap(sz(N), 0.0), in(sz(N), 0.0), in_arap(sz(N), 0.0);
+    for (std::vector<double>* v : {&own, &own_arap, &in, &in_arap}) std::fill(v->begin(), v->end(), 0.0);
     for (int i = 0; i < N; ++i)
       for (int k = 0; k < K; ++k) {
         const int j = n.graph.indices[sz(i) * K + k];

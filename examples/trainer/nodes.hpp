@@ -164,7 +164,7 @@ class NodeObjective {
 // visibility (every sample visible when `visibility` is false), [T][N].
 std::vector<double> node_confidences(const Nodes& nodes, const std::vector<double>& positions,
                                      const smg::ConfidenceOptions& options, smg::ParallelOptions parallel = {},
-                                     bool visibility = true);
+                                     bool visibility = true, smg::EnergyWorkspace<double>* workspace = nullptr);
 
 // What the confidences measure, against the ground truth (procedural scenes; docs/results.md).
 // Over the observed samples (t, i) of the nodes, with c the confidences (E6) of `positions`:
