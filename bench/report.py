@@ -12,6 +12,17 @@ noise protocol), a table of every row (wall time median and min over the repetit
 CPU time, other processes' load, every counter with its unit) and a summary generated from the
 numbers. bench/results/torch.json (bench/torch/bench_torch.py) also gives the energy section
 its PyTorch autograd baseline rows. Standard library only.
+
+       bench/report.py --highlights RESULTS_DIR [RESULTS_MD]
+       bench/report.py --readme README.md [RESULTS_DIR [RESULTS_MD]]
+
+The README's result highlights: a few short tables and lines generated from the same JSON
+(RESULTS_DIR, default bench/results, with gpu/torch_cuda_h100.json when present) and from the
+ablation-ladder tables of RESULTS_MD (default docs/results.md). --highlights prints the block;
+--readme rewrites the lines between "<!-- smg:highlights begin -->" and
+"<!-- smg:highlights end -->" of README.md in place. scripts/check_docs.py checks that the
+README's block equals what this generates (scripts/bench.sh --publish and scripts/ladder.sh
+rewrite it).
 """
 import json
 import math
@@ -454,11 +465,353 @@ def per_term_comparison(files, d):
     return "\n".join(out) + "\n"
 
 
+# ---- README highlights (bench/report.py --highlights / --readme) --------------------------------
+REPO = os.path.dirname(HERE)
+HIGHLIGHTS_BEGIN = "<!-- smg:highlights begin -->"
+HIGHLIGHTS_END = "<!-- smg:highlights end -->"
+# issue 6's target for the splatter (forward + backward, 320x240, 100k Gaussians, 2 threads); the
+# energy target travels in the JSON as the counter target_ms.
+SPLAT_TARGET_MS = 150.0
+# What each variant of the ablation ladder uses (docs/trainer.md, "Variants"): graph, rigidity, LRM.
+LADDER_VARIANTS = {"base": ("geometric", "—", "—"), "mosca": ("geometric", "ARAP", "—"),
+                   "smg-only": ("semantic", "ARAP", "—"), "no-carap": ("semantic", "ARAP", "yes"),
+                   "no-lrm": ("semantic", "C-ARAP", "—"), "full": ("semantic", "C-ARAP", "yes")}
+# The paired differences quoted (scripts/ladder_report.py writes them all to docs/results.md).
+LADDER_PAIRS = [("full", "no-lrm"), ("full", "no-carap"), ("smg-only", "mosca"), ("smg-only", "base")]
+
+
+def fmt_ms(value):
+    """A time in milliseconds, in s from 1000 ms on."""
+    return f"{fmt(value / 1e3)} s" if value >= 1e3 else f"{fmt(value)} ms"
+
+
+def cpu_ms(b):
+    scale = {"ns": 1e-6, "us": 1e-3, "ms": 1.0, "s": 1e3}[b.get("time_unit", "ns")]
+    return b["cpu_time"] * scale
+
+
+def load_result(d, name):
+    path = os.path.join(d, name + ".json")
+    return Result(path) if os.path.exists(path) else None
+
+
+def hl_core(res):
+    batch = float(param(res, "n") or 1024)
+    ns = {"ns": 1.0, "us": 1e3, "ms": 1e6, "s": 1e9}
+    names = {("exp", "true"): " + Jr", ("log", "true"): " + Jr⁻¹", ("rotate", "true"): " + both Jacobians"}
+    out = []
+    for fn in ("exp", "log", "rotate"):
+        for jac in ("false", "true"):
+            d = res.one(rf"^BM_{fn}<double, {jac}>")
+            f = res.one(rf"^BM_{fn}<float, {jac}>")
+            if not (d and f and "ns_per_call" in d and "ns_per_call" in f):
+                continue
+            cd = d["cpu_time"] * ns[d.get("time_unit", "ns")] / batch
+            cf = f["cpu_time"] * ns[f.get("time_unit", "ns")] / batch
+            out.append(f"| `so3::{fn}`{names.get((fn, jac), '')} | {fmt(d['ns_per_call'])} / {fmt(cd)} | "
+                       f"{fmt(f['ns_per_call'])} / {fmt(cf)} | {fmt(f.get('err_vs_double'))} |")
+    if not out:
+        return []
+    return [f"**core** (`bench/results/core.json`; a batch of {int(batch)} random inputs; wall / process "
+            f"CPU time per call; float's largest relative error against double on the same inputs):", "",
+            "| operation | double ns/call | float ns/call | float error vs double |",
+            "|---|---:|---:|---:|"] + out + [""]
+
+
+def hl_graph(res):
+    sizes, frames = [], []
+    for b in res.find(r"^knn/double/\d+/\d+"):
+        n, t = (int(x) for x in b["clean"].split("/")[2:4])
+        if n not in sizes:
+            sizes.append(n)
+        if t not in frames:
+            frames.append(t)
+    if not sizes:
+        return []
+    sizes.sort()
+    frames.sort()
+    rows = []
+    for n in sizes:
+        cells = []
+        for t in frames:
+            b = res.one(rf"^knn/double/{n}/{t}/")
+            cell = f"{fmt_ms(ms(b))} ({fmt_ms(cpu_ms(b))} CPU)" if b else "—"
+            bf = res.one(rf"^knn_brute_force/double/{n}/{t}/")
+            if b and bf:
+                cell += f"; brute force {fmt_ms(ms(bf))}"
+            cells.append(cell)
+        big = res.one(rf"^knn/double/{n}/{frames[-1]}/")
+        rss = f"{fmt(big['peak_rss_mb'])} MB" if big and "peak_rss_mb" in big else "—"
+        rows.append(f"| {n:,} | ".replace(",", " ") + " | ".join(cells) + f" | {rss} |")
+    knn = res.find(r"^knn/")
+    mismatched = sum(int(b.get("mismatched_rows", 0)) for b in knn)
+    checked = sum(int(b.get("checked_rows", 0)) for b in knn)
+    return [f"**graph** (`bench/results/graph.json`; exact trajectory KNN, k = {param(res, 'k')}, double, "
+            f"one build on all threads; wall time and process CPU time over all threads; "
+            f"{mismatched} rows differ from brute force over the {checked} checked):", "",
+            "| N | " + " | ".join(f"T = {t}" for t in frames) + f" | peak RSS (T = {frames[-1]}) |",
+            "|---:|" + "---:|" * (len(frames) + 1)] + rows + [""]
+
+
+def hl_energy(res):
+    t = max_threads_row(res, r"^BM_carap_plus_lrm<float>")
+    if not t:
+        return []
+    th = threads_of(t)
+    line = (f"**energy** (`bench/results/energy.json`; N = {param(res, 'n')}, T = {param(res, 't')}, "
+            f"K = {param(res, 'k')}, gaps {{{param(res, 'gaps').replace(',', ', ')}}}): C-ARAP + LRM energy "
+            f"and exact gradient, float, {th} threads: **{fmt_ms(ms(t))}** wall ({fmt_ms(cpu_ms(t))} "
+            f"process CPU)")
+    if "target_ms" in t:
+        verdict = "met" if ms(t) <= t["target_ms"] else "missed"
+        line += f"; the {fmt_ms(t['target_ms'])} target is {verdict} on this run"
+    d = res.one(rf"^BM_carap_plus_lrm<double>/threads:{th}$")
+    if d:
+        line += f"; double {fmt_ms(ms(d))}"
+    if "err_vs_double" in t:
+        line += f"; float against double, gradient relative error {fmt(t['err_vs_double'])}"
+    line += "."
+    ads = []
+    for name, title in (("carap", "C-ARAP"), ("lrm", "LRM")):
+        ad = res.one(rf"^BM_autodiff_{name}")
+        if ad and "ad_ratio" in ad:
+            ads.append(f"{fmt(ad['ad_ratio'])}× ({title})")
+    if ads:
+        line += (" Against Eigen's AutoDiffScalar on the same maths the analytic gradients are "
+                 + " and ".join(ads) + " faster.")
+    dl = res.one(r"^BM_lrm<double, 2>")
+    if dl and "err_detach_vs_exact" in dl:
+        line += f" Holding ω constant changes the LRM gradient by {fmt(100 * dl['err_detach_vs_exact'])} %."
+    return [line, ""]
+
+
+def hl_skin(res):
+    def rate(prec, method, th, kind="BM_blend"):
+        b = res.one(rf"^{kind}<{prec}, SkinMethod::{method}>/{th}$")
+        return b.get("blend_rate") if b else None
+
+    parts, ratios = [], []
+    for method in ("dqb", "lbs"):
+        cells = []
+        for prec in ("double", "float"):
+            r1, r2 = rate(prec, method, 1), rate(prec, method, 2)
+            if r1 and r2:
+                cells.append(f"{fmt(r1 / 1e6)} M ({fmt(r2 / 1e6)} M) in {prec}")
+            for th in (1, 2):
+                a, b = rate(prec, "dqb", th), rate(prec, "lbs", th)
+                if method == "lbs" and a and b:
+                    ratios.append(b / a)
+        if cells:
+            parts.append(f"{method.upper()} {', '.join(cells)}")
+    if not parts:
+        return []
+    points = f"{int(param(res, 'points') or 0):,}".replace(",", " ")
+    line = (f"**skin** (`bench/results/skin.json`; {points} points × {int(param(res, 'k') or 0) + 1} "
+            f"drivers; point×driver blends per second of wall time on one thread, two in brackets): "
+            + "; ".join(parts) + ".")
+    if ratios:
+        line += (f" LBS's rate is {min(ratios):.2f}–{max(ratios):.2f}× DQB's over these four "
+                 f"configurations.")
+    j = rate("double", "dqb", 1, "BM_blend_jacobians")
+    if j:
+        line += f" With every Jacobian block: {fmt(j / 1e6)} M (double, DQB, one thread)."
+    bw = max_threads_slash(res, r"^BM_backward<double, SkinMethod::dqb>")
+    if bw:
+        line += f" Backward into nodes and points: {fmt_ms(ms(bw))} (double, {threads_of_slash(bw)} threads)."
+    twists = sorted({int(b["clean"].split("/")[1]) for b in res.find(r"^BM_twist/\d+/0$")})
+    vols = []
+    for th in twists:
+        b = res.one(rf"^BM_twist/{th}/0$")
+        if b and "vol_ratio_dqb" in b and "vol_ratio_lbs" in b:
+            vols.append(f"{th}°: DQB {fmt(b['vol_ratio_dqb'])}, LBS {fmt(b['vol_ratio_lbs'])}")
+    if vols:
+        line += " Volume of a twisting tube after/before (" + "; ".join(vols) + ")."
+    return [line, ""]
+
+
+def threads_of_slash(b):
+    m = re.search(r"/(\d+)$", b["clean"])
+    return int(m.group(1)) if m else None
+
+
+def max_threads_slash(res, pattern):
+    rows = res.find(pattern)
+    return max(rows, key=lambda b: threads_of_slash(b) or 0) if rows else None
+
+
+def hl_splat(res):
+    fb2 = res.one(r"^forward_backward/W:320/H:240/G:100000/threads:2$")
+    if not fb2:
+        return []
+    verdict = "met" if ms(fb2) <= SPLAT_TARGET_MS else "missed"
+    line = (f"**splat** (`bench/results/splat.json`; float, 100k Gaussians): forward + backward at "
+            f"320×240 on 2 threads **{fmt_ms(ms(fb2))}** wall ({fmt_ms(cpu_ms(fb2))} process CPU); the "
+            f"{fmt_ms(SPLAT_TARGET_MS)} target is {verdict} on this run")
+    fb1 = res.one(r"^forward_backward/W:320/H:240/G:100000/threads:1$")
+    if fb1:
+        line += f"; 1 thread {fmt_ms(ms(fb1))}"
+    line += (". The double-precision splatter is checked against an independent PyTorch autograd "
+             "statement of gsplat's maths (`tests/reference/`).")
+    return [line, ""]
+
+
+def hl_torch(d):
+    rows = []
+    cpu = load_result(d, "torch")
+    if cpu:
+        for b in cpu.rows:
+            if isinstance(b.get("speedup"), (int, float)) and math.isfinite(b["speedup"]):
+                rows.append(f"| CPU | {b['name']} | {fmt_ms(b['real_time'])} | {fmt_ms(b['pytorch_ms'])} | "
+                            f"{fmt(b['speedup'])}× |")
+    gpu_path = os.path.join(d, "gpu", "torch_cuda_h100.json")
+    device = None
+    if os.path.exists(gpu_path):
+        with open(gpu_path) as f:
+            gpu = json.load(f)
+        device = gpu.get("context", {}).get("device")
+        for b in gpu.get("benchmarks", []):
+            if isinstance(b.get("speedup"), (int, float)) and math.isfinite(b["speedup"]):
+                rows.append(f"| {b.get('device', device)} | {b['name']} | {fmt_ms(b['real_time'])} | "
+                            f"{fmt_ms(b['pytorch_ms'])} | {fmt(b['speedup'])}× |")
+    if not rows:
+        return []
+    return ["**smg_torch against pure-PyTorch autograd** (forward + backward of the same equations; "
+            "`bench/results/torch.json`" + (", `bench/results/gpu/torch_cuda_h100.json`" if device else "")
+            + "; best time; [docs/torch.md](docs/torch.md), [docs/cuda.md](docs/cuda.md)):", "",
+            "| device | operation | smg_torch | PyTorch autograd | speed-up |",
+            "|---|---|---:|---:|---:|"] + rows + [""]
+
+
+def md_section(text, name):
+    begin, end = f"<!-- ladder:{name} -->", f"<!-- /ladder:{name} -->"
+    if begin not in text or end not in text:
+        return None
+    return text[text.index(begin):text.index(end)]
+
+
+def md_table(text, first_cell):
+    """The first Markdown table whose header starts with `first_cell`: (header cells, rows)."""
+    lines = text.split("\n")
+    for i, line in enumerate(lines):
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.startswith("|") and cells[0] == first_cell:
+            rows = []
+            for row in lines[i + 2:]:
+                if not row.startswith("|"):
+                    break
+                rows.append([c.strip() for c in row.strip().strip("|").split("|")])
+            return cells, rows
+    return None, []
+
+
+def hl_ladder(results_md):
+    if not os.path.exists(results_md):
+        return []
+    with open(results_md, encoding="utf-8") as f:
+        text = f.read()
+    scenes, means, paired, seeds = [], {}, {}, {}
+    for scene in ("standard", "occluder"):
+        sec = md_section(text, scene)
+        if sec is None:
+            continue
+        head, rows = md_table(sec, "variant")
+        if not head:
+            continue
+        scenes.append(scene)
+        means[scene] = {r[0]: dict(zip(head, r)) for r in rows}
+        phead, prows = md_table(sec, "A − B")
+        paired[scene] = {r[0]: dict(zip(phead, r)) for r in prows} if phead else {}
+        shead = [h for h in (md_table(sec.split("Per seed", 1)[-1], "variant")[0] or []) if h.startswith("seed ")]
+        seeds[scene] = len(shead)
+    if not scenes:
+        return []
+    cols = ("3D EPE (m)", "masked PSNR (dB)")
+    variants = list(means[scenes[0]])
+    head = ("| variant | graph | rigidity | LRM | "
+            + " | ".join(f"{s}: {cols[0]} | {cols[1]}" for s in scenes) + " |")
+    out = [f"**ablation ladder** (`docs/results.md`, written by `scripts/ladder.sh`; "
+           f"{' and '.join(f'{seeds[s]} seeds on the {s} scene' for s in scenes)}, mean ± 95 % "
+           f"interval; every seed is a different scene):", "", head,
+           "|---|---|---|---|" + "---:|" * (2 * len(scenes))]
+    for v in variants:
+        desc = LADDER_VARIANTS.get(v, ("?", "?", "?"))
+        cells = [means[s].get(v, {}).get(c, "—") for s in scenes for c in cols]
+        out.append(f"| {v} | " + " | ".join(desc) + " | " + " | ".join(cells) + " |")
+    out.append("")
+    lines = []
+    for a, b in LADDER_PAIRS:
+        key = f"{a} − {b}"
+        row = {s: paired[s].get(key) for s in scenes if paired[s].get(key)}
+        if not row:
+            continue
+        what = next(iter(row.values())).get("isolates", "")
+        per = "; ".join(f"{s}: {r[cols[0]]}" for s, r in row.items())
+        lines.append(f"- {what} (`{key}`), 3D EPE in m: {per}")
+    if lines:
+        out += ["Paired differences A − B over the same seeds (mean ± 95 % interval; in brackets, on how "
+                "many seeds A is better):", ""] + lines + [""]
+    return out
+
+
+def highlights(d, results_md=None):
+    """The README's result highlights (the lines between the markers, without them)."""
+    results_md = results_md or os.path.join(REPO, "docs", "results.md")
+    found = [r for r in (load_result(d, m) for m in ("core", "graph", "energy", "skin", "splat")) if r]
+    dates = sorted({r.context.get("date", "?")[:10] for r in found})
+    others = [b["others_cpus"] for r in found for b in r.rows if isinstance(b.get("others_cpus"), (int, float))]
+    cpus = {str(r.context.get("num_cpus", "?")) for r in found}
+    out = ["<!-- Generated by bench/report.py --readme README.md from bench/results/*.json and "
+           "docs/results.md: do not edit by hand (scripts/check_docs.py compares). -->", ""]
+    if found:
+        out += [f"CPU figures: the published runs in `bench/results/` ({' to '.join(sorted({dates[0], dates[-1]}))}, "
+                f"Release, {'/'.join(sorted(cpus))} CPUs"
+                + (f", other processes keeping {fmt(min(others))}–{fmt(max(others))} of them busy, so wall "
+                   f"times are indicative and process CPU times are given beside them" if others else "")
+                + "); every row, its load and its noise protocol: [docs/performance.md](docs/performance.md).", ""]
+    by = {m: load_result(d, m) for m in ("core", "graph", "energy", "skin", "splat")}
+    for m, fn in (("core", hl_core), ("graph", hl_graph), ("energy", hl_energy), ("skin", hl_skin),
+                  ("splat", hl_splat)):
+        if by[m]:
+            out += fn(by[m])
+    out += hl_torch(d)
+    out += hl_ladder(results_md)
+    while out and out[-1] == "":
+        out.pop()
+    return "\n".join(out) + "\n"
+
+
+def write_readme(readme, d=None, results_md=None):
+    d = d or os.path.join(REPO, "bench", "results")
+    with open(readme, encoding="utf-8") as f:
+        text = f.read()
+    if HIGHLIGHTS_BEGIN not in text or HIGHLIGHTS_END not in text:
+        print(f"bench/report.py: {readme} has no '{HIGHLIGHTS_BEGIN}' ... '{HIGHLIGHTS_END}' block",
+              file=sys.stderr)
+        return 1
+    head = text[:text.index(HIGHLIGHTS_BEGIN) + len(HIGHLIGHTS_BEGIN)]
+    tail = text[text.index(HIGHLIGHTS_END):]
+    new = head + "\n" + highlights(d, results_md) + tail
+    if new != text:
+        with open(readme, "w", encoding="utf-8") as f:
+            f.write(new)
+    return 0
+
+
 def main():
-    if len(sys.argv) != 2:
+    args = sys.argv[1:]
+    if args and args[0] in ("-h", "--help"):
+        print(__doc__)
+        return 0
+    if args and args[0] == "--highlights" and 2 <= len(args) <= 3:
+        sys.stdout.write(highlights(args[1], args[2] if len(args) > 2 else None))
+        return 0
+    if args and args[0] == "--readme" and 2 <= len(args) <= 4:
+        return write_readme(args[1], args[2] if len(args) > 2 else None,
+                            args[3] if len(args) > 3 else None)
+    if len(args) != 1 or args[0].startswith("-"):
         print(__doc__, file=sys.stderr)
         return 2
-    d = sys.argv[1]
+    d = args[0]
     names = [f[:-5] for f in os.listdir(d) if f.endswith(".json")]
     by_module = {}
     for n in names:
