@@ -10,7 +10,8 @@
 #   --reps N                         repetitions of every row (SMG_BENCH_REPS; report: median, min)
 #   --tag TAG                        name the results <module>-TAG.json (a second size, say)
 #   --publish                        also copy the results into bench/results/ and regenerate
-#                                    docs/performance.md from bench/results/*.json
+#                                    docs/performance.md and the README's highlights from
+#                                    bench/results/*.json
 #   -- ARGS...                       pass the remaining arguments to every binary (e.g.
 #                                    --benchmark_enable_random_interleaving=true, --n=20000)
 #   --smoke                          every row very briefly, 1 repetition, smaller autodiff and
@@ -26,7 +27,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 usage() {
-  sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//' >&2
+  sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//' >&2
   exit 2
 }
 smoke=0 publish=0 filter='' out='' tag='' reps=''
@@ -56,7 +57,8 @@ if [ "$smoke" = 1 ] && [ "$publish" = 1 ]; then
 fi
 scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev python3
 build=${SMG_BUILD_DIR:-build/release}
-cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_WERROR=ON >/dev/null
+# -DSMG_BUILD_BENCH=ON: build/release may have been configured first by scripts/example.sh without it.
+cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_WERROR=ON -DSMG_BUILD_BENCH=ON >/dev/null
 if [ ${#modules[@]} -eq 0 ]; then
   for src in bench/bench_*.cpp; do modules+=("$(basename "$src" .cpp | sed 's/^bench_//')"); done
 fi
@@ -102,5 +104,6 @@ if [ "$publish" = 1 ]; then
     cp "$out/$name.json" "$out/$name.load" bench/results/
   done
   python3 bench/report.py bench/results > docs/performance.md
-  echo "published: bench/results/ updated, docs/performance.md regenerated"
+  python3 bench/report.py --readme README.md bench/results
+  echo "published: bench/results/ updated, docs/performance.md and the README's highlights regenerated"
 fi

@@ -10,7 +10,9 @@ below on both generated scenes and every seed, then writes, between the markers
     better;
   * the confidence diagnostics of the full variant (nodes.hpp, confidence_diagnostics).
 Usage: scripts/carap_study.py [--seeds "0 1 2 3 4"] [--jobs 2] [--out build/carap_study]
-                              [--doc docs/results.md] [--trainer build/example/examples/smg_trainer]
+                              [--doc docs/results.md] [--trainer build/release/examples/smg_trainer]
+Without --trainer it first builds the trainer into build/release (scripts/build_trainer.sh, as
+scripts/ladder.sh does); with --trainer it runs that binary as it is.
 A run whose metrics.json exists is not repeated (delete OUT to start over)."""
 import argparse
 import concurrent.futures
@@ -82,8 +84,14 @@ def main():
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", default="build/carap_study")
     ap.add_argument("--doc", default="docs/results.md")
-    ap.add_argument("--trainer", default="build/example/examples/smg_trainer")
+    ap.add_argument("--trainer", default=None,
+                    help="the smg_trainer to run (default: build it into build/release first)")
     a = ap.parse_args()
+    if a.trainer is None:
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        subprocess.run([os.path.join(root, "scripts", "build_trainer.sh")], check=True)
+        a.trainer = os.path.join(root, os.environ.get("SMG_BUILD_DIR") or "build/release",
+                                 "examples", "smg_trainer")
     seeds = a.seeds.split()
     os.makedirs(a.out, exist_ok=True)
     jobs = [(s, sd, c) for s in SCENES for sd in seeds for c in CONFIGS]

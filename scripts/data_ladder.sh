@@ -5,7 +5,8 @@
 # no-carap, no-lrm, full) with the same flags and prints one Markdown table: Dycheck's mPSNR and
 # mSSIM over the validation frames, and the 3D EPE / fractions within 5 and 10 cm when SCENE holds
 # queries.json and queries_tracks3d.npy (what smg_trainer --export-dycheck writes), plus nodes,
-# seconds and peak memory. Each run's metrics.json stays under OUT/<variant>/ (docs/data.md).
+# seconds and peak memory. Each run's metrics.json stays under OUT/<variant>/ (docs/data.md;
+# default OUT: build/data_ladder). The trainer is built into build/release (scripts/build_trainer.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 [[ $# -ge 1 ]] || { echo "usage: scripts/data_ladder.sh SCENE [--out DIR] [--variants LIST] [-- FLAGS]" >&2; exit 2; }
@@ -21,11 +22,9 @@ while [[ $# -gt 0 ]]; do
   esac
 done
 flags=("$@")
-scripts/deps.sh cmake make g++ libeigen3-dev libstb-dev python3
-build=${SMG_BUILD_DIR:-build/example}
-cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_BENCH=OFF \
-      -DSMG_BUILD_EXAMPLES=ON >/dev/null
-cmake --build "$build" -j"$(nproc)" --target smg_trainer >/dev/null
+scripts/deps.sh python3
+scripts/build_trainer.sh >/dev/null
+build=${SMG_BUILD_DIR:-build/release}
 queries=()
 if [[ -f "$scene/queries.json" && -f "$scene/queries_tracks3d.npy" ]]; then
   queries=(--track-queries "$scene/queries.json" --track-truth "$scene/queries_tracks3d.npy")

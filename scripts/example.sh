@@ -1,14 +1,11 @@
 #!/usr/bin/env bash
 # scripts/example.sh [TRAINER_FLAGS...] — the README's first command: builds the example scene
-# trainer and runs it (docs/trainer.md). With no flags: the default run (the full SMG variant,
-# seed 0, 32 frames at 160x120; about 1 minute on 2 cores), pictures and metrics.json in
-# trainer_out/. `scripts/example.sh --quick` is the small run CI uses; `--help` lists the flags.
-# Only the library's own dependencies and Debian's libstb-dev (PNG output) are needed.
+# trainer into build/release (scripts/build_trainer.sh) and runs it (docs/trainer.md). With no
+# flags: the default run (the full SMG variant, seed 0, 32 frames at 160x120; about 1 minute on
+# 2 cores), pictures and metrics.json in trainer_out/. `scripts/example.sh --quick` is the small
+# run CI uses; `--help` lists the flags. Only the library's own dependencies and Debian's
+# libstb-dev (PNG output) are needed: cmake make g++ libeigen3-dev libstb-dev.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/deps.sh cmake make g++ libeigen3-dev libstb-dev
-build=${SMG_BUILD_DIR:-build/example}
-cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_BENCH=OFF \
-      -DSMG_BUILD_EXAMPLES=ON >/dev/null
-cmake --build "$build" -j"$(nproc)" --target smg_trainer
-exec "$build/examples/smg_trainer" "$@"
+scripts/build_trainer.sh
+exec "${SMG_BUILD_DIR:-build/release}/examples/smg_trainer" "$@"

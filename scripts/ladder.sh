@@ -2,12 +2,20 @@
 # scripts/ladder.sh [--seeds "0 1 2 3 4"] [--jobs J] [--out DIR] [--doc docs/results.md]
 #                   [--section NAME] [--report-only] [-- TRAINER_FLAGS...]
 #
+#   scripts/ladder.sh --jobs 2                                  the standard scene -> section standard
+#   scripts/ladder.sh --jobs 2 --out build/ladder_occluder -- --scene occluder   -> section occluder
+#
 # The ablation ladder (the paper's Table 5): runs smg_trainer for every variant (base, mosca,
 # smg-only, no-carap, no-lrm, full) on every seed with the same flags, keeps each run's
 # metrics.json under OUT/<variant>_s<seed>/, and writes the tables (means with 95 % confidence
 # intervals, paired per-seed differences; scripts/ladder_report.py) into the section NAME of the
 # results page, whatever they show. The flags after `--` go to every run unchanged (for example
 # `--scene occluder`) and are recorded in the page with the machine and the date.
+# --section defaults to the scene's name: `standard`, or the value of `--scene` when that is the
+# only trainer flag; with any other trainer flag it must be given, so that a run at other settings
+# never overwrites a published ladder. The trainer is built into build/release
+# (scripts/build_trainer.sh); after a report into docs/results.md the README's highlights are
+# regenerated (bench/report.py --readme README.md).
 #
 # --jobs J runs J trainers at once, each with nproc/J threads (results do not depend on the thread
 # count). A run whose OUT/<variant>_s<seed>/metrics.json exists with the same flags is not run
@@ -17,7 +25,7 @@ cd "$(dirname "$0")/.."
 seeds="0 1 2 3 4"
 out=build/ladder
 doc=docs/results.md
-section=default
+section=
 jobs=1
 report_only=0
 while [[ $# -gt 0 ]]; do
@@ -34,13 +42,23 @@ while [[ $# -gt 0 ]]; do
 done
 [[ "$jobs" =~ ^[1-9][0-9]*$ ]] || { echo "ladder.sh: --jobs must be a positive integer, got '$jobs'" >&2; exit 2; }
 flags=("$@")
+if [[ -z "$section" ]]; then
+  if [[ ${#flags[@]} -eq 0 ]]; then
+    section=standard
+  elif [[ ${#flags[@]} -eq 2 && "${flags[0]}" == --scene ]]; then
+    section=${flags[1]}
+  elif [[ ${#flags[@]} -eq 1 && "${flags[0]}" == --scene=* ]]; then
+    section=${flags[0]#--scene=}
+  else
+    echo "ladder.sh: trainer flags '${flags[*]}' need --section NAME (the section of $doc to write)" >&2
+    exit 2
+  fi
+fi
 variants="base mosca smg-only no-carap no-lrm full"
 if [[ $report_only == 0 ]]; then
-  scripts/deps.sh cmake make g++ libeigen3-dev libstb-dev python3
-  build=${SMG_BUILD_DIR:-build/example}
-  cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_BENCH=OFF \
-        -DSMG_BUILD_EXAMPLES=ON >/dev/null
-  cmake --build "$build" -j"$(nproc)" --target smg_trainer
+  scripts/deps.sh python3
+  scripts/build_trainer.sh
+  build=${SMG_BUILD_DIR:-build/release}
   threads=$(( $(nproc) / jobs )); (( threads >= 1 )) || threads=1
   mkdir -p "$out"
   todo=()
@@ -66,3 +84,6 @@ if [[ $report_only == 0 ]]; then
 fi
 python3 scripts/ladder_report.py --out "$out" --doc "$doc" --section "$section" --seeds "$seeds" \
   --variants "$variants" --flags "${flags[*]:-}" --jobs "$jobs"
+if [[ "$doc" == docs/results.md ]]; then
+  python3 bench/report.py --readme README.md
+fi

@@ -31,6 +31,9 @@ if [ "$mode" = asan ]; then
   export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 else
   build=${SMG_BUILD_DIR:-build/release}
+  # The project's one build folder, which scripts/example.sh (scripts/build_trainer.sh) may have
+  # configured first without the tests and benchmarks: every part is turned on here.
+  all=(-DSMG_BUILD_TESTS=ON -DSMG_BUILD_EXAMPLES=ON -DSMG_BUILD_BENCH=ON)
   # PyTorch extension: only with Debian's python3 + torch + pytest (the python3 first on PATH may
   # lack torch). CMake turns SMG_BUILD_TORCH on by itself when libtorch-dev and pybind11 exist.
   torch_py=/usr/bin/python3
@@ -39,9 +42,9 @@ else
     torch_ok=1
   fi
   if [ "$torch_ok" = 1 ]; then
-    cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_WERROR=ON -DPython3_EXECUTABLE="$torch_py"
+    cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_WERROR=ON "${all[@]}" -DPython3_EXECUTABLE="$torch_py"
   else
-    cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_WERROR=ON -DSMG_BUILD_TORCH=OFF
+    cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_WERROR=ON "${all[@]}" -DSMG_BUILD_TORCH=OFF
   fi
 fi
 cmake --build "$build" -j"$jobs"
