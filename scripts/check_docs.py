@@ -22,6 +22,21 @@ Usage: scripts/check_docs.py [REPO_ROOT]   (standard library only; exit 1 on any
     ("<!-- run: ... -->" in docs/quickstart.md and README.md) exist.
     `scripts/check_docs.py --sync-quickstart` rewrites the page's blocks from the files.
 
+(f) every command shown in README.md, docs/*.md and bench/README.md (lines of ```sh/```bash
+    blocks, command-like lines of plain ``` blocks, and inline `code` that starts with scripts/,
+    build/, python3, PYTHONPATH=, cmake ...) names things that exist: the script or program; each
+    --flag given to a project script appears in that script's source (its argument parser or
+    usage), and flags passed through to the trainer (scripts/example.sh, and after `--` for
+    ladder.sh / data_ladder.sh) or to a benchmark in that program's sources; cmake's -S folders,
+    --target names (targets the CMakeLists define) and -D SMG_* options; every repository path
+    exists, or lies in a build folder that a script (or an earlier cmake -B / --out on the same
+    page) creates, naming a program that the build defines there (build/release/examples/
+    smg_trainer, build/release/bench/bench_core, ...).
+(g) generated text is current: README.md's block between "<!-- smg:highlights begin -->" and
+    "<!-- smg:highlights end -->" equals `bench/report.py --highlights bench/results`, and
+    docs/performance.md equals `bench/report.py bench/results` (fix: `bench/report.py --readme
+    README.md`, `bench/report.py bench/results > docs/performance.md`).
+
 Prints one line per problem, "path:line: message", and exits 1 if there are any.
 """
 
@@ -328,6 +343,397 @@ for page, marks in RUN_MARKS.items():
         if mark not in text.split("\n"):
             problem(page, 1, "missing the command block '%s' that scripts/check_packaging.sh runs"
                     % mark)
+
+# ---------------------------------------------------------------------------------------------
+# (f) commands in the docs name scripts, flags, targets and paths that exist
+import shlex  # noqa: E402
+
+CMD_PAGES = sorted(f for f in TEXT if f.endswith(".md") and
+                   (f == "README.md" or f == "bench/README.md" or re.match(r"docs/[^/]+\.md$", f)))
+TOP = sorted({f.split("/", 1)[0] for f in FILES})
+SCRIPT_EXT = (".sh", ".py")
+CODE_OF = {}
+
+
+def sources_under(*prefixes):
+    """The concatenated text of the tracked files under the given folders (or the files)."""
+    key = prefixes
+    if key not in CODE_OF:
+        CODE_OF[key] = "\n".join(t for f, t in TEXT.items() if f.startswith(prefixes))
+    return CODE_OF[key]
+
+
+TRAINER_SRC = ("examples/trainer/", "examples/common/")
+PROGRAM_SRC = {"smg_trainer": TRAINER_SRC, "scene_preview": TRAINER_SRC,
+               "smg_cli": ("examples/cli/", "examples/common/"), "core_tour": ("examples/core_tour.cpp",)}
+# Scripts that hand flags on: (what gets them, all flags or only those after `--`).
+PASS_ON = {"scripts/example.sh": (TRAINER_SRC, False), "scripts/ladder.sh": (TRAINER_SRC, True),
+           "scripts/data_ladder.sh": (TRAINER_SRC, True), "scripts/bench.sh": (("bench/",), True)}
+SCRIPT_TEXT = "\n".join(TEXT.get(f, "") for f in FILES
+                        if f.startswith("scripts/") or f == ".ci/run")
+# Build folders the scripts create (build/release, build/asan, build/lint, build/bench-results, ...)
+# and the folders they create inside a build folder ($build/bench-smoke, $build/python).
+SCRIPT_BUILD_DIRS = {"build/" + m for m in re.findall(r"(?<![\w$}/.])build/([\w.-]+)", SCRIPT_TEXT)}
+IN_BUILD = set(re.findall(r"\$\{?build\}?/([\w.-]+)", SCRIPT_TEXT))
+# Top-level build folders whose remainder must name a program of the build.
+PROJECT_BUILDS = {"build/release", "build/asan", "build/lint"}
+
+
+def cmake_texts():
+    return {f: TEXT[f] for f in TEXT if os.path.basename(f) == "CMakeLists.txt"}
+
+
+def exe_patterns(folder):
+    """Regular expressions of the programs a CMakeLists.txt folder defines (add_executable)."""
+    text = TEXT.get((folder + "/" if folder else "") + "CMakeLists.txt", "")
+    pats = []
+    for m in re.finditer(r"add_executable\(\s*([^\s)]+)", text):
+        pats.append("^" + re.sub(r"\\\$\\\{\w+\\\}", ".+", re.escape(m.group(1))) + "$")
+    return pats
+
+
+def targets():
+    names = set()
+    for f, text in cmake_texts().items():
+        for m in re.finditer(r"(?:add_executable|add_library|pybind11_add_module|add_custom_target)"
+                             r"\(\s*([\w:]+)", text):
+            names.add(m.group(1))
+    names |= {"test_" + d.split("/")[1] for d in FILES if re.match(r"tests/[^/]+/.+\.cpp$", d)
+              and d.split("/")[1] not in ("support", "consumer", "probes")}
+    names |= {re.sub(r"^bench/(bench_\w+)\.cpp$", r"\1", f) for f in FILES
+              if re.match(r"bench/bench_\w+\.cpp$", f)}
+    names |= {"quickstart_" + os.path.basename(f)[:-4] for f in FILES
+              if re.match(r"examples/quickstart/\w+\.cpp$", f)}
+    return names
+
+
+TARGETS = targets()
+SMG_OPTIONS = set(re.findall(r"\b(SMG_\w+)\b", "\n".join(cmake_texts().values())))
+
+
+def program_ok(rel, source):
+    """Is build-folder path `rel` (e.g. examples/smg_trainer) something the build of `source`
+    defines? None when it is, else the reason."""
+    parts = rel.split("/")
+    if not rel or parts[0] in IN_BUILD - {"examples", "bench", "tests"}:
+        return None
+    folder = "/".join(([source] if source != "." else []) + parts[:-1])
+    name = parts[-1]
+    if not os.path.isdir(os.path.join(ROOT, folder)):
+        if len(parts) == 1 and os.path.isdir(os.path.join(ROOT, source, name)):
+            return None  # the binary folder of a source folder (build/release/tests)
+        return "no source folder %s for it" % folder
+    if len(parts) == 1 and os.path.isdir(os.path.join(ROOT, folder, name)):
+        return None
+    if folder == "bench" and not os.path.exists(os.path.join(ROOT, "bench", name + ".cpp")):
+        return "no bench/%s.cpp" % name
+    if folder == "tests" and not (name.startswith("test_") and
+                                  os.path.isdir(os.path.join(ROOT, "tests", name[5:]))):
+        return "no tests/%s folder" % name[5:]
+    if folder == "examples/quickstart" and not os.path.exists(
+            os.path.join(ROOT, folder, name.replace("quickstart_", "", 1) + ".cpp")):
+        return "no %s/%s.cpp" % (folder, name.replace("quickstart_", "", 1))
+    if not any(re.match(p, name) for p in exe_patterns(folder)):
+        return "%s/CMakeLists.txt defines no program %s" % (folder, name)
+    return None
+
+
+def path_problem(tok, cwd, made):
+    """None if the repository path `tok` (relative to `cwd`) is fine, else why not."""
+    rel = os.path.normpath(os.path.join(cwd, tok))
+    if rel.startswith(".."):
+        return None  # outside the repository (a sibling project of the README's examples)
+    if rel == "build" or not rel.startswith("build/"):
+        return None if os.path.exists(os.path.join(ROOT, rel)) else "no such file or folder"
+    parts = rel.split("/")
+    top = "/".join(parts[:2])
+    if top in made:
+        source = made[top]
+    elif top in SCRIPT_BUILD_DIRS:
+        source = "." if top in PROJECT_BUILDS else None
+    else:
+        return ("no script builds into %s (the build folder is build/release: scripts/test.sh, "
+                "scripts/example.sh, scripts/bench.sh)" % top)
+    if source is None or len(parts) == 2:
+        return None
+    return program_ok("/".join(parts[2:]), source)
+
+
+def looks_like_path(tok):
+    if not tok or tok.startswith(("/", "$", "~", "-")) or re.search(r"[<>*{}…|]|\.\.\.", tok):
+        return False
+    first = tok.split("/", 1)[0]
+    return "/" in tok and (first in TOP or first == "build") or tok in TOP and "." in tok
+
+
+def flag_problem(flag, source_text, program):
+    name = flag.split("=", 1)[0]
+    if re.search(re.escape(name) + r"(?![\w-])", source_text):
+        return None
+    if program == "bench" and name.startswith("--benchmark_"):
+        return None
+    bare = name.lstrip("-")
+    if program in ("trainer", "bench", "program") and re.search(r'"%s"' % re.escape(bare), source_text):
+        return None
+    return "flag %s is not in %s" % (name, {"trainer": "the trainer's sources (examples/trainer)",
+                                             "bench": "the benchmarks' sources (bench/)"}.get(program, program))
+
+
+def split_commands(line):
+    try:
+        lex = shlex.shlex(line, posix=True, punctuation_chars="|&;")
+        lex.whitespace_split = True
+        lex.commenters = "#"
+        toks = list(lex)
+    except ValueError:
+        toks = line.split()
+    cmd = []
+    for t in toks:
+        if t and set(t) <= set("|&;"):
+            if cmd:
+                yield cmd
+            cmd = []
+        else:
+            cmd.append(t)
+    if cmd:
+        yield cmd
+
+
+OUT_FLAGS = ("--out", "-B", "--prefix", "--json", "-o", "--export-case", "--export-dycheck", "--doc")
+
+
+def check_command(f, n, toks, state):
+    """One command (a token list); state: cwd and the build folders made on this page."""
+    toks = [t.strip("[]") for t in toks]
+    toks = [t for t in toks if t]
+    env = []
+    while toks and re.match(r"^[A-Za-z_]\w*=", toks[0]):
+        env.append(toks.pop(0))
+    while toks and toks[0] in ("time", "sudo", "exec", "env"):
+        toks.pop(0)
+    if not toks:
+        return
+    prog, args = toks[0], toks[1:]
+    for e in env:
+        for v in e.split("=", 1)[1].split(":"):
+            if looks_like_path(v):
+                why = path_problem(v, state["cwd"], state["made"])
+                if why:
+                    problem(f, n, "%s: %s" % (v, why))
+    checked_paths = []
+    flags_to = []  # (flag, source text, program kind)
+    if prog == "cd":
+        if args and looks_like_path(args[0]):
+            why = path_problem(args[0], state["cwd"], state["made"])
+            if why:
+                problem(f, n, "cd %s: %s" % (args[0], why))
+            state["cwd"] = os.path.normpath(os.path.join(state["cwd"], args[0]))
+        return
+    if prog in ("python3", "/usr/bin/python3", "python"):
+        if "-c" in args:
+            return
+        if "-m" in args:
+            for a in args[args.index("-m") + 2:]:
+                if looks_like_path(a):
+                    why = path_problem(a, state["cwd"], state["made"])
+                    if why:
+                        problem(f, n, "%s: %s" % (a, why))
+            return
+        else:
+            rest = [a for a in args if not a.startswith("-")]
+            if not rest:
+                return
+            prog, args = rest[0], args[args.index(rest[0]) + 1:]
+    if prog == "cmake":
+        i = 0
+        source = None
+        while i < len(args):
+            a = args[i]
+            val = args[i + 1] if i + 1 < len(args) else ""
+            if a == "-S":
+                source = os.path.normpath(os.path.join(state["cwd"], val))
+                if (val == "." or looks_like_path(val + "/")) and \
+                        not os.path.isfile(os.path.join(ROOT, source, "CMakeLists.txt")):
+                    problem(f, n, "cmake -S %s: no CMakeLists.txt there" % val)
+                i += 2
+                continue
+            if a == "-B":
+                state["made"]["/".join(os.path.normpath(os.path.join(state["cwd"], val)).split("/")[:2])] = \
+                    source if source else "."
+                i += 2
+                continue
+            if a in ("--build", "--install", "--test-dir"):
+                if looks_like_path(val):
+                    checked_paths.append(val)
+                i += 2
+                continue
+            if a == "--target":
+                j = i + 1
+                while j < len(args) and not args[j].startswith("-"):
+                    if args[j] not in TARGETS:
+                        problem(f, n, "cmake --target %s: no such target in the CMakeLists" % args[j])
+                    j += 1
+                i = j
+                continue
+            m = re.match(r"^-D(SMG_\w+)", a)
+            if m and m.group(1) not in SMG_OPTIONS:
+                problem(f, n, "cmake %s: no option %s in the CMakeLists" % (a, m.group(1)))
+            i += 1
+        for p in checked_paths:
+            why = path_problem(p, state["cwd"], state["made"])
+            if why:
+                problem(f, n, "%s: %s" % (p, why))
+        return
+    if prog == "ctest":
+        if "--test-dir" in args:
+            checked_paths.append(args[args.index("--test-dir") + 1])
+        args = []
+    elif looks_like_path(prog):
+        why = path_problem(prog, state["cwd"], state["made"])
+        rel = os.path.normpath(os.path.join(state["cwd"], prog))
+        if why:
+            problem(f, n, "%s: %s" % (prog, why))
+        elif not rel.startswith("build/") and rel.endswith(SCRIPT_EXT + ("run",)):
+            text = TEXT.get(rel, "")
+            dest = PASS_ON.get(rel)
+            after = False
+            for a in args:
+                if a == "--":
+                    after = True
+                    continue
+                if not a.startswith("--"):
+                    continue
+                if dest and (after or not dest[1]):
+                    kind = "bench" if dest[0] == ("bench/",) else "trainer"
+                    flags_to.append((a, sources_under(*dest[0]), kind))
+                elif not after:
+                    flags_to.append((a, text, rel))
+        elif rel.startswith("build/"):
+            name = os.path.basename(rel)
+            src = PROGRAM_SRC.get(name)
+            kind = "trainer" if src == TRAINER_SRC else "program"
+            if name.startswith("bench_"):
+                src, kind = ("bench/",), "bench"
+            if src:
+                for a in args:
+                    if a.startswith("--"):
+                        flags_to.append((a, sources_under(*src), kind if kind != "program" else name))
+    elif prog not in ("cp", "g++", "pip", "ls", "cat", "mkdir", "cd"):
+        return
+    for a in args:
+        v = a.split("=", 1)[1] if a.startswith("-") and "=" in a else a
+        if looks_like_path(v):
+            checked_paths.append(v)
+    for i, a in enumerate(args):
+        if a in OUT_FLAGS and i + 1 < len(args):
+            out = os.path.normpath(os.path.join(state["cwd"], args[i + 1]))
+            if out.startswith("build/"):
+                state["made"].setdefault("/".join(out.split("/")[:2]), None)
+            if args[i + 1] in checked_paths and not os.path.exists(os.path.join(ROOT, out)):
+                checked_paths.remove(args[i + 1])  # an output the command creates
+    for p in checked_paths:
+        why = path_problem(p, state["cwd"], state["made"])
+        if why:
+            problem(f, n, "%s: %s" % (p, why))
+    for flag, text, kind in flags_to:
+        why = flag_problem(flag, text, kind)
+        if why:
+            problem(f, n, why)
+
+
+CMD_START = re.compile(r"^(?:[A-Za-z_]\w*=\S*\s+)*(?:time\s+)?(?:scripts/|build/|\.ci/|bench/\S+\.py|"
+                       r"examples/\S+\.py|python3?\s|/usr/bin/python3\s|cmake\s|ctest\s|cd\s)")
+
+
+def doc_commands(text):
+    """(line number, command line) of a page: shell blocks, command-like lines of plain blocks,
+    inline code that starts like a command."""
+    lines = text.split("\n")
+    fenced, lang = False, ""
+    n = 0
+    while n < len(lines):
+        line = lines[n]
+        m = FENCE.match(line)
+        if m:
+            fenced = not fenced
+            lang = line.strip()[3:].strip().lower() if fenced else ""
+            n += 1
+            continue
+        if fenced:
+            start = n
+            while line.endswith("\\") and n + 1 < len(lines):
+                n += 1
+                line = line[:-1] + " " + lines[n].strip()
+            s = line.strip()
+            if lang in ("sh", "bash", "console", "shell"):
+                if s and not s.startswith("#"):
+                    yield start + 1, s
+            elif lang == "" and CMD_START.match(s) and not s.split()[0].endswith("/"):
+                yield start + 1, s
+        n += 1
+    # Inline code, which may wrap onto the next line: over the text outside fenced blocks.
+    prose, fenced = [], False
+    for line in lines:
+        if FENCE.match(line):
+            fenced = not fenced
+            prose.append("")
+        else:
+            prose.append("" if fenced else line)
+    prose = "\n".join(prose)
+    for m in re.finditer(r"`([^`]+)`", prose):
+        span = " ".join(m.group(1).split())
+        if span and CMD_START.match(span) and not span.split()[0].endswith("/") \
+                and not re.search(r"[<>*{}…]|\.\.\.", span.split()[0]):
+            yield prose.count("\n", 0, m.start()) + 1, span
+
+
+for f in CMD_PAGES:
+    state = {"made": {}}
+    for n, line in doc_commands(TEXT[f]):
+        state["cwd"] = "."
+        for cmd in split_commands(line):
+            check_command(f, n, cmd, state)
+
+# ---------------------------------------------------------------------------------------------
+# (g) generated text is current
+import importlib.util  # noqa: E402
+
+_spec = importlib.util.spec_from_file_location("smg_bench_report", os.path.join(ROOT, "bench", "report.py"))
+report = importlib.util.module_from_spec(_spec)
+try:
+    _spec.loader.exec_module(report)
+except (OSError, SyntaxError) as e:
+    problem("bench/report.py", 1, "cannot load: %s" % e)
+    report = None
+if report is not None:
+    readme = TEXT.get("README.md", "")
+    b, e = report.HIGHLIGHTS_BEGIN, report.HIGHLIGHTS_END
+    if b not in readme or e not in readme:
+        problem("README.md", 1, "no '%s' ... '%s' block (bench/report.py --readme README.md fills it)" % (b, e))
+    else:
+        have = readme[readme.index(b) + len(b):readme.index(e)].lstrip("\n")
+        want = report.highlights(os.path.join(ROOT, "bench", "results"),
+                                 os.path.join(ROOT, "docs", "results.md"))
+        if have != want:
+            a, w = have.split("\n"), want.split("\n")
+            k = next((i for i in range(min(len(a), len(w))) if a[i] != w[i]), min(len(a), len(w)))
+            line = readme[:readme.index(b)].count("\n") + 2 + k
+            problem("README.md", line, "the highlights differ from what bench/report.py generates from "
+                    "bench/results and docs/results.md (run: python3 bench/report.py --readme README.md)")
+    import io  # noqa: E402
+    import contextlib  # noqa: E402
+    buf = io.StringIO()
+    old_argv = sys.argv
+    sys.argv = ["report.py", os.path.join(ROOT, "bench", "results")]
+    try:
+        with contextlib.redirect_stdout(buf):
+            report.main()
+    finally:
+        sys.argv = old_argv
+    perf = TEXT.get("docs/performance.md")
+    if perf is not None and perf != buf.getvalue().replace(os.path.join(ROOT, ""), ""):
+        problem("docs/performance.md", 1, "differs from what bench/report.py generates from bench/results "
+                "(run: python3 bench/report.py bench/results > docs/performance.md)")
 
 for p in problems:
     print(p)
