@@ -244,14 +244,15 @@ def ms(b):
     return b["real_time"] * scale
 
 
-def threads_of(b):
-    m = re.search(r"threads:(\d+)", b["clean"])
+def threads_of(b, where=r"threads:(\d+)"):
+    """A row's thread count: `threads:N` in its name (skin's rows end in `/N`: where=r"/(\d+)$")."""
+    m = re.search(where, b["clean"])
     return int(m.group(1)) if m else None
 
 
-def max_threads_row(res, pattern):
+def max_threads_row(res, pattern, where=r"threads:(\d+)"):
     rows = res.find(pattern)
-    return max(rows, key=lambda b: threads_of(b) or 0) if rows else None
+    return max(rows, key=lambda b: threads_of(b, where) or 0) if rows else None
 
 
 def summary_energy(res):
@@ -615,9 +616,10 @@ def hl_skin(res):
     j = rate("double", "dqb", 1, "BM_blend_jacobians")
     if j:
         line += f" With every Jacobian block: {fmt(j / 1e6)} M (double, DQB, one thread)."
-    bw = max_threads_slash(res, r"^BM_backward<double, SkinMethod::dqb>")
+    bw = max_threads_row(res, r"^BM_backward<double, SkinMethod::dqb>", r"/(\d+)$")
     if bw:
-        line += f" Backward into nodes and points: {fmt_ms(ms(bw))} (double, {threads_of_slash(bw)} threads)."
+        th = threads_of(bw, r"/(\d+)$")
+        line += f" Backward into nodes and points: {fmt_ms(ms(bw))} (double, {th} threads)."
     twists = sorted({int(b["clean"].split("/")[1]) for b in res.find(r"^BM_twist/\d+/0$")})
     vols = []
     for th in twists:
@@ -627,16 +629,6 @@ def hl_skin(res):
     if vols:
         line += " Volume of a twisting tube after/before (" + "; ".join(vols) + ")."
     return [line, ""]
-
-
-def threads_of_slash(b):
-    m = re.search(r"/(\d+)$", b["clean"])
-    return int(m.group(1)) if m else None
-
-
-def max_threads_slash(res, pattern):
-    rows = res.find(pattern)
-    return max(rows, key=lambda b: threads_of_slash(b) or 0) if rows else None
 
 
 def hl_splat(res):
