@@ -21,6 +21,7 @@
 #include "smg/cuda/skin_weights.cuh"
 #include "smg/cuda/validate.cuh"
 #include "smg_torch_common.hpp"
+#include "smg_torch_skin_views.hpp"
 
 namespace smg_torch {
 
@@ -113,24 +114,6 @@ at::Tensor lrm_cuda(const EnergyInputs& in, const smg::LrmOptions& o, bool valid
   return energy.to(in.ref.st);
 }
 
-template <class S>
-smg::SkinNodes<S> skin_nodes(const SkinInputs& in) {
-  return {smg::PositionsView<const S>(cptr<S>(in.x), in.T, in.N),
-          smg::QuaternionsView<const S>(cptr<S>(in.q), in.T, in.N)};
-}
-
-template <class S>
-smg::SkinPoints<S> skin_points(const SkinInputs& in, const at::Tensor& drivers,
-                               const at::Tensor& weights) {
-  smg::SkinPoints<S> p;
-  p.drivers = smg::SkinDriversView(cptr<std::int32_t>(drivers), in.P, drivers.size(1));
-  p.weights = smg::TableView<const S, Eigen::Dynamic>(cptr<S>(weights), in.P, weights.size(1));
-  p.t_ref = smg::SkinIndexView(cptr<std::int32_t>(in.t_ref), in.P);
-  p.positions = smg::TableView<const S, 3>(cptr<S>(in.pts), in.P);
-  if (in.pq.defined()) p.quaternions = smg::TableView<const S, 4>(cptr<S>(in.pq), in.P);
-  return p;
-}
-
 // dqb forward: smg::cuda::skin_drivers, skinning_weights and skin_blend into the outputs
 // (drivers [P, D] int32, weights [P, D], positions [Q, P, 3], quaternions [Q, P, 4]).
 void dqb_forward_cuda(const SkinInputs& in, const smg::SkinOptions& opt, const at::Tensor& drivers,
@@ -146,7 +129,7 @@ void dqb_forward_cuda(const SkinInputs& in, const smg::SkinOptions& opt, const a
                                smg::TableView<std::int32_t, Eigen::Dynamic>(mptr<std::int32_t>(drivers), in.P, D),
                                stream),
        kSkinNames);
-    const auto nodes = skin_nodes<S>(in);
+    const auto nodes = nodes_of<S>(in);
     ok(smg::cuda::skinning_weights<S>(
            nodes.positions, smg::SkinDriversView(cptr<std::int32_t>(drivers), in.P, D),
            smg::SkinIndexView(cptr<std::int32_t>(in.t_ref), in.P),
@@ -157,7 +140,7 @@ void dqb_forward_cuda(const SkinInputs& in, const smg::SkinOptions& opt, const a
     smg::SkinBlendOutputs<S> o;
     o.positions = {mptr<S>(out_x), in.Q, in.P};
     o.quaternions = {mptr<S>(out_q), in.Q, in.P};
-    ok(smg::cuda::skin_blend(nodes, skin_points<S>(in, drivers, weights),
+    ok(smg::cuda::skin_blend(nodes, points_of<S>(in, drivers, weights),
                              smg::SkinIndexView(cptr<std::int32_t>(in.t_query), in.Q), o, opt, stream),
        kSkinNames);
     return 0;
@@ -173,19 +156,13 @@ void dqb_backward_cuda(const SkinInputs& in, const smg::SkinOptions& opt, const 
   const cudaStream_t stream = stream_of(in.ref);
   dispatch(in.ref.st, false, [&](auto s, auto) {
     using S = decltype(s);
-    smg::SkinBlendOutputGradients<S> go;
-    if (grad_x.defined()) go.positions = {cptr<S>(grad_x), in.Q, in.P};
-    if (grad_q.defined()) go.quaternions = {cptr<S>(grad_q), in.Q, in.P};
-    smg::SkinBlendGradients<S> gr;
-    if (gx.defined()) gr.node_positions = {mptr<S>(gx), in.T, in.N};
-    if (gq.defined()) gr.node_quaternions = {mptr<S>(gq), in.T, in.N};
-    if (gp.defined()) gr.points = {mptr<S>(gp), in.P};
-    if (gpq.defined()) gr.point_quaternions = {mptr<S>(gpq), in.P};
+    const auto go = output_gradients<S>(in, grad_x, grad_q);
+    auto gr = blend_gradients<S>(in, gx, gq, gp, gpq);
     smg::cuda::ReverseGraph incidence;
     if (gx.defined() || gq.defined())
       ok(smg::cuda::build_driver_incidence(cptr<std::int32_t>(drivers), in.P, drivers.size(1), in.N,
                                            stream, incidence));
-    ok(smg::cuda::skin_blend_backward(skin_nodes<S>(in), skin_points<S>(in, drivers, weights),
+    ok(smg::cuda::skin_blend_backward(nodes_of<S>(in), points_of<S>(in, drivers, weights),
                                       smg::SkinIndexView(cptr<std::int32_t>(in.t_query), in.Q), go,
                                       gr, incidence, opt, stream),
        kSkinNames);

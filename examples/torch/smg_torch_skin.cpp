@@ -13,6 +13,7 @@
 
 #include "smg/skin.hpp"
 #include "smg_torch_common.hpp"
+#include "smg_torch_skin_views.hpp"
 
 namespace smg_torch {
 
@@ -55,24 +56,6 @@ SkinInputs prepare(const at::Tensor& node_positions, const at::Tensor& node_quat
 void int32_indices(SkinInputs& in) {
   for (at::Tensor* t : {&in.anchor, &in.t_ref, &in.t_query})
     if (t->defined()) *t = t->to(at::kInt).contiguous();
-}
-
-template <class S>
-smg::SkinNodes<S> nodes_of(const SkinInputs& in) {
-  return {smg::PositionsView<const S>(cptr<S>(in.x), in.T, in.N),
-          smg::QuaternionsView<const S>(cptr<S>(in.q), in.T, in.N)};
-}
-
-template <class S>
-smg::SkinPoints<S> points_of(const SkinInputs& in, const at::Tensor& drivers,
-                             const at::Tensor& weights) {
-  smg::SkinPoints<S> p;
-  p.drivers = smg::SkinDriversView(cptr<std::int32_t>(drivers), in.P, drivers.size(1));
-  p.weights = smg::TableView<const S, Eigen::Dynamic>(cptr<S>(weights), in.P, weights.size(1));
-  p.t_ref = smg::SkinIndexView(cptr<std::int32_t>(in.t_ref), in.P);
-  p.positions = smg::TableView<const S, 3>(cptr<S>(in.pts), in.P);
-  if (in.pq.defined()) p.quaternions = smg::TableView<const S, 4>(cptr<S>(in.pq), in.P);
-  return p;
 }
 
 // The checks of validate_skinning_weights and validate_skin_blend on everything except the
@@ -232,14 +215,8 @@ py::tuple dqb_backward(const at::Tensor& node_positions, const at::Tensor& node_
   } else {
     dispatch(in.ref.st, false, [&](auto s, auto) {
       using S = decltype(s);
-      smg::SkinBlendOutputGradients<S> go;
-      if (gop.defined()) go.positions = {cptr<S>(gop), in.Q, in.P};
-      if (goq.defined()) go.quaternions = {cptr<S>(goq), in.Q, in.P};
-      smg::SkinBlendGradients<S> gr;
-      if (gx.defined()) gr.node_positions = {mptr<S>(gx), in.T, in.N};
-      if (gq.defined()) gr.node_quaternions = {mptr<S>(gq), in.T, in.N};
-      if (gp.defined()) gr.points = {mptr<S>(gp), in.P};
-      if (gpq.defined()) gr.point_quaternions = {mptr<S>(gpq), in.P};
+      const auto go = output_gradients<S>(in, gop, goq);
+      auto gr = blend_gradients<S>(in, gx, gq, gp, gpq);
       py::gil_scoped_release release;
       smg::SkinWorkspace<S> ws;
       opt.parallel = parallel_options();
