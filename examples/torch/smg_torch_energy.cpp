@@ -16,55 +16,26 @@ namespace smg_torch {
 
 namespace {
 
-using OptTensor = std::optional<at::Tensor>;
-
-smg::GapList gap_list(const std::vector<int64_t>& gaps, const std::optional<std::vector<double>>& w) {
-  if (gaps.empty()) value_error("gaps: needs at least one gap");
-  if (w && w->size() != gaps.size())
-    value_error("gap_weights: needs one weight per gap (" + std::to_string(gaps.size()) + "), got " +
-                std::to_string(w->size()));
-  smg::GapList list;
-  for (std::size_t k = 0; k < gaps.size(); ++k) {
-    if (gaps[k] < 1 || gaps[k] > 1000000) value_error("gaps: entries must be integers >= 1");
-    list.push_back({static_cast<int>(gaps[k]), w ? (*w)[k] : 1.0});
-  }
-  return list;
-}
-
-smg::Normalization norm_of(bool normalize) {
-  return normalize ? smg::Normalization::mean : smg::Normalization::sum;
-}
-
-struct Inputs {
-  at::ScalarType st;
-  at::Tensor x, q, c;
-  GraphTensors g;
-  int64_t T = 0, N = 0;
-};
-
-Inputs prepare(const at::Tensor& positions, const OptTensor& quats, const at::Tensor& indices,
-               const at::Tensor& weights, const OptTensor& confidence) {
-  Inputs in;
-  in.st = float_type_of(positions, "positions");
-  require_shape(positions, "positions", 3, 3, "[T, N, 3]");
-  in.x = positions.contiguous();
-  in.T = positions.size(0);
-  in.N = positions.size(1);
-  if (quats) {
-    in.q = float_input<float>(*quats, "quats", in.st);
-    require_shape(in.q, "quats", 3, 4, "[T, N, 4]");
-  }
-  if (confidence) {
-    in.c = float_input<float>(*confidence, "confidence", in.st);
-    require_shape(in.c, "confidence", 2, -1, "[T, N]");
-  }
-  in.g = graph_input(indices, weights, in.st);
+// Checks positions [T, N, 3] (the reference), quats [T, N, 4], confidence [T, N], visibility
+// [T, N] and the graph on positions' device.
+EnergyInputs prepare(const at::Tensor& positions, const OptTensor& quats, const at::Tensor& indices,
+                     const at::Tensor& weights, const OptTensor& confidence,
+                     const OptTensor& visibility = std::nullopt, bool validate = false) {
+  EnergyInputs in;
+  in.ref = reference(positions, "positions");
+  in.x = float_input(positions, "positions", in.ref, 3, 3, "[T, N, 3]");
+  in.T = in.x.size(0);
+  in.N = in.x.size(1);
+  if (quats) in.q = float_input(*quats, "quats", in.ref, 3, 4, "[T, N, 4]");
+  if (confidence) in.c = float_input(*confidence, "confidence", in.ref, 2, -1, "[T, N]");
+  in.g = graph_input(indices, weights, in.ref);
+  if (visibility) in.vis = visibility_input(*visibility, in.ref, validate);
   return in;
 }
 
-template <class S, class I>
-smg::NeighborsView<S, I> graph_view(const GraphTensors& g) {
-  return smg::NeighborsView<S, I>(cptr<I>(g.indices), cptr<S>(g.weights), g.n, g.k);
+template <class S>
+smg::PositionsView<const S> positions_view(const EnergyInputs& in) {
+  return {cptr<S>(in.x), in.T, in.N};
 }
 
 template <class S>
@@ -78,38 +49,46 @@ smg::QuaternionsView<const S> quat_view(const at::Tensor& q) {
   return smg::QuaternionsView<const S>(cptr<S>(q), q.size(0), q.size(1));
 }
 
-at::Tensor scalar_tensor(double v, at::ScalarType st) {
-  return at::scalar_tensor(v, options_of(st));
+// Gradient buffers [T, N, 3] / [T, N, 4] on positions' device, zero, when requested.
+at::Tensor zeros_if(bool need, const EnergyInputs& in, int64_t last) {
+  return need ? at::zeros({in.T, in.N, last}, in.ref.options()) : at::Tensor();
 }
 
 py::object opt(const at::Tensor& t) { return t.defined() ? py::cast(t) : py::none(); }
 
+// CUDA implementation `f` of cuda_ops() (set in a CUDA build whenever a CUDA reference passed
+// reference()).
+template <class F>
+F& cuda(F& f) {
+  if (!f) not_implemented(kNoCudaMessage);
+  return f;
+}
+
 // node_confidences(positions, indices, weights, visibility, kappa_m, kappa_r, lambda_m,
-// lambda_r, eps) -> [T, N]
+// lambda_r, eps, validate) -> [T, N]
 at::Tensor node_confidences(const at::Tensor& positions, const at::Tensor& indices,
                             const at::Tensor& weights, const OptTensor& visibility, double kappa_m,
-                            double kappa_r, double lambda_m, double lambda_r, double eps) {
-  Inputs in = prepare(positions, std::nullopt, indices, weights, std::nullopt);
-  at::Tensor vis;
-  if (visibility) vis = visibility_input(*visibility);
-  smg::ConfidenceOptions o;
-  o.kappa_m = kappa_m;
-  o.kappa_r = kappa_r;
-  o.lambda_m = lambda_m;
-  o.lambda_r = lambda_r;
-  o.eps = eps;
-  at::Tensor out = at::empty({in.T, in.N}, options_of(in.st));
-  dispatch(in.st, in.g.int64, [&](auto s, auto i) {
+                            double kappa_r, double lambda_m, double lambda_r, double eps,
+                            bool validate) {
+  const EnergyInputs in =
+      prepare(positions, std::nullopt, indices, weights, std::nullopt, visibility, validate);
+  const smg::ConfidenceOptions o = confidence_options(kappa_m, kappa_r, lambda_m, lambda_r, eps);
+  at::Tensor out = at::empty({in.T, in.N}, in.ref.options());
+  if (in.ref.cuda()) {
+    cuda(cuda_ops().node_confidences)(in, o, validate, out);
+    return out;
+  }
+  dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
     using S = decltype(s);
     using I = decltype(i);
-    const smg::PositionsView<const S> xv(cptr<S>(in.x), in.T, in.N);
+    const auto xv = positions_view<S>(in);
     const smg::VisibilityView<const std::uint8_t> vv =
-        vis.defined() ? smg::VisibilityView<const std::uint8_t>(cptr<std::uint8_t>(vis), vis.size(0),
-                                                                vis.size(1))
-                      : smg::VisibilityView<const std::uint8_t>();
+        in.vis.defined() ? smg::VisibilityView<const std::uint8_t>(cptr<std::uint8_t>(in.vis),
+                                                                   in.vis.size(0), in.vis.size(1))
+                         : smg::VisibilityView<const std::uint8_t>();
     const auto gv = graph_view<S, I>(in.g);
     const smg::FrameScalarsView<S> cv(mptr<S>(out), in.T, in.N);
-    ok(smg::validate_confidence<S>(xv, vv, gv, o, cv));
+    ok(smg::validate_confidence<S>(xv, vv, gv, o, cv), kEnergyNames);
     py::gil_scoped_release release;
     smg::node_confidences<S>(xv, vv, gv, o, cv, {}, {}, nullptr, parallel_options());
     return 0;
@@ -118,70 +97,57 @@ at::Tensor node_confidences(const at::Tensor& positions, const at::Tensor& indic
 }
 
 // carap / arap: -> (energy 0-dim, grad_positions or None, grad_quats or None)
-py::tuple carap_impl(bool plain, const at::Tensor& positions, const at::Tensor& quats,
+py::tuple carap_impl(const CarapCall& call, const at::Tensor& positions, const at::Tensor& quats,
                      const at::Tensor& indices, const at::Tensor& weights,
-                     const OptTensor& confidence, double alpha, double lambda_c, double lambda_l,
-                     const std::vector<int64_t>& gaps,
-                     const std::optional<std::vector<double>>& gap_weights, bool normalize,
-                     bool grad_x, bool grad_q) {
-  Inputs in = prepare(positions, quats, indices, weights, plain ? std::nullopt : confidence);
-  smg::CarapOptions co;
-  smg::ArapOptions ao;
-  co.alpha = alpha;
-  co.lambda_c = ao.lambda_c = lambda_c;
-  co.lambda_l = ao.lambda_l = lambda_l;
-  co.gaps = ao.gaps = gap_list(gaps, gap_weights);
-  co.normalization = ao.normalization = norm_of(normalize);
-  at::Tensor gx, gq;
-  if (grad_x) gx = at::zeros({in.T, in.N, 3}, options_of(in.st));
-  if (grad_q) gq = at::zeros({in.T, in.N, 4}, options_of(in.st));
-  const double e = dispatch(in.st, in.g.int64, [&](auto s, auto i) {
+                     const OptTensor& confidence, bool grad_x, bool grad_q, bool validate) {
+  const EnergyInputs in =
+      prepare(positions, quats, indices, weights, call.plain ? std::nullopt : confidence);
+  const at::Tensor gx = zeros_if(grad_x, in, 3), gq = zeros_if(grad_q, in, 4);
+  if (in.ref.cuda())
+    return py::make_tuple(cuda(cuda_ops().carap)(in, call, validate, gx, gq), opt(gx), opt(gq));
+  const double e = dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
     using S = decltype(s);
     using I = decltype(i);
-    const smg::PositionsView<const S> xv(cptr<S>(in.x), in.T, in.N);
+    const auto xv = positions_view<S>(in);
     const auto qv = quat_view<S>(in.q);
     const auto gv = graph_view<S, I>(in.g);
     const smg::PositionsView<S> gxv = grad_x ? smg::PositionsView<S>(mptr<S>(gx), in.T, in.N)
                                              : smg::PositionsView<S>();
     smg::RotationGradientView<S> gqv;
     if (grad_q) gqv = smg::QuaternionsView<S>(mptr<S>(gq), in.T, in.N);
-    if (plain) {
-      ok(smg::validate_arap<S>(xv, qv, gv, ao, gxv, gqv));
+    if (call.plain) {
+      ok(smg::validate_arap<S>(xv, qv, gv, call.arap, gxv, gqv), kEnergyNames);
       py::gil_scoped_release release;
-      return double(smg::arap<S>(xv, qv, gv, ao, gxv, gqv, nullptr, parallel_options()));
+      return double(smg::arap<S>(xv, qv, gv, call.arap, gxv, gqv, nullptr, parallel_options()));
     }
     const auto cv = conf_view<S>(in.c);
-    ok(smg::validate_carap<S>(xv, qv, cv, gv, co, gxv, gqv));
+    ok(smg::validate_carap<S>(xv, qv, cv, gv, call.carap, gxv, gqv), kEnergyNames);
     py::gil_scoped_release release;
-    return double(smg::carap<S>(xv, qv, cv, gv, co, gxv, gqv, nullptr, parallel_options()));
+    return double(smg::carap<S>(xv, qv, cv, gv, call.carap, gxv, gqv, nullptr, parallel_options()));
   });
-  return py::make_tuple(scalar_tensor(e, in.st), opt(gx), opt(gq));
+  return py::make_tuple(at::scalar_tensor(e, in.ref.options()), opt(gx), opt(gq));
 }
 
 py::tuple lrm_impl(const at::Tensor& positions, const at::Tensor& indices, const at::Tensor& weights,
                    const OptTensor& confidence, double alpha, double huber_delta, bool detach_omega,
-                   bool normalize, bool grad_x) {
-  Inputs in = prepare(positions, std::nullopt, indices, weights, confidence);
-  smg::LrmOptions o;
-  o.alpha = alpha;
-  o.huber_delta = huber_delta;
-  o.detach_omega = detach_omega;
-  o.normalization = norm_of(normalize);
-  at::Tensor gx;
-  if (grad_x) gx = at::zeros({in.T, in.N, 3}, options_of(in.st));
-  const double e = dispatch(in.st, in.g.int64, [&](auto s, auto i) {
+                   bool normalize, bool grad_x, bool validate) {
+  const EnergyInputs in = prepare(positions, std::nullopt, indices, weights, confidence);
+  const smg::LrmOptions o = lrm_options(alpha, huber_delta, detach_omega, normalize);
+  const at::Tensor gx = zeros_if(grad_x, in, 3);
+  if (in.ref.cuda()) return py::make_tuple(cuda(cuda_ops().lrm)(in, o, validate, gx), opt(gx));
+  const double e = dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
     using S = decltype(s);
     using I = decltype(i);
-    const smg::PositionsView<const S> xv(cptr<S>(in.x), in.T, in.N);
+    const auto xv = positions_view<S>(in);
     const auto gv = graph_view<S, I>(in.g);
     const auto cv = conf_view<S>(in.c);
     const smg::PositionsView<S> gxv = grad_x ? smg::PositionsView<S>(mptr<S>(gx), in.T, in.N)
                                              : smg::PositionsView<S>();
-    ok(smg::validate_lrm<S>(xv, cv, gv, o, gxv));
+    ok(smg::validate_lrm<S>(xv, cv, gv, o, gxv), kEnergyNames);
     py::gil_scoped_release release;
     return double(smg::lrm<S>(xv, cv, gv, o, gxv, nullptr, parallel_options()));
   });
-  return py::make_tuple(scalar_tensor(e, in.st), opt(gx));
+  return py::make_tuple(at::scalar_tensor(e, in.ref.options()), opt(gx));
 }
 
 // _library_seconds(op, positions, quats, indices, weights, confidence, repeat): the binding's
@@ -193,33 +159,38 @@ py::tuple lrm_impl(const at::Tensor& positions, const at::Tensor& indices, const
 // and no workspace (as the binding calls it), on torch's intra-op thread count.
 double library_seconds(const std::string& op, const at::Tensor& positions, const OptTensor& quats,
                        const at::Tensor& indices, const at::Tensor& weights, const OptTensor& confidence,
-                       int64_t repeat) {
+                       const py::int_& repeat_arg) {
   const bool carap_op = op == "carap";
   if (!carap_op && op != "lrm") value_error("_library_seconds: op must be 'carap' or 'lrm'");
   if (carap_op && !quats) value_error("_library_seconds: carap needs quats");
-  if (repeat < 1) value_error("_library_seconds: repeat must be >= 1");
-  Inputs in = prepare(positions, carap_op ? quats : std::nullopt, indices, weights, confidence);
+  const int64_t repeat = int_arg(repeat_arg, "repeat", 1, 1000000);
+  const std::pair<OptTensor, const char*> tensors[] = {
+      {positions, "positions"}, {quats, "quats"}, {indices, "indices"}, {weights, "weights"},
+      {confidence, "confidence"}};
+  for (const auto& [t, name] : tensors)
+    if (t) require_cpu(*t, name);
+  const EnergyInputs in = prepare(positions, carap_op ? quats : std::nullopt, indices, weights, confidence);
   smg::CarapOptions co;
   co.alpha = 0.6;
   co.gaps = smg::default_gaps();
   smg::LrmOptions lo;
   lo.alpha = 0.6;
   lo.huber_delta = 0.01;
-  at::Tensor gx = at::zeros({in.T, in.N, 3}, options_of(in.st));
-  at::Tensor gq = at::zeros({in.T, in.N, 4}, options_of(in.st));
-  return dispatch(in.st, in.g.int64, [&](auto s, auto i) {
+  at::Tensor gx = at::zeros({in.T, in.N, 3}, in.ref.options());
+  at::Tensor gq = at::zeros({in.T, in.N, 4}, in.ref.options());
+  return dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
     using S = decltype(s);
     using I = decltype(i);
-    const smg::PositionsView<const S> xv(cptr<S>(in.x), in.T, in.N);
+    const auto xv = positions_view<S>(in);
     const auto gv = graph_view<S, I>(in.g);
     const auto cv = conf_view<S>(in.c);
     const smg::PositionsView<S> gxv(mptr<S>(gx), in.T, in.N);
     smg::RotationGradientView<S> gqv;
     if (carap_op) {
       gqv = smg::QuaternionsView<S>(mptr<S>(gq), in.T, in.N);
-      ok(smg::validate_carap<S>(xv, quat_view<S>(in.q), cv, gv, co, gxv, gqv));
+      ok(smg::validate_carap<S>(xv, quat_view<S>(in.q), cv, gv, co, gxv, gqv), kEnergyNames);
     } else {
-      ok(smg::validate_lrm<S>(xv, cv, gv, lo, gxv));
+      ok(smg::validate_lrm<S>(xv, cv, gv, lo, gxv), kEnergyNames);
     }
     const smg::ParallelOptions par = parallel_options();
     S* const gxp = mptr<S>(gx);
@@ -248,31 +219,42 @@ double library_seconds(const std::string& op, const at::Tensor& positions, const
 
 void register_energy(py::module_& m) {
   using namespace pybind11::literals;
+  // Each operator takes CPU or CUDA tensors (the device of positions decides); `validate`
+  // concerns CUDA tensors only (CPU tensors are always validated).
   m.def("node_confidences", &node_confidences, "positions"_a, "indices"_a, "weights"_a,
-        "visibility"_a, "kappa_m"_a, "kappa_r"_a, "lambda_m"_a, "lambda_r"_a, "eps"_a);
+        "visibility"_a, "kappa_m"_a, "kappa_r"_a, "lambda_m"_a, "lambda_r"_a, "eps"_a, "validate"_a);
   m.def(
       "carap",
       [](const at::Tensor& x, const at::Tensor& q, const at::Tensor& idx, const at::Tensor& w,
-         const OptTensor& c, double alpha, double lc, double ll, const std::vector<int64_t>& gaps,
-         const std::optional<std::vector<double>>& gw, bool normalize, bool gx, bool gq) {
-        return carap_impl(false, x, q, idx, w, c, alpha, lc, ll, gaps, gw, normalize, gx, gq);
+         const OptTensor& c, double alpha, double lc, double ll, const py::sequence& gaps,
+         const std::optional<std::vector<double>>& gw, bool normalize, bool gx, bool gq,
+         bool validate) {
+        return carap_impl(carap_options(false, alpha, lc, ll, gaps, gw, normalize), x, q, idx, w, c,
+                          gx, gq, validate);
       },
       "positions"_a, "quats"_a, "indices"_a, "weights"_a, "confidence"_a, "alpha"_a, "lambda_c"_a,
-      "lambda_l"_a, "gaps"_a, "gap_weights"_a, "normalize"_a, "grad_positions"_a, "grad_quats"_a);
+      "lambda_l"_a, "gaps"_a, "gap_weights"_a, "normalize"_a, "grad_positions"_a, "grad_quats"_a,
+      "validate"_a);
   m.def(
       "arap",
       [](const at::Tensor& x, const at::Tensor& q, const at::Tensor& idx, const at::Tensor& w,
-         double lc, double ll, const std::vector<int64_t>& gaps,
-         const std::optional<std::vector<double>>& gw, bool normalize, bool gx, bool gq) {
-        return carap_impl(true, x, q, idx, w, std::nullopt, 1.0, lc, ll, gaps, gw, normalize, gx,
-                          gq);
+         double lc, double ll, const py::sequence& gaps, const std::optional<std::vector<double>>& gw,
+         bool normalize, bool gx, bool gq, bool validate) {
+        return carap_impl(carap_options(true, 1.0, lc, ll, gaps, gw, normalize), x, q, idx, w,
+                          std::nullopt, gx, gq, validate);
       },
       "positions"_a, "quats"_a, "indices"_a, "weights"_a, "lambda_c"_a, "lambda_l"_a, "gaps"_a,
-      "gap_weights"_a, "normalize"_a, "grad_positions"_a, "grad_quats"_a);
+      "gap_weights"_a, "normalize"_a, "grad_positions"_a, "grad_quats"_a, "validate"_a);
   m.def("_library_seconds", &library_seconds, "op"_a, "positions"_a, "quats"_a, "indices"_a, "weights"_a,
         "confidence"_a, "repeat"_a);
   m.def("lrm", &lrm_impl, "positions"_a, "indices"_a, "weights"_a, "confidence"_a, "alpha"_a,
-        "huber_delta"_a, "detach_omega"_a, "normalize"_a, "grad_positions"_a);
+        "huber_delta"_a, "detach_omega"_a, "normalize"_a, "grad_positions"_a, "validate"_a);
+  m.def("set_memory_limit", [](double bytes) {
+    if (!(bytes > 0 && bytes <= 1048576 * kGiB))
+      value_error("set_memory_limit: bytes must be in (0, 2^50], got " + std::string(py::str(py::float_(bytes))));
+    memory_limit() = bytes;
+  }, "bytes"_a);
+  m.def("memory_limit", [] { return memory_limit(); });
 }
 
 }  // namespace smg_torch

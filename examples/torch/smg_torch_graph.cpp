@@ -13,31 +13,33 @@ namespace smg_torch {
 
 namespace {
 
-using OptTensor = std::optional<at::Tensor>;
-
 // -> (indices int64 [N, K], weights [N, K], features [N, C] or None, distances [N, K])
 py::tuple build_graph(const at::Tensor& positions, const OptTensor& visibility,
-                      const OptTensor& feature_samples, const OptTensor& features, int64_t k,
-                      double tau, const std::string& aggregation, int64_t m, double rho,
-                      int64_t min_covisible, const std::string& isolated,
-                      const std::string& weighting, bool gate) {
-  const at::ScalarType st = float_type_of(positions, "positions");
-  require_shape(positions, "positions", 3, 3, "[T, N, 3]");
-  const at::Tensor x = positions.contiguous();
+                      const OptTensor& feature_samples, const OptTensor& features,
+                      const py::int_& k_arg, double tau, const std::string& aggregation,
+                      const py::int_& m_arg, double rho, const py::int_& min_covisible_arg,
+                      const std::string& isolated, const std::string& weighting, bool gate) {
+  // The graph has no CUDA code: every tensor on the CPU.
+  const std::pair<OptTensor, const char*> tensors[] = {{positions, "positions"},
+                                                       {visibility, "visibility"},
+                                                       {feature_samples, "feature_samples"},
+                                                       {features, "features"}};
+  for (const auto& [t, name] : tensors)
+    if (t) require_cpu(*t, name);
+  const Reference r = reference(positions, "positions");
+  const at::ScalarType st = r.st;
+  const at::Tensor x = float_input(positions, "positions", r, 3, 3, "[T, N, 3]");
   const int64_t T = x.size(0), N = x.size(1);
   at::Tensor vis, fs, f;
-  if (visibility) vis = visibility_input(*visibility);
-  if (features) {
-    f = float_input<float>(*features, "features", st);
-    require_shape(f, "features", 2, -1, "[N, C]");
-  } else if (feature_samples) {
-    fs = float_input<float>(*feature_samples, "feature_samples", st);
-    require_shape(fs, "feature_samples", 3, -1, "[T, N, C]");
-  }
-  if (k < 1 || k > (1 << 20)) value_error("k: must be in [1, 2^20], got " + std::to_string(k));
-  if (m < 1 || m > 0x7fffffff) value_error("m: must be >= 1, got " + std::to_string(m));
-  if (min_covisible < 0 || min_covisible > 0x7fffffff)
-    value_error("min_covisible: must be >= 0, got " + std::to_string(min_covisible));
+  if (visibility) vis = visibility_input(*visibility, r, true);
+  if (features)
+    f = float_input(*features, "features", r, 2, -1, "[N, C]");
+  else if (feature_samples)
+    fs = float_input(*feature_samples, "feature_samples", r, 3, -1, "[T, N, C]");
+  // Integer arguments range-checked before they are narrowed to int.
+  const int64_t k = int_arg(k_arg, "k", 1, 1 << 20);
+  const int64_t m = int_arg(m_arg, "m", 1, 0x7fffffff);
+  const int64_t min_covisible = int_arg(min_covisible_arg, "min_covisible", 0, 0x7fffffff);
   if (!(rho > 0 && rho <= 1)) value_error("rho: must be in (0, 1], got " + std::to_string(rho));
   if (aggregation != "paper" && aggregation != "robust_max")
     value_error("aggregation: must be 'paper' or 'robust_max', got '" + aggregation + "'");
@@ -61,10 +63,21 @@ py::tuple build_graph(const at::Tensor& positions, const OptTensor& visibility,
   if ((f.defined() || fs.defined()) && C < 1)
     value_error(std::string(f.defined() ? "features" : "feature_samples") + ": needs at least one channel (C >= 1)");
   o.gate = gate && C > 0;
-  at::Tensor feats = f;
-  if (fs.defined()) feats = at::empty({N, C}, options_of(st));
-  at::Tensor idx32 = at::empty({N, k}, at::TensorOptions().dtype(at::kInt));
-  at::Tensor w = at::empty({N, k}, options_of(st)), d = at::empty({N, k}, options_of(st));
+  // Outputs [N, k] (int32 indices and their int64 copy, weights, distances), the descriptors
+  // [N, C] and the node-major trajectory copy [N, T, 3] (as smg_cli's graph).
+  const double s = st == at::kFloat ? 4 : 8;
+  const std::string what = "k: k = " + std::to_string(k) + " neighbours of N = " + std::to_string(N) +
+                           " nodes";
+  check_memory(double(N) * double(k) * (12 + 2 * s) + double(N) * double(C) * s +
+                   double(N) * double(T) * 3 * s,
+               what);
+  at::Tensor feats = f, idx32, w, d;
+  allocating(what, [&] {
+    if (fs.defined()) feats = at::empty({N, C}, r.options());
+    idx32 = at::empty({N, k}, r.int32());
+    w = at::empty({N, k}, r.options());
+    d = at::empty({N, k}, r.options());
+  });
   dispatch(st, false, [&](auto s, auto) {
     using S = decltype(s);
     const smg::PositionsView<const S> xv(cptr<S>(x), T, N);
@@ -83,11 +96,14 @@ py::tuple build_graph(const at::Tensor& positions, const OptTensor& visibility,
     const smg::TableView<std::int32_t, Eigen::Dynamic> iv(mptr<std::int32_t>(idx32), N, k);
     const smg::TableView<S, Eigen::Dynamic> wv(mptr<S>(w), N, k), dv(mptr<S>(d), N, k);
     ok(smg::validate_semantic_graph<S>(xv, vv, fv, o, iv, wv, dv));
-    py::gil_scoped_release release;
-    smg::build_semantic_graph<S>(xv, vv, fv, o, iv, wv, dv);
+    allocating(what, [&] {  // the KNN's workspace
+      py::gil_scoped_release release;
+      smg::build_semantic_graph<S>(xv, vv, fv, o, iv, wv, dv);
+    });
     return 0;
   });
-  return py::make_tuple(idx32.to(at::kLong), w, feats.defined() ? py::cast(feats) : py::none(), d);
+  const at::Tensor idx64 = allocating(what, [&] { return idx32.to(at::kLong); });
+  return py::make_tuple(idx64, w, feats.defined() ? py::cast(feats) : py::none(), d);
 }
 
 }  // namespace

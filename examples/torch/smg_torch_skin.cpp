@@ -3,115 +3,88 @@
 // blend (S6)-(S13) forward, and its analytic backward (S14)-(S18) w.r.t. the node positions, the
 // raw node quaternions, the points and the raw point quaternions.
 //
-// Copies: anchor, t_ref and t_query are narrowed to int32 (after a range check in int64), the
-// driver table [P, K+1] int32 and the weights [P, K+1] are new tensors (saved for backward).
+// CPU or CUDA tensors (node_positions' device decides): the checks, outputs and memory estimate
+// here are shared; the CUDA launches are in smg_torch_cuda.cu.
+// Copies: anchor, t_ref and t_query are narrowed to int32 (after a range check in their own
+// dtype), the driver table [P, K+1] int32 and the weights [P, K+1] are new tensors (saved for
+// backward).
 #include <optional>
 #include <string>
 
 #include "smg/skin.hpp"
 #include "smg_torch_common.hpp"
+#include "smg_torch_skin_views.hpp"
 
 namespace smg_torch {
 
 namespace {
 
-using OptTensor = std::optional<at::Tensor>;
-
-// An index vector [n] (any integer dtype) as int32 after checking [0, bound).
-at::Tensor index_input(const at::Tensor& a, const char* name, int64_t bound, const char* bound_name) {
-  require_cpu(a, name);
-  if (a.dim() != 1) value_error(std::string(name) + ": expected shape [n], got " + shape_of(a));
-  if (at::isFloatingType(a.scalar_type()) || a.scalar_type() == at::kBool)
-    value_error(std::string(name) + ": dtype must be an integer type, got " + dtype_name(a));
-  const at::Tensor l = a.to(at::kLong).contiguous();
-  const int64_t* p = l.data_ptr<int64_t>();
-  for (int64_t i = 0; i < l.numel(); ++i)
-    if (p[i] < 0 || p[i] >= bound)
-      value_error(std::string(name) + ": element [" + std::to_string(i) + "] = " + std::to_string(p[i]) +
-                  " is out of range [0, " + bound_name + "=" + std::to_string(bound) + ")");
-  return l.to(at::kInt).contiguous();
-}
-
-template <class S>
-smg::TableView<const S, 4> point_quat_view(const at::Tensor& pq) {
-  if (!pq.defined()) return {};
-  return smg::TableView<const S, 4>(cptr<S>(pq), pq.size(0));
-}
-
-struct SkinInputs {
-  at::ScalarType st;
-  at::Tensor x, q, pts, pq, sigma, anchor, t_ref, t_query;
-  GraphTensors g;
-  int64_t T = 0, N = 0, P = 0, Q = 0;
-};
-
+// Checks node_positions [T, N, 3] (the reference), node_quats [T, N, 4], points [P, 3],
+// point_quats [P, 4] and the index vectors t_ref [P], t_query [Q] (dtype and shape; their
+// ranges are checked by check_index_ranges, then they are converted with int32_indices).
 SkinInputs prepare(const at::Tensor& node_positions, const at::Tensor& node_quats,
                    const at::Tensor& points, const OptTensor& point_quats, const at::Tensor& t_ref,
                    const at::Tensor& t_query) {
   SkinInputs in;
-  in.st = float_type_of(node_positions, "node_positions");
-  require_shape(node_positions, "node_positions", 3, 3, "[T, N, 3]");
-  in.x = node_positions.contiguous();
-  in.T = node_positions.size(0);
-  in.N = node_positions.size(1);
-  in.q = float_input<float>(node_quats, "node_quats", in.st);
-  require_shape(in.q, "node_quats", 3, 4, "[T, N, 4]");
+  in.ref = reference(node_positions, "node_positions");
+  in.x = float_input(node_positions, "node_positions", in.ref, 3, 3, "[T, N, 3]");
+  in.T = in.x.size(0);
+  in.N = in.x.size(1);
+  in.q = float_input(node_quats, "node_quats", in.ref, 3, 4, "[T, N, 4]");
   if (in.q.size(0) != in.T || in.q.size(1) != in.N)
     value_error("node_quats: expected shape [T=" + std::to_string(in.T) + ", N=" +
                 std::to_string(in.N) + ", 4] like node_positions, got " + shape_of(in.q));
-  in.pts = float_input<float>(points, "points", in.st);
-  require_shape(in.pts, "points", 2, 3, "[P, 3]");
-  in.P = points.size(0);
+  in.pts = float_input(points, "points", in.ref, 2, 3, "[P, 3]");
+  in.P = in.pts.size(0);
   if (point_quats) {
-    in.pq = float_input<float>(*point_quats, "point_quats", in.st);
-    require_shape(in.pq, "point_quats", 2, 4, "[P, 4]");
+    in.pq = float_input(*point_quats, "point_quats", in.ref, 2, 4, "[P, 4]");
     if (in.pq.size(0) != in.P)
       value_error("point_quats: expected shape [P=" + std::to_string(in.P) + ", 4], got " +
                   shape_of(in.pq));
   }
-  in.t_ref = index_input(t_ref, "t_ref", in.T, "T");
-  if (in.t_ref.numel() != in.P)
+  index_input(t_ref, "t_ref", in.ref);
+  if (t_ref.numel() != in.P)
     value_error("t_ref: expected shape [P=" + std::to_string(in.P) + "], got " + shape_of(t_ref));
-  in.t_query = index_input(t_query, "t_query", in.T, "T");
-  in.Q = in.t_query.numel();
+  index_input(t_query, "t_query", in.ref);
+  in.t_ref = t_ref;
+  in.t_query = t_query;
+  in.Q = t_query.numel();
   return in;
 }
 
-template <class S>
-smg::SkinNodes<S> nodes_of(const SkinInputs& in) {
-  return {smg::PositionsView<const S>(cptr<S>(in.x), in.T, in.N),
-          smg::QuaternionsView<const S>(cptr<S>(in.q), in.T, in.N)};
-}
-
-template <class S>
-smg::SkinPoints<S> points_of(const SkinInputs& in, const at::Tensor& drivers,
-                             const at::Tensor& weights) {
-  smg::SkinPoints<S> p;
-  p.drivers = smg::SkinDriversView(cptr<std::int32_t>(drivers), in.P, drivers.size(1));
-  p.weights = smg::TableView<const S, Eigen::Dynamic>(cptr<S>(weights), in.P, weights.size(1));
-  p.t_ref = smg::SkinIndexView(cptr<std::int32_t>(in.t_ref), in.P);
-  p.positions = smg::TableView<const S, 3>(cptr<S>(in.pts), in.P);
-  p.quaternions = point_quat_view<S>(in.pq);
-  return p;
+// The range-checked index vectors as int32 (what smg's skin views read).
+void int32_indices(SkinInputs& in) {
+  for (at::Tensor* t : {&in.anchor, &in.t_ref, &in.t_query})
+    if (t->defined()) *t = t->to(at::kInt).contiguous();
 }
 
 // The checks of validate_skinning_weights and validate_skin_blend on everything except the
-// driver table (built by skin_drivers) and the weights (built by skinning_weights): node
-// positions and quaternions, points, point quaternions, sigma (t_ref, t_query and anchor were
-// range-checked by index_input).
+// driver table (built by skin_drivers), the weights (built by skinning_weights), the index
+// vectors and sigma (checked by dqb_forward on either device): node positions and quaternions,
+// points, point quaternions.
 template <class S>
-void check_skin_inputs(const smg::SkinNodes<S>& nodes, smg::TableView<const S, 3> points,
-                       const at::Tensor& pq, smg::TableView<const S, 1> sigma, int64_t N) {
+void check_skin_inputs(const SkinInputs& in) {
+  const auto nodes = nodes_of<S>(in);
   ok(smg::validate_positions<S>(nodes.positions, -1, -1, "node_positions"));
   ok(smg::validate_quaternions<S>(nodes.quaternions, nodes.frames(), nodes.nodes(),
                                   smg::QuaternionNorm::normalize_on_entry, "node_quats"));
+  const smg::TableView<const S, 3> points(cptr<S>(in.pts), in.P);
   ok(smg::detail::check_table<S, 3>(points, points.rows(), 3, "points"));
-  if (pq.defined()) {
-    const smg::TableView<const S, 4> qv(cptr<S>(pq), pq.size(0));
+  if (in.pq.defined()) {
+    const smg::TableView<const S, 4> qv(cptr<S>(in.pq), in.P);
     ok(smg::detail::check_table<S, 4>(qv, qv.rows(), 4, "point_quats"));
     ok(smg::detail::check_quaternion_rows<S>(qv, "point_quats"));
   }
-  ok(smg::validate_skin_sigma<S>(sigma, N));
+}
+
+// sigma [N]: finite and > 0, by the library's validator on a host copy (none on CPU).
+void check_sigma(const SkinInputs& in) {
+  const at::Tensor host = in.sigma.cpu();
+  dispatch(in.ref.st, false, [&](auto s, auto) {
+    using S = decltype(s);
+    ok(smg::validate_skin_sigma<S>(smg::TableView<const S, 1>(cptr<S>(host), in.N), in.N));
+    return 0;
+  });
 }
 
 // -> (positions [Q, P, 3], quaternions [Q, P, 4], drivers [P, D] int32, weights [P, D])
@@ -121,25 +94,50 @@ py::tuple dqb_forward(const at::Tensor& node_positions, const at::Tensor& node_q
                       const at::Tensor& anchor, const at::Tensor& t_ref, const at::Tensor& t_query,
                       const at::Tensor& sigma, bool lbs) {
   SkinInputs in = prepare(node_positions, node_quats, points, point_quats, t_ref, t_query);
-  in.g = graph_input(indices, gweights, in.st);
-  in.anchor = index_input(anchor, "anchor", in.N, "N");
-  if (in.anchor.numel() != in.P)
+  in.g = graph_input(indices, gweights, in.ref);
+  if (in.g.n != in.N)
+    value_error("graph.indices: expected shape [N=" + std::to_string(in.N) + ", K], got " +
+                shape_of(indices));
+  index_input(anchor, "anchor", in.ref);
+  if (anchor.numel() != in.P)
     value_error("anchor: expected shape [P=" + std::to_string(in.P) + "], got " + shape_of(anchor));
-  in.sigma = float_input<float>(sigma, "sigma", in.st);
-  require_shape(in.sigma, "sigma", 1, -1, "[N]");
+  in.anchor = anchor;
+  in.sigma = float_input(sigma, "sigma", in.ref, 1, -1, "[N]");
+  if (in.sigma.size(0) != in.N)
+    value_error("sigma: expected shape [N=" + std::to_string(in.N) + "], got " + shape_of(in.sigma));
+  // Outputs [Q, P, 3] + [Q, P, 4] and the drivers and weights [P, D] (as smg_cli's dqb).
   const int64_t D = in.g.k + 1;
-  at::Tensor drivers = at::empty({in.P, D}, at::TensorOptions().dtype(at::kInt));
-  at::Tensor weights = at::empty({in.P, D}, options_of(in.st));
-  at::Tensor out_x = at::empty({in.Q, in.P, 3}, options_of(in.st));
-  at::Tensor out_q = at::empty({in.Q, in.P, 4}, options_of(in.st));
-  dispatch(in.st, in.g.int64, [&](auto s, auto i) {
+  const double s = in.ref.st == at::kFloat ? 4 : 8;
+  const std::string outputs = "t_query: Q = " + std::to_string(in.Q) + " query frames x P = " +
+                              std::to_string(in.P) + " points of blended outputs [Q, P, 7]";
+  check_memory(double(in.Q) * double(in.P) * 7 * s + double(in.P) * double(D) * (4 + s), outputs);
+  check_index_ranges({{in.g.indices, "graph", -1, in.N, "N", true},
+                      {in.anchor, "anchor", 0, in.N, "N"},
+                      {in.t_ref, "t_ref", 0, in.T, "T"},
+                      {in.t_query, "t_query", 0, in.T, "T"}});
+  check_sigma(in);
+  int32_indices(in);
+  at::Tensor drivers, weights, out_x, out_q;
+  allocating(outputs, [&] {
+    drivers = at::empty({in.P, D}, in.ref.int32());
+    weights = at::empty({in.P, D}, in.ref.options());
+    out_x = at::empty({in.Q, in.P, 3}, in.ref.options());
+    out_q = at::empty({in.Q, in.P, 4}, in.ref.options());
+  });
+  smg::SkinOptions opt = skin_options(lbs);
+  if (in.ref.cuda()) {
+    if (!cuda_ops().dqb_forward) not_implemented(kNoCudaMessage);
+    cuda_ops().dqb_forward(in, opt, drivers, weights, out_x, out_q);
+    return py::make_tuple(out_x, out_q, drivers, weights);
+  }
+  dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
     using S = decltype(s);
     using I = decltype(i);
-    const smg::NeighborsView<S, I> gv(cptr<I>(in.g.indices), cptr<S>(in.g.weights), in.g.n, in.g.k);
+    const auto gv = graph_view<S, I>(in.g);
     const smg::SkinIndexView av(cptr<std::int32_t>(in.anchor), in.P);
     const smg::TableView<std::int32_t, Eigen::Dynamic> dv(mptr<std::int32_t>(drivers), in.P, D);
     ok(smg::validate_skin_drivers(gv, av, in.N, dv));
-    const smg::TableView<const S, 1> sv(cptr<S>(in.sigma), in.sigma.size(0));
+    const smg::TableView<const S, 1> sv(cptr<S>(in.sigma), in.N);
     const auto nodes = nodes_of<S>(in);
     const smg::SkinIndexView tr(cptr<std::int32_t>(in.t_ref), in.P);
     const smg::TableView<const S, 3> pv(cptr<S>(in.pts), in.P);
@@ -152,7 +150,7 @@ py::tuple dqb_forward(const at::Tensor& node_positions, const at::Tensor& node_q
     // validate_skinning_weights / validate_skin_blend minus the driver table, which
     // skin_drivers just built from a validated graph and anchors: the library's check_drivers
     // builds an ostringstream per entry (~140 ms for 32768 x 17, 15x the blend itself).
-    check_skin_inputs<S>(nodes, pv, in.pq, sv, in.N);
+    check_skin_inputs<S>(in);
     {
       py::gil_scoped_release release;
       smg::skinning_weights<S>(nodes.positions, dv, tr, pv, sv, wv, parallel_options());
@@ -163,8 +161,6 @@ py::tuple dqb_forward(const at::Tensor& node_positions, const at::Tensor& node_q
     o.quaternions = {mptr<S>(out_q), in.Q, in.P};
     const smg::SkinIndexView tq(cptr<std::int32_t>(in.t_query), in.Q);
     py::gil_scoped_release release;
-    smg::SkinOptions opt;
-    opt.method = lbs ? smg::SkinMethod::lbs : smg::SkinMethod::dqb;
     opt.parallel = parallel_options();
     smg::skin_blend(nodes, pts, tq, o, opt);
     return 0;
@@ -181,53 +177,57 @@ py::tuple dqb_backward(const at::Tensor& node_positions, const at::Tensor& node_
                        const OptTensor& grad_quats, bool lbs, bool need_x, bool need_q,
                        bool need_p, bool need_pq) {
   SkinInputs in = prepare(node_positions, node_quats, points, point_quats, t_ref, t_query);
+  // drivers and weights are the forward's outputs (their contents are trusted).
+  const at::Tensor drv = on_device(drivers, "drivers", in.ref);
+  if (drv.scalar_type() != at::kInt || drv.dim() != 2 || drv.size(0) != in.P)
+    value_error("drivers: expected an int32 tensor [P=" + std::to_string(in.P) + ", D], got " +
+                shape_of(drv));
+  const at::Tensor wts = float_input(weights, "weights", in.ref, 2, drv.size(1), "[P, D] like drivers");
+  if (wts.size(0) != in.P)
+    value_error("weights: expected shape " + shape_of(drv) + " like drivers, got " + shape_of(wts));
   at::Tensor gop, goq;
   if (grad_positions) {
-    gop = float_input<float>(*grad_positions, "grad_positions", in.st);
-    require_shape(gop, "grad_positions", 3, 3, "[Q, P, 3]");
+    gop = float_input(*grad_positions, "grad_positions", in.ref, 3, 3, "[Q, P, 3]");
+    if (gop.size(0) != in.Q || gop.size(1) != in.P)
+      value_error("grad_positions: expected shape [Q, P, 3], got " + shape_of(gop));
   }
   if (grad_quats) {
-    goq = float_input<float>(*grad_quats, "grad_quats", in.st);
-    require_shape(goq, "grad_quats", 3, 4, "[Q, P, 4]");
-  }
-  at::Tensor gx, gq, gp, gpq;
-  if (need_x) gx = at::zeros({in.T, in.N, 3}, options_of(in.st));
-  if (need_q) gq = at::zeros({in.T, in.N, 4}, options_of(in.st));
-  if (need_p) gp = at::zeros({in.P, 3}, options_of(in.st));
-  if (need_pq && in.pq.defined()) gpq = at::zeros({in.P, 4}, options_of(in.st));
-  dispatch(in.st, false, [&](auto s, auto) {
-    using S = decltype(s);
-    const auto nodes = nodes_of<S>(in);
-    const auto pts = points_of<S>(in, drivers, weights);
-    const smg::SkinIndexView tq(cptr<std::int32_t>(in.t_query), in.Q);
-    smg::SkinBlendOutputGradients<S> go;
-    if (gop.defined()) go.positions = {cptr<S>(gop), in.Q, in.P};
-    if (goq.defined()) go.quaternions = {cptr<S>(goq), in.Q, in.P};
-    smg::SkinBlendGradients<S> gr;
-    if (gx.defined()) gr.node_positions = {mptr<S>(gx), in.T, in.N};
-    if (gq.defined()) gr.node_quaternions = {mptr<S>(gq), in.T, in.N};
-    if (gp.defined()) gr.points = {mptr<S>(gp), in.P};
-    if (gpq.defined()) gr.point_quaternions = {mptr<S>(gpq), in.P};
-    // Inputs, drivers and weights were validated (or built) by the forward; only the incoming
-    // gradients are new (shapes checked above, finiteness here).
-    if (gop.defined() && !at::isfinite(gop).all().item<bool>())
-      value_error("grad_positions: has a value that is not finite");
-    if (goq.defined() && !at::isfinite(goq).all().item<bool>())
-      value_error("grad_quats: has a value that is not finite");
-    if (gop.defined() && (gop.size(0) != in.Q || gop.size(1) != in.P))
-      value_error("grad_positions: expected shape [Q, P, 3], got " + shape_of(gop));
-    if (goq.defined() && (goq.size(0) != in.Q || goq.size(1) != in.P))
+    goq = float_input(*grad_quats, "grad_quats", in.ref, 3, 4, "[Q, P, 4]");
+    if (goq.size(0) != in.Q || goq.size(1) != in.P)
       value_error("grad_quats: expected shape [Q, P, 4], got " + shape_of(goq));
-    py::gil_scoped_release release;
-    smg::SkinWorkspace<S> ws;
-    smg::SkinOptions opt;
-    opt.method = lbs ? smg::SkinMethod::lbs : smg::SkinMethod::dqb;
-    opt.parallel = parallel_options();
-    smg::skin_blend_backward(nodes, pts, tq, go, gr, ws, opt);
-    return 0;
-  });
-  auto opt = [](const at::Tensor& t) { return t.defined() ? py::cast(t) : py::none(); };
-  return py::make_tuple(opt(gx), opt(gq), opt(gp), opt(gpq));
+  }
+  // The incoming gradients' contents on CPU tensors (on CUDA tensors it would synchronise).
+  if (!in.ref.cuda() && gop.defined() && !at::isfinite(gop).all().item<bool>())
+    value_error("grad_positions: has a value that is not finite");
+  if (!in.ref.cuda() && goq.defined() && !at::isfinite(goq).all().item<bool>())
+    value_error("grad_quats: has a value that is not finite");
+  check_index_ranges({{in.t_ref, "t_ref", 0, in.T, "T"}, {in.t_query, "t_query", 0, in.T, "T"}});
+  int32_indices(in);
+  const auto o = in.ref.options();
+  const at::Tensor gx = need_x ? at::zeros({in.T, in.N, 3}, o) : at::Tensor();
+  const at::Tensor gq = need_q ? at::zeros({in.T, in.N, 4}, o) : at::Tensor();
+  const at::Tensor gp = need_p ? at::zeros({in.P, 3}, o) : at::Tensor();
+  const at::Tensor gpq = need_pq && in.pq.defined() ? at::zeros({in.P, 4}, o) : at::Tensor();
+  smg::SkinOptions opt = skin_options(lbs);
+  if (in.ref.cuda()) {
+    if (!cuda_ops().dqb_backward) not_implemented(kNoCudaMessage);
+    cuda_ops().dqb_backward(in, opt, drv, wts, gop, goq, gx, gq, gp, gpq);
+  } else {
+    dispatch(in.ref.st, false, [&](auto s, auto) {
+      using S = decltype(s);
+      const auto go = output_gradients<S>(in, gop, goq);
+      auto gr = blend_gradients<S>(in, gx, gq, gp, gpq);
+      py::gil_scoped_release release;
+      smg::SkinWorkspace<S> ws;
+      opt.parallel = parallel_options();
+      smg::skin_blend_backward(nodes_of<S>(in), points_of<S>(in, drv, wts),
+                               smg::SkinIndexView(cptr<std::int32_t>(in.t_query), in.Q), go, gr, ws,
+                               opt);
+      return 0;
+    });
+  }
+  auto opt_out = [](const at::Tensor& t) { return t.defined() ? py::cast(t) : py::none(); };
+  return py::make_tuple(opt_out(gx), opt_out(gq), opt_out(gp), opt_out(gpq));
 }
 
 }  // namespace

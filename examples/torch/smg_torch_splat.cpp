@@ -17,7 +17,15 @@ namespace smg_torch {
 namespace {
 
 namespace sp = smg::splat;
-using OptTensor = std::optional<at::Tensor>;
+
+// Library names that differ from the Python arguments of render (after validate_camera's
+// "camera: " and validate_settings' "settings: " prefixes are dropped).
+constexpr Names kRenderNames = {
+    {"near plane", "near"},           {"far plane", "far"},         {"focal lengths", "K"},
+    {"principal point", "K"},         {"image size", "width, height"},
+    {"tile_size", "tile_size"},       {"radius_sigmas", "radius_sigmas"},
+    {"eps2d", "eps2d"},               {"alpha_max", "alpha_max"},   {"image", "grad_image"},
+    {"alpha", "grad_alpha"},          {"depth", "grad_depth"}};
 
 struct RenderState {
   at::ScalarType st = at::kDouble;
@@ -65,20 +73,26 @@ struct Params {
   int64_t G = 0, ncoef = 0;
 };
 
-Params prepare(at::ScalarType st, const at::Tensor& means, const at::Tensor& quats,
-               const at::Tensor& log_scales, const at::Tensor& opacity_logits,
-               const at::Tensor& colors) {
+// The Gaussians on the CPU (the splatter has no CUDA code): means [G, 3] (the reference), quats
+// [G, 4], log_scales [G, 3], opacity_logits [G], colors [G, C] or [G, K, C].
+Params prepare(const at::Tensor& means, const at::Tensor& quats, const at::Tensor& log_scales,
+               const at::Tensor& opacity_logits, const at::Tensor& colors) {
+  for (const auto& [t, name] : {std::pair{&means, "means"}, std::pair{&quats, "quats"},
+                                std::pair{&log_scales, "log_scales"},
+                                std::pair{&opacity_logits, "opacity_logits"},
+                                std::pair{&colors, "colors"}})
+    require_cpu(*t, name);
   Params p;
-  require_shape(means, "means", 2, 3, "[G, 3]");
-  p.means = means.contiguous();
+  const Reference r = reference(means, "means");
+  p.means = float_input(means, "means", r, 2, 3, "[G, 3]");
   p.G = means.size(0);
-  p.quats = float_input<float>(quats, "quats", st);
-  require_shape(p.quats, "quats", 2, 4, "[G, 4]");
-  p.scales = float_input<float>(log_scales, "log_scales", st);
-  require_shape(p.scales, "log_scales", 2, 3, "[G, 3]");
-  p.logits = float_input<float>(opacity_logits, "opacity_logits", st);
-  require_shape(p.logits, "opacity_logits", 1, -1, "[G]");
-  p.colors = float_input<float>(colors, "colors", st);
+  p.quats = float_input(quats, "quats", r, 2, 4, "[G, 4]");
+  p.scales = float_input(log_scales, "log_scales", r, 2, 3, "[G, 3]");
+  p.logits = float_input(opacity_logits, "opacity_logits", r, 1, -1, "[G]");
+  p.colors = on_device(colors, "colors", r);
+  if (p.colors.scalar_type() != r.st)
+    value_error("colors: dtype " + dtype_name(p.colors.scalar_type()) + " does not match means (" +
+                dtype_name(r.st) + ")");
   if (p.colors.dim() != 2 && p.colors.dim() != 3)
     value_error("colors: expected shape [G, C] or SH coefficients [G, K, C], got " + shape_of(colors));
   p.ncoef = p.colors.dim() == 2 ? p.colors.size(1) : p.colors.size(1) * p.colors.size(2);
@@ -101,11 +115,12 @@ sp::GaussianParams<S> params_of(const Params& p, int sh_degree) {
 py::tuple render_forward(const at::Tensor& means, const at::Tensor& quats,
                          const at::Tensor& log_scales, const at::Tensor& opacity_logits,
                          const at::Tensor& colors, const at::Tensor& viewmat, const at::Tensor& K,
-                         int64_t width, int64_t height, const OptTensor& background, double near,
-                         double far, int64_t tile_size, double radius_sigmas, double eps2d,
+                         const py::int_& width_arg, const py::int_& height_arg,
+                         const OptTensor& background, double near, double far,
+                         const py::int_& tile_size_arg, double radius_sigmas, double eps2d,
                          double alpha_max) {
-  const at::ScalarType st = float_type_of(means, "means");
-  Params p = prepare(st, means, quats, log_scales, opacity_logits, colors);
+  Params p = prepare(means, quats, log_scales, opacity_logits, colors);
+  const at::ScalarType st = p.means.scalar_type();
   auto state = std::make_shared<RenderState>();
   state->st = st;
   if (p.colors.dim() == 3) {
@@ -125,14 +140,17 @@ py::tuple render_forward(const at::Tensor& means, const at::Tensor& quats,
     value_error("viewmat: expected shape [4, 4], got " + shape_of(viewmat));
   if (K.dim() != 2 || K.size(0) != 3 || K.size(1) != 3)
     value_error("K: expected shape [3, 3], got " + shape_of(K));
-  if (width < 1 || height < 1 || width > 65536 || height > 65536)
-    value_error("width, height: must be in 1..65536");
+  // Integer arguments range-checked before they are narrowed to int (as smg_cli's --width,
+  // --height and --tile-size); the library then allows tile sizes 8, 16 and 32.
+  const int64_t width = int_arg(width_arg, "width", 1, 65536);
+  const int64_t height = int_arg(height_arg, "height", 1, 65536);
+  const int64_t tile_size = int_arg(tile_size_arg, "tile_size", 1, 2147483647);
   const at::Tensor vm = viewmat.to(at::kDouble).contiguous(), km = K.to(at::kDouble).contiguous();
   for (int k = 0; k < 16; ++k) state->vm[k] = vm.data_ptr<double>()[k];
   const double* kp = km.data_ptr<double>();
   {
     const Eigen::Matrix3d Km = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(kp);
-    ok(sp::validate_camera_matrix<double>(Km));
+    ok(sp::validate_camera_matrix<double>(Km), kRenderNames);
   }
   state->fx = kp[0];
   state->fy = kp[4];
@@ -154,10 +172,21 @@ py::tuple render_forward(const at::Tensor& means, const at::Tensor& quats,
                   std::to_string(bg.numel()));
     for (int64_t k = 0; k < C; ++k) state->background.push_back(bg.data_ptr<double>()[bg.numel() == 1 ? 0 : k]);
   }
-  at::Tensor image = at::empty({height, width, C}, options_of(st));
-  at::Tensor alpha = at::empty({height, width}, options_of(st));
-  at::Tensor depth = at::empty({height, width}, options_of(st));
-  at::Tensor radii = at::empty({p.G}, at::TensorOptions().dtype(at::kInt));
+  // Images (image, alpha, depth), their gradients in backward (same size), the workspace's
+  // per-pixel state (~4 scalars) and per-Gaussian state (~64 scalars), as smg_cli's render.
+  const double s = st == at::kFloat ? 4 : 8, px = double(width) * double(height);
+  const std::string images_what = "width, height: a " + std::to_string(width) + "x" +
+                                  std::to_string(height) + " image with C = " + std::to_string(C) +
+                                  " channels and G = " + std::to_string(p.G) + " Gaussians";
+  check_memory(px * ((double(C) + 2) * s * 2 + 4 * s) + double(p.G) * 64 * s, images_what);
+  const at::TensorOptions o = at::TensorOptions().dtype(st);
+  at::Tensor image, alpha, depth, radii;
+  allocating(images_what, [&] {
+    image = at::empty({height, width, C}, o);
+    alpha = at::empty({height, width}, o);
+    depth = at::empty({height, width}, o);
+    radii = at::empty({p.G}, at::TensorOptions().dtype(at::kInt));
+  });
   dispatch(st, false, [&](auto s, auto) {
     using S = decltype(s);
     const auto params = params_of<S>(p, state->sh_degree);
@@ -168,14 +197,14 @@ py::tuple render_forward(const at::Tensor& means, const at::Tensor& quats,
                                      {mptr<S>(alpha), height, width},
                                      {mptr<S>(depth), height, width}};
     auto& ws = state->ws<S>();
-    ok(sp::validate_render(params, cam, set, images, C == 3 ? 3 : -1));
-    {
+    ok(sp::validate_render(params, cam, set, images, C == 3 ? 3 : -1), kRenderNames);
+    allocating(images_what, [&] {  // the workspace (tile lists, per-pixel state)
       py::gil_scoped_release release;
       if (C == 3)
         sp::render_forward<3>(params, cam, set, ws, images, parallel_options());
       else
         sp::render_forward<Eigen::Dynamic>(params, cam, set, ws, images, parallel_options());
-    }
+    });
     int32_t* r = radii.data_ptr<int32_t>();
     for (int64_t g = 0; g < p.G; ++g)
       r[g] = static_cast<int32_t>(std::min<S>(ws.radii[std::size_t(g)], S(2147483647)));
@@ -191,15 +220,20 @@ py::tuple render_backward(const std::shared_ptr<RenderState>& state, const at::T
                           const OptTensor& grad_image, const OptTensor& grad_alpha,
                           const OptTensor& grad_depth) {
   const at::ScalarType st = state->st;
-  Params p = prepare(st, means, quats, log_scales, opacity_logits, colors);
+  Params p = prepare(means, quats, log_scales, opacity_logits, colors);
+  const Reference r{"means", at::Device(at::kCPU), st};
+  if (p.means.scalar_type() != st)
+    value_error("means: dtype " + dtype_name(p.means.scalar_type()) + " does not match the forward's (" +
+                dtype_name(st) + ")");
   const int64_t H = state->height, W = state->width, C = state->channels;
   at::Tensor gi, ga, gd;
-  if (grad_image) gi = float_input<float>(*grad_image, "grad_image", st);
-  if (grad_alpha) ga = float_input<float>(*grad_alpha, "grad_alpha", st);
-  if (grad_depth) gd = float_input<float>(*grad_depth, "grad_depth", st);
-  at::Tensor g_means = at::zeros({p.G, 3}, options_of(st)), g_quats = at::zeros({p.G, 4}, options_of(st)),
-             g_scales = at::zeros({p.G, 3}, options_of(st)), g_logits = at::zeros({p.G}, options_of(st)),
-             g_colors = at::zeros(p.colors.sizes(), options_of(st));
+  if (grad_image) gi = float_input(*grad_image, "grad_image", r, 3, C, "[H, W, C]");
+  if (grad_alpha) ga = float_input(*grad_alpha, "grad_alpha", r, 2, -1, "[H, W]");
+  if (grad_depth) gd = float_input(*grad_depth, "grad_depth", r, 2, -1, "[H, W]");
+  const at::TensorOptions o = at::TensorOptions().dtype(st);
+  at::Tensor g_means = at::zeros({p.G, 3}, o), g_quats = at::zeros({p.G, 4}, o),
+             g_scales = at::zeros({p.G, 3}, o), g_logits = at::zeros({p.G}, o),
+             g_colors = at::zeros(p.colors.sizes(), o);
   dispatch(st, false, [&](auto s, auto) {
     using S = decltype(s);
     const auto params = params_of<S>(p, state->sh_degree);
@@ -223,7 +257,7 @@ py::tuple render_backward(const std::shared_ptr<RenderState>& state, const at::T
     gout.log_scales = {mptr<S>(g_scales), p.G};
     gout.opacity_logits = {mptr<S>(g_logits), p.G};
     gout.colors = {mptr<S>(g_colors), p.G, p.ncoef};
-    ok(sp::validate_render_backward(params, cam, set, ws, gin, gout));
+    ok(sp::validate_render_backward(params, cam, set, ws, gin, gout), kRenderNames);
     py::gil_scoped_release release;
     if (C == 3)
       sp::render_backward<3>(params, cam, set, ws, gin, gout, parallel_options());

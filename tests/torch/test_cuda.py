@@ -38,8 +38,7 @@ def test_cuda_matches_cpu(dtype, tol, int64):
         conf = smg.node_confidences(xs, g)
         e = smg.carap(xs, qs, g, c.to(dev), alpha=0.3, gaps=(1, 3), gap_weights=(1.0, 0.5))
         e = e + 0.5 * smg.arap(xs, qs, g, lambda_l=0.25)
-        if hasattr(smg._C, "cuda_lrm"):
-            e = e + smg.lrm(xs, g, c.to(dev))
+        e = e + smg.lrm(xs, g, c.to(dev))
         e.backward()
         out[dev] = (conf.cpu(), e.detach().cpu(), xs.grad.cpu(), qs.grad.cpu())
     conf_cpu, e_cpu, gx_cpu, gq_cpu = out["cpu"]
@@ -178,7 +177,7 @@ def test_cuda_dqb_internals_and_determinism():
     x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma = _skin_scene(torch.float64)
     cpu = smg._C.dqb_forward(x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma, False)
     d = [t.cuda() for t in (x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma)]
-    runs = [smg._C.cuda_dqb_forward(*d, False) for _ in range(2)]
+    runs = [smg._C.dqb_forward(*d, False) for _ in range(2)]  # CUDA tensors: the CUDA operator
     assert runs[0][2].dtype == torch.int32
     assert torch.equal(runs[0][2].cpu(), cpu[2])
     assert _rel(runs[0][3].cpu(), cpu[3]) <= 1e-12

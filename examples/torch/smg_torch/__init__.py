@@ -13,17 +13,33 @@ in forward (the library's kernels produce both in one pass, cheaper than a secon
 input requires grad, and backward scales it by grad_output (energies are linear in it).
 float32 and float64; contiguous CPU tensors are read in place; non-contiguous ones are copied
 once (.contiguous()); graph indices int32 or int64 are read in place; graph weights of the
-other float dtype are converted. Errors raise ValueError with the library's one-line message.
+other float dtype are converted. Errors raise ValueError with the library's one-line message,
+naming the Python argument.
+
+Device: each operator takes CPU or CUDA tensors; the device of its first tensor (positions,
+node_positions) decides, in the compiled module. A CUDA tensor raises NotImplementedError for an
+operator without CUDA code (build_graph, render) or when smg_torch was built without CUDA.
+
+Memory limit: before allocating a large output (dqb's [Q, P, 7] blended frames, render's images
+and buffers, build_graph's [N, k] tables), the request's memory is estimated and refused with a
+ValueError naming the argument that makes it large when above the limit, as smg_cli's
+--max-memory-gb does (docs/interop.md "Limits"): 8 GiB by default, set with
+set_memory_limit(bytes) or, at import, the environment variable SMG_TORCH_MAX_MEMORY_GB (GiB);
+memory_limit() returns it. An allocation that fails anyway is a ValueError naming the argument.
+Integer arguments (k, m, min_covisible, gaps, width, height, tile_size) are range-checked before
+they are narrowed: a ValueError names the argument.
 """
 from __future__ import annotations
 
+import os
 from typing import NamedTuple, Optional, Sequence, Tuple, Union
 
 import torch
 
 from . import _C  # noqa: E402  (after torch: the module links against libtorch)
 
-__all__ = ["Graph", "has_cuda", "build_graph", "node_confidences", "carap", "arap", "lrm", "dqb", "render", "version"]
+__all__ = ["Graph", "has_cuda", "build_graph", "node_confidences", "carap", "arap", "lrm", "dqb", "render", "version",
+           "set_memory_limit", "memory_limit"]
 
 version = _C.version
 
@@ -32,8 +48,20 @@ version = _C.version
 #: device's current stream with the same equations and gradients.
 has_cuda = bool(getattr(_C, "has_cuda", False))
 
-_CUDA_MESSAGE = "smg_torch: CUDA tensors are not supported by this operator (CPU only)"
-_NO_CUDA_MESSAGE = "smg_torch: CUDA tensors need smg_torch built with CUDA (smg_torch.has_cuda is False)"
+
+def set_memory_limit(bytes: float) -> None:
+    """The memory limit of the large outputs (module docstring), in bytes: 0 < bytes <= 2^50.
+    8 GiB by default; at import, SMG_TORCH_MAX_MEMORY_GB (GiB) when set."""
+    _C.set_memory_limit(float(bytes))
+
+
+def memory_limit() -> float:
+    """The memory limit in bytes (set_memory_limit)."""
+    return _C.memory_limit()
+
+
+if os.environ.get("SMG_TORCH_MAX_MEMORY_GB"):
+    set_memory_limit(float(os.environ["SMG_TORCH_MAX_MEMORY_GB"]) * 2 ** 30)
 
 
 class Graph(NamedTuple):
@@ -57,28 +85,11 @@ def _graph(g) -> Tuple[torch.Tensor, torch.Tensor]:
     raise ValueError("graph: expected smg_torch.Graph or a tuple (indices, weights)")
 
 
-def _tensor(x, name: str, cuda_ok: bool = False) -> torch.Tensor:
-    if not isinstance(x, torch.Tensor):
-        raise ValueError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
-    if x.is_cuda and not cuda_ok:
-        raise NotImplementedError(_CUDA_MESSAGE)
-    if x.is_cuda and not has_cuda:
-        raise NotImplementedError(_NO_CUDA_MESSAGE)
-    return x
-
-
 def _check(**tensors) -> None:
+    """Tensors or None (the extension checks devices, dtypes and shapes)."""
     for name, t in tensors.items():
-        if t is not None:
-            _tensor(t, name)
-
-
-def _check_cuda_ok(**tensors) -> None:
-    """For the operators with a CUDA implementation: CPU or CUDA tensors (the extension then
-    checks that they are all on positions' device)."""
-    for name, t in tensors.items():
-        if t is not None:
-            _tensor(t, name, cuda_ok=True)
+        if t is not None and not isinstance(t, torch.Tensor):
+            raise ValueError(f"{name}: expected a torch.Tensor, got {type(t).__name__}")
 
 
 def _gap_args(gaps, gap_weights):
@@ -115,13 +126,11 @@ def node_confidences(positions: torch.Tensor, g: GraphLike, visibility: Optional
     """c_{t,i} (docs/math/energy.md E2-E6), [T, N], no gradient (a constant for the energies).
     validate: as for carap (CUDA tensors only; CPU tensors are always validated)."""
     idx, w = _graph(g)
-    _check_cuda_ok(positions=positions, indices=idx, weights=w, visibility=visibility)
-    args = (positions.detach(), idx, w.detach(), visibility, float(kappa_m), float(kappa_r),
-            float(lambda_m), float(lambda_r), float(eps))
+    _check(positions=positions, indices=idx, weights=w, visibility=visibility)
     with torch.no_grad():
-        if positions.is_cuda:
-            return _C.cuda_node_confidences(*args, bool(validate))
-        return _C.node_confidences(*args)
+        return _C.node_confidences(positions.detach(), idx, w.detach(), visibility, float(kappa_m),
+                                   float(kappa_r), float(lambda_m), float(lambda_r), float(eps),
+                                   bool(validate))
 
 
 def _scale(grad_output, g):
@@ -136,11 +145,8 @@ class _CarapFunction(torch.autograd.Function):
         args = (positions.detach(), quats.detach(), idx, w.detach())
         if not plain:
             args += (None if confidence is None else confidence.detach(), alpha)
-        args += (lambda_c, lambda_l, gaps, gap_weights, normalize, need_x, need_q)
-        if positions.is_cuda:
-            e, gx, gq = (_C.cuda_arap if plain else _C.cuda_carap)(*args, validate)
-        else:  # the CPU operators always validate
-            e, gx, gq = (_C.arap if plain else _C.carap)(*args)
+        args += (lambda_c, lambda_l, gaps, gap_weights, normalize, need_x, need_q, validate)
+        e, gx, gq = (_C.arap if plain else _C.carap)(*args)
         ctx.grads = (gx, gq)
         return e
 
@@ -160,7 +166,7 @@ def carap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike,
     CPU tensors are always validated; CUDA tensors' contents only with validate=True (the CPU
     validators on a host copy, one synchronising copy per call)."""
     idx, w = _graph(g)
-    _check_cuda_ok(positions=positions, quats=quats, indices=idx, weights=w, confidence=confidence)
+    _check(positions=positions, quats=quats, indices=idx, weights=w, confidence=confidence)
     gaps, gw = _gap_args(gaps, gap_weights)
     return _CarapFunction.apply(positions, quats, idx, w, confidence, False, float(alpha),
                                 float(lambda_c), float(lambda_l), gaps, gw, bool(normalize),
@@ -173,7 +179,7 @@ def arap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike, *, lambda_c
          validate: bool = False) -> torch.Tensor:
     """Plain ARAP energy (E9 with c = 1, alpha = 1), 0-dim; differentiable like carap."""
     idx, w = _graph(g)
-    _check_cuda_ok(positions=positions, quats=quats, indices=idx, weights=w)
+    _check(positions=positions, quats=quats, indices=idx, weights=w)
     gaps, gw = _gap_args(gaps, gap_weights)
     return _CarapFunction.apply(positions, quats, idx, w, None, True, 1.0, float(lambda_c),
                                 float(lambda_l), gaps, gw, bool(normalize), bool(validate))
@@ -185,11 +191,8 @@ class _LrmFunction(torch.autograd.Function):
                 validate):
         args = (positions.detach(), idx, w.detach(),
                 None if confidence is None else confidence.detach(), alpha, huber_delta,
-                detach_omega, normalize, ctx.needs_input_grad[0])
-        if positions.is_cuda:
-            e, gx = _C.cuda_lrm(*args, validate)
-        else:  # the CPU operators always validate
-            e, gx = _C.lrm(*args)
+                detach_omega, normalize, ctx.needs_input_grad[0], validate)
+        e, gx = _C.lrm(*args)
         ctx.grad = gx
         return e
 
@@ -205,7 +208,7 @@ def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor
     """Local rigid-motion energy (E11-E16), 0-dim; differentiable w.r.t. positions.
     validate: as for carap (CUDA tensors only; CPU tensors are always validated)."""
     idx, w = _graph(g)
-    _check_cuda_ok(positions=positions, indices=idx, weights=w, confidence=confidence)
+    _check(positions=positions, indices=idx, weights=w, confidence=confidence)
     return _LrmFunction.apply(positions, idx, w, confidence, float(alpha), float(huber_delta),
                               bool(detach_omega), bool(normalize), bool(validate))
 
@@ -230,9 +233,8 @@ class _DqbFunction(torch.autograd.Function):
                 sigma, lbs):
         xs, qs, ps = node_positions.detach(), node_quats.detach(), points.detach()
         pqs = None if point_quats is None else point_quats.detach()
-        op = _C.cuda_dqb_forward if xs.is_cuda else _C.dqb_forward
-        out_x, out_q, drivers, weights = op(xs, qs, idx, w.detach(), ps, pqs, anchor, t_ref,
-                                            t_query, sigma.detach(), lbs)
+        out_x, out_q, drivers, weights = _C.dqb_forward(xs, qs, idx, w.detach(), ps, pqs, anchor,
+                                                        t_ref, t_query, sigma.detach(), lbs)
         # The backward recomputes the blend (as cheap as reading a cache, per the library).
         # saved through autograd, so that an in-place change before backward raises
         ctx.save_for_backward(node_positions, node_quats, points, point_quats)
@@ -245,9 +247,8 @@ class _DqbFunction(torch.autograd.Function):
         xs, qs, ps, pqs = (None if t is None else t.detach() for t in ctx.saved_tensors)
         t_ref, t_query, drivers, weights, lbs = ctx.inputs
         nx, nq, np_, npq = ctx.needs_input_grad[:4]
-        op = _C.cuda_dqb_backward if xs.is_cuda else _C.dqb_backward
-        gx, gq, gp, gpq = op(xs, qs, ps, pqs, t_ref, t_query, drivers, weights, grad_x, grad_q, lbs,
-                             nx, nq, np_, npq and pqs is not None)
+        gx, gq, gp, gpq = _C.dqb_backward(xs, qs, ps, pqs, t_ref, t_query, drivers, weights, grad_x,
+                                          grad_q, lbs, nx, nq, np_, npq and pqs is not None)
         return (gx, gq, gp, gpq) + (None,) * 7
 
 
@@ -268,12 +269,7 @@ def dqb(node_positions: torch.Tensor, node_quats: torch.Tensor, g: GraphLike, po
     tensors = dict(node_positions=node_positions, node_quats=node_quats, points=points,
                    point_quats=point_quats, indices=idx, weights=w, anchor=anchor, t_ref=t_ref,
                    t_query=t_query, sigma=sigma)
-    _check_cuda_ok(**tensors)
-    if not node_positions.is_cuda:  # the CUDA operator checks the devices itself
-        for name, t in tensors.items():
-            if t is not None and t.is_cuda:
-                raise ValueError(f"{name}: expected a tensor on {node_positions.device} like "
-                                 f"node_positions, got {t.device}")
+    _check(**tensors)
     return _DqbFunction.apply(node_positions, node_quats, points, point_quats, idx, w, anchor, t_ref,
                               t_query, sigma, bool(lbs))
 
