@@ -52,12 +52,8 @@ void check_case(const Invocation& inv, JsonLine& summary) {
 }  // namespace
 
 Subcommand check_subcommand() {
-  Subcommand s;
-  s.name = "check";
-  s.summary = "validate a case directory's node files (positions, quats, visibility, features)";
-  s.writes_output = false;
-  s.run = check_case;
-  return s;
+  return {"check", "validate a case directory's node files (positions, quats, visibility, features)", {},
+          /*writes_output=*/false, check_case};
 }
 
 }  // namespace cli

@@ -246,12 +246,8 @@ void run_energies(const Invocation& inv, JsonLine& summary) {
 }  // namespace
 
 Subcommand energies_subcommand() {
-  Subcommand s;
-  s.name = "energies";
-  s.summary = "node confidences, C-ARAP, LRM and plain ARAP energies with their gradients";
-  s.flags = energy_flags();
-  s.run = run_energies;
-  return s;
+  return {"energies", "node confidences, C-ARAP, LRM and plain ARAP energies with their gradients", energy_flags(),
+          /*writes_output=*/true, run_energies};
 }
 
 }  // namespace cli

@@ -45,12 +45,8 @@ void run_graph(const Invocation& inv, JsonLine& summary) {
 }  // namespace
 
 Subcommand graph_subcommand() {
-  Subcommand s;
-  s.name = "graph";
-  s.summary = "build the semantic motion graph (graph_indices, graph_weights, features, distances)";
-  s.flags = graph_flags();
-  s.run = run_graph;
-  return s;
+  return {"graph", "build the semantic motion graph (graph_indices, graph_weights, features, distances)", graph_flags(),
+          /*writes_output=*/true, run_graph};
 }
 
 }  // namespace cli

@@ -3,12 +3,16 @@
 #include <doctest/doctest.h>
 
 #include <string>
+#include <vector>
 
+#include "support/operators.hpp"
 #include "support/run_program.hpp"
 
 #ifdef SMG_ASSERT_PROBE_PATH
 TEST_CASE("debug assertions catch mis-shaped views and out-of-range accesses") {
-  for (const char* mode : {"view", "carap", "lrm"}) {
+  std::vector<std::string> modes = {"view"};  // then every operator, misused by name
+  smg::test::for_each_operator([&](auto op) { modes.push_back(op.name); });
+  for (const std::string& mode : modes) {
     CAPTURE(mode);
     const auto r = smg::test::run_program(SMG_ASSERT_PROBE_PATH, mode, "smg_assert_probe");
     CHECK(r.code != 0);

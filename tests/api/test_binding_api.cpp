@@ -15,6 +15,7 @@
 #include "energy/scene.hpp"
 #include "smg/smg.hpp"
 #include "support/finite_diff.hpp"
+#include "support/operators.hpp"
 #include "support/random.hpp"
 
 using smg::Index;
@@ -42,11 +43,26 @@ double rotation_function(const Eigen::Vector4d& q, const Eigen::Vector3d& a,
   return a.dot(r * v) + b.dot(r * w);
 }
 
+// Runs every operator of the list (support/operators.hpp) on `in` and appends to `out` its
+// energy, position and rotation gradients (or updates) and confidences, each into zeroed buffers.
+template <class I>
+void run_operators(const smg::test::OperatorInputs<double, I>& in, smg::EnergyWorkspace<double>* ws,
+                   smg::ParallelOptions po, std::vector<double>& out) {
+  const Index T = in.positions.frames(), N = in.positions.nodes();
+  smg::test::for_each_operator([&](auto op) {
+    CAPTURE(op.name);
+    std::vector<double> gx(T * N * 3, 0.0), gr(T * N * 3, 0.0), c(T * N, 0.0);
+    out.push_back(op.run(in, {{gx.data(), T, N}, {gr.data(), T, N}, {c.data(), T, N}}, ws, po));
+    out.insert(out.end(), gx.begin(), gx.end());
+    out.insert(out.end(), gr.begin(), gr.end());
+    out.insert(out.end(), c.begin(), c.end());
+  });
+}
+
 }  // namespace
 
 TEST_CASE("raw <-> tangent rotation gradient converters agree with central differences") {
-  smg::test::Rng rng(101);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 101);
   for (int trial = 0; trial < 20; ++trial) {
     const Eigen::Vector3d a = rng.vec3(), b = rng.vec3(), v = rng.vec3(), w = rng.vec3();
     Eigen::Vector4d q = smg::to_wxyz(rng.quaternion()) * rng.uniform(0.3, 3.0);
@@ -101,8 +117,7 @@ TEST_CASE("batched converters equal the per-element ones and add to their output
 }
 
 TEST_CASE("C-ARAP and ARAP raw-quaternion gradients agree with central differences") {
-  smg::test::Rng rng(202);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 202);
   const Index T = 6, N = 7, K = 3;
   smg::test::Scene<double> s = unnormalised_scene(rng, T, N, K);
   smg::CarapOptions co;
@@ -168,21 +183,16 @@ TEST_CASE("int64 graph indices give the same bits as int32, without a copy") {
   CHECK(g64.indices.data() == idx64.data());  // read in place
   REQUIRE(smg::validate_neighbors(g64, N));
   auto run = [&](const auto& g) {
-    std::vector<double> c(T * N), gx(T * N * 3, 0.0), gr(T * N * 3, 0.0), out;
+    std::vector<double> c(T * N), out;
     smg::node_confidences<double>(s.positions(), s.visibility(), g, smg::ConfidenceOptions{},
                                   {c.data(), T, N});
     const smg::FrameScalarsView<const double> C(c.data(), T, N);
-    out.push_back(smg::carap<double>(s.positions(), s.rotations(), C, g, smg::CarapOptions{},
-                                     {gx.data(), T, N}, smg::TangentsView<double>(gr.data(), T, N)));
-    out.push_back(smg::lrm<double>(s.positions(), C, g, smg::LrmOptions{}, {gx.data(), T, N}));
-    out.push_back(smg::arap<double>(s.positions(), s.rotations(), g, smg::ArapOptions{}));
+    run_operators(smg::test::inputs_of(s, g, C), nullptr, {}, out);
     smg::CarapResidualBlock<double> b;
     REQUIRE(smg::carap_residual_block<double>(s.positions(), s.rotations(), C, g,
                                               smg::CarapOptions{}, 0, 2, 3, 0, b));
     out.insert(out.end(), b.r.data(), b.r.data() + 4);
     out.insert(out.end(), c.begin(), c.end());
-    out.insert(out.end(), gx.begin(), gx.end());
-    out.insert(out.end(), gr.begin(), gr.end());
     std::vector<std::int32_t> anchor = {0, 5, 17}, drv(3 * (K + 1));
     smg::skin_drivers(g, {anchor.data(), 3}, {drv.data(), 3, K + 1});
     out.insert(out.end(), drv.begin(), drv.end());
@@ -229,19 +239,13 @@ TEST_CASE("a caller's executor gives the same bits as smg's pool for any thread 
   const Index T = 40, N = 300, K = 6;
   smg::test::Scene<double> s = unnormalised_scene(rng, T, N, K);
   auto run = [&](smg::ParallelOptions po) {
-    std::vector<double> c(T * N), gx(T * N * 3, 0.0), gr(T * N * 3, 0.0), out;
+    std::vector<double> c(T * N), out;
     smg::EnergyWorkspace<double> ws;
     smg::node_confidences<double>(s.positions(), s.visibility(), s.graph(),
                                   smg::ConfidenceOptions{}, {c.data(), T, N}, {}, {}, &ws, po);
-    const smg::FrameScalarsView<const double> C(c.data(), T, N);
-    out.push_back(smg::carap<double>(s.positions(), s.rotations(), C, s.graph(),
-                                     smg::CarapOptions{}, {gx.data(), T, N},
-                                     smg::TangentsView<double>(gr.data(), T, N), &ws, po));
-    out.push_back(smg::lrm<double>(s.positions(), C, s.graph(), smg::LrmOptions{},
-                                   {gx.data(), T, N}, &ws, po));
+    run_operators(smg::test::inputs_of(s, s.graph(), smg::FrameScalarsView<const double>(c.data(), T, N)), &ws, po,
+                  out);
     out.insert(out.end(), c.begin(), c.end());
-    out.insert(out.end(), gx.begin(), gx.end());
-    out.insert(out.end(), gr.begin(), gr.end());
     return out;
   };
   const std::vector<double> ref = run(smg::ParallelOptions{1});

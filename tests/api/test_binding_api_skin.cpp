@@ -12,8 +12,7 @@ using smg::Index;
 using smg::test::relative_error;
 
 TEST_CASE("DQB backward: raw node-quaternion gradient agrees with central differences") {
-  smg::test::Rng rng(303);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 303);
   const Index T = 3, N = 6, K = 3, P = 5, Q = 2;
   smg::test::Scene s = smg::test::random_scene(rng, T, N, K, P);
   const Index D = K + 1;

@@ -4,18 +4,9 @@
 
 #include "smg/core/dual_quaternion.hpp"
 #include "support/autodiff.hpp"
-#include "support/finite_diff.hpp"
-#include "support/random.hpp"
+#include "support/prelude.hpp"
 
 using smg::DualQuaternion;
-using smg::Matrix3;
-using smg::Quaternion;
-using smg::Vector3;
-using smg::Vector8;
-using smg::test::central_jacobian;
-using smg::test::relative_error;
-using Eigen::MatrixXd;
-using Eigen::VectorXd;
 
 namespace {
 using DQ = DualQuaternion<double>;
@@ -26,8 +17,7 @@ DQ random_motion(smg::test::Rng& rng, double t_scale = 2.0) {
 }  // namespace
 
 TEST_CASE("dual quaternion of (R, t) applies R p + t and round-trips") {
-  smg::test::Rng rng(21);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 21);
   for (int k = 0; k < 50; ++k) {
     const Quaternion<double> q = rng.quaternion();
     const Vector3<double> t = rng.vec3(10), p = rng.vec3(3);
@@ -51,8 +41,7 @@ TEST_CASE("dual quaternion of (R, t) applies R p + t and round-trips") {
 }
 
 TEST_CASE("product composes motions, conjugate inverts, normalisation makes |r| = 1") {
-  smg::test::Rng rng(22);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 22);
   for (int k = 0; k < 50; ++k) {
     const DQ a = random_motion(rng), b = random_motion(rng);
     const Vector3<double> p = rng.vec3(3);
@@ -70,8 +59,7 @@ TEST_CASE("product composes motions, conjugate inverts, normalisation makes |r| 
 }
 
 TEST_CASE("dual quaternion Jacobians against central differences") {
-  smg::test::Rng rng(23);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 23);
   for (int trial = 0; trial < 20; ++trial) {
     const Quaternion<double> q = rng.quaternion();
     const Vector3<double> t = rng.vec3(4);
@@ -122,8 +110,7 @@ TEST_CASE("dual quaternion Jacobians against central differences") {
 
 TEST_CASE("AutoDiffScalar cross-check: transform_point and product") {
   using smg::test::AD;
-  smg::test::Rng rng(24);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 24);
   for (int trial = 0; trial < 5; ++trial) {
     const Vector8<double> a = random_motion(rng).coeffs_wxyz() + 0.1 * Vector8<double>::Random();
     const Vector8<double> b = random_motion(rng).coeffs_wxyz();
@@ -153,8 +140,7 @@ TEST_CASE("AutoDiffScalar cross-check: transform_point and product") {
 }
 
 TEST_CASE("float against double: dual quaternion transform and Jacobians") {
-  smg::test::Rng rng(25);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 25);
   for (int trial = 0; trial < 20; ++trial) {
     const DQ d = random_motion(rng, 5);
     const Vector3<double> p = rng.vec3(3);

@@ -8,16 +8,7 @@
 
 #include "smg/core/so3.hpp"
 #include "support/autodiff.hpp"
-#include "support/finite_diff.hpp"
-#include "support/random.hpp"
-
-using smg::Matrix3;
-using smg::Quaternion;
-using smg::Vector3;
-using smg::test::central_jacobian;
-using smg::test::relative_error;
-using Eigen::MatrixXd;
-using Eigen::VectorXd;
+#include "support/prelude.hpp"
 
 namespace {
 
@@ -38,8 +29,7 @@ const std::vector<double> kAngles = {0.0, 1e-12, 1e-6, 1e-3, 0.0999, 0.1001, 0.3
 }  // namespace
 
 TEST_CASE("hat and vee") {
-  smg::test::Rng rng(11);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 11);
   for (int k = 0; k < 20; ++k) {
     const Vector3<double> v = rng.vec3(3), u = rng.vec3(2);
     const Matrix3<double> H = smg::so3::hat(v);
@@ -50,8 +40,7 @@ TEST_CASE("hat and vee") {
 }
 
 TEST_CASE("Exp/Log round trips at 0, 1e-12, 1e-6, 1, pi - 1e-9 and pi") {
-  smg::test::Rng rng(12);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 12);
   for (double angle : {0.0, 1e-12, 1e-6, 1.0, M_PI - 1e-9, M_PI}) {
     for (int k = 0; k < 10; ++k) {
       CAPTURE(angle);
@@ -74,8 +63,7 @@ TEST_CASE("Exp/Log round trips at 0, 1e-12, 1e-6, 1, pi - 1e-9 and pi") {
 }
 
 TEST_CASE("Log is the same for q and -q, and picks the angle in [0, pi]") {
-  smg::test::Rng rng(13);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 13);
   for (int k = 0; k < 100; ++k) {
     const Quaternion<double> q = rng.quaternion();
     const Quaternion<double> mq(-q.coeffs());
@@ -91,8 +79,7 @@ TEST_CASE("Log is the same for q and -q, and picks the angle in [0, pi]") {
 }
 
 TEST_CASE("Log does not need a unit quaternion") {
-  smg::test::Rng rng(14);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 14);
   for (double scale : {1e-8, 0.5, 3.0, 1e8}) {
     const Quaternion<double> q = rng.quaternion();
     CHECK((smg::so3::log(Quaternion<double>(scale * q.coeffs())) - smg::so3::log(q)).norm() < 1e-14);
@@ -100,8 +87,7 @@ TEST_CASE("Log does not need a unit quaternion") {
 }
 
 TEST_CASE("Right Jacobian of Exp against central differences") {
-  smg::test::Rng rng(15);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 15);
   for (double angle : kAngles) {
     CAPTURE(angle);
     const Vector3<double> phi = angle * rng.unit3();
@@ -117,8 +103,7 @@ TEST_CASE("Right Jacobian of Exp against central differences") {
 }
 
 TEST_CASE("Jacobian of Log is the inverse right Jacobian") {
-  smg::test::Rng rng(16);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 16);
   for (double angle : kAngles) {
     CAPTURE(angle);
     const Quaternion<double> q = rng.rotation_with_angle(angle);
@@ -151,58 +136,54 @@ TEST_CASE("Right Jacobian series and closed form agree at the switch point") {
 }
 
 TEST_CASE("rotate, inverse_rotate, compose, inverse, between: Jacobians against central differences") {
-  smg::test::Rng rng(17);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 17);
   for (int trial = 0; trial < 20; ++trial) {
     const Quaternion<double> a = rng.quaternion(), b = rng.quaternion();
     const Vector3<double> v = rng.vec3(5);
     const VectorXd v0 = v;
-    Matrix3<double> Jq, Jv;
 
-    smg::so3::rotate(a, v, &Jq, &Jv);
-    CHECK(relative_error(Jq, central_jacobian([&](const VectorXd& d) -> VectorXd {
-                           return smg::so3::rotate(perturb_right(a, d), v);
-                         }, VectorXd::Zero(3))) < 1e-8);
-    CHECK(relative_error(Jv, central_jacobian([&](const VectorXd& x) -> VectorXd {
-                           return smg::so3::rotate(a, Vector3<double>(x));
-                         }, v0)) < 1e-8);
+    // R v and a ⊗ b, then (inverse) R^T v and a^-1 ⊗ b: the Jacobians in q, a and b (right
+    // tangents) and in v.
+    for (bool inverse : {false, true}) {
+      CAPTURE(inverse);
+      const auto rot = [inverse](const Quaternion<double>& q, const Vector3<double>& x, Matrix3<double>* Jq = nullptr,
+                                 Matrix3<double>* Jx = nullptr) {
+        return inverse ? smg::so3::inverse_rotate(q, x, Jq, Jx) : smg::so3::rotate(q, x, Jq, Jx);
+      };
+      Matrix3<double> Jq, Jv;
+      rot(a, v, &Jq, &Jv);
+      CHECK(relative_error(Jq, central_jacobian([&](const VectorXd& d) -> VectorXd {
+                             return rot(perturb_right(a, d), v);
+                           }, VectorXd::Zero(3))) < 1e-8);
+      CHECK(relative_error(Jv, central_jacobian([&](const VectorXd& x) -> VectorXd {
+                             return rot(a, Vector3<double>(x));
+                           }, v0)) < 1e-8);
 
-    smg::so3::inverse_rotate(a, v, &Jq, &Jv);
-    CHECK(relative_error(Jq, central_jacobian([&](const VectorXd& d) -> VectorXd {
-                           return smg::so3::inverse_rotate(perturb_right(a, d), v);
-                         }, VectorXd::Zero(3))) < 1e-8);
-    CHECK(relative_error(Jv, central_jacobian([&](const VectorXd& x) -> VectorXd {
-                           return smg::so3::inverse_rotate(a, Vector3<double>(x));
-                         }, v0)) < 1e-8);
+      const auto op = [inverse](const Quaternion<double>& x, const Quaternion<double>& y, Matrix3<double>* Jx = nullptr,
+                                Matrix3<double>* Jy = nullptr) {
+        return inverse ? smg::so3::between(x, y, Jx, Jy) : smg::so3::compose(x, y, Jx, Jy);
+      };
+      Matrix3<double> Ja, Jb;
+      const Quaternion<double> out = op(a, b, &Ja, &Jb);
+      CHECK(relative_error(Ja, central_jacobian([&](const VectorXd& d) {
+                             return tangent_diff(out, op(perturb_right(a, d), b));
+                           }, VectorXd::Zero(3))) < 1e-8);
+      CHECK(relative_error(Jb, central_jacobian([&](const VectorXd& d) {
+                             return tangent_diff(out, op(a, perturb_right(b, d)));
+                           }, VectorXd::Zero(3))) < 1e-8);
+    }
 
-    Matrix3<double> Ja, Jb;
-    const Quaternion<double> ab = smg::so3::compose(a, b, &Ja, &Jb);
-    CHECK(relative_error(Ja, central_jacobian([&](const VectorXd& d) {
-                           return tangent_diff(ab, smg::so3::compose(perturb_right(a, d), b));
-                         }, VectorXd::Zero(3))) < 1e-8);
-    CHECK(relative_error(Jb, central_jacobian([&](const VectorXd& d) {
-                           return tangent_diff(ab, smg::so3::compose(a, perturb_right(b, d)));
-                         }, VectorXd::Zero(3))) < 1e-8);
-
+    Matrix3<double> Ja;
     const Quaternion<double> ai = smg::so3::inverse(a, &Ja);
     CHECK(relative_error(Ja, central_jacobian([&](const VectorXd& d) {
                            return tangent_diff(ai, smg::so3::inverse(perturb_right(a, d)));
-                         }, VectorXd::Zero(3))) < 1e-8);
-
-    const Quaternion<double> btw = smg::so3::between(a, b, &Ja, &Jb);
-    CHECK(relative_error(Ja, central_jacobian([&](const VectorXd& d) {
-                           return tangent_diff(btw, smg::so3::between(perturb_right(a, d), b));
-                         }, VectorXd::Zero(3))) < 1e-8);
-    CHECK(relative_error(Jb, central_jacobian([&](const VectorXd& d) {
-                           return tangent_diff(btw, smg::so3::between(a, perturb_right(b, d)));
                          }, VectorXd::Zero(3))) < 1e-8);
   }
 }
 
 TEST_CASE("AutoDiffScalar cross-check: Exp, Log, rotate, inverse_rotate, compose") {
   using smg::test::AD;
-  smg::test::Rng rng(18);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 18);
   for (double angle : {0.0, 1e-6, 0.7, 2.5, M_PI - 1e-6}) {
     CAPTURE(angle);
     // d to_wxyz(Exp(phi)) / d phi = quat_tangent_jacobian(Exp(phi)) * Jr(phi) (4x3).
@@ -240,8 +221,7 @@ TEST_CASE("AutoDiffScalar cross-check: Exp, Log, rotate, inverse_rotate, compose
 }
 
 TEST_CASE("float against double: Exp, Log, right Jacobians, rotate") {
-  smg::test::Rng rng(19);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 19);
   for (double angle : kAngles) {
     CAPTURE(angle);
     const Vector3<double> phi = angle * rng.unit3();

@@ -9,13 +9,9 @@
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
 #include "support/autodiff.hpp"
-#include "support/finite_diff.hpp"
-#include "support/random.hpp"
+#include "support/prelude.hpp"
 
-using smg::Index;
-using smg::Vector3;
 using smg::test::AD;
-using smg::test::Rng;
 using smg::test::Scene;
 
 namespace {
@@ -55,8 +51,7 @@ double max_rel(const Eigen::VectorXd& a, const std::vector<double>& b) {
 }  // namespace
 
 TEST_CASE("C-ARAP: AutoDiffScalar through the kernel equals the analytic gradient") {
-  Rng rng(601);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 601);
   const Scene<double> s = smg::test::random_scene(10, 6, 3, rng);
   AdScene a = to_ad(s);
   smg::CarapOptions o;
@@ -75,8 +70,7 @@ TEST_CASE("C-ARAP: AutoDiffScalar through the kernel equals the analytic gradien
 }
 
 TEST_CASE("LRM: AutoDiffScalar through the kernel equals the analytic gradient") {
-  Rng rng(602);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 602);
   const Scene<double> s = smg::test::random_scene(5, 8, 4, rng);
   AdScene a = to_ad(s);
   smg::ParallelOptions par;

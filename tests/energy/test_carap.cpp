@@ -11,13 +11,8 @@
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
 #include "support/autodiff.hpp"
-#include "support/finite_diff.hpp"
-#include "support/random.hpp"
+#include "support/prelude.hpp"
 
-using smg::Index;
-using smg::Quaternion;
-using smg::Vector3;
-using smg::test::Rng;
 using smg::test::Scene;
 
 namespace {
@@ -80,11 +75,18 @@ Grad finite_difference(const Scene<double>& s, const smg::CarapOptions& o, bool 
   return g;
 }
 
+// The analytic gradient (with confidences) equals central finite differences.
+void check_against_finite_differences(const Scene<double>& s, const smg::CarapOptions& o) {
+  const Grad a = run_carap(s, o, true);
+  const Grad f = finite_difference(s, o, true);
+  CHECK(smg::test::relative_error(a.x, f.x) < 1e-7);
+  CHECK(smg::test::relative_error(a.r, f.r) < 1e-7);
+}
+
 }  // namespace
 
 TEST_CASE("C-ARAP energy matches the term-by-term reference") {
-  Rng rng(401);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 401);
   for (int rep = 0; rep < 4; ++rep) {
     const Index T = 3 + rep * 7;  // 3, 10, 17, 24: blocks of 8 frames, with and without spill
     const Scene<double> s = smg::test::random_scene(T, 9, 5, rng);
@@ -106,8 +108,7 @@ TEST_CASE("C-ARAP energy matches the term-by-term reference") {
 }
 
 TEST_CASE("C-ARAP gradient matches central finite differences") {
-  Rng rng(402);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 402);
   for (int rep = 0; rep < 3; ++rep) {
     const Index T = 5 + rep * 6;  // 5, 11, 17
     const Scene<double> s = smg::test::random_scene(T, 7, 4, rng);
@@ -116,46 +117,37 @@ TEST_CASE("C-ARAP gradient matches central finite differences") {
     o.lambda_c = 0.7;
     o.lambda_l = 1.3;
     CAPTURE(T);
-    const Grad a = run_carap(s, o, true);
-    const Grad f = finite_difference(s, o, true);
-    CHECK(smg::test::relative_error(a.x, f.x) < 1e-7);
-    CHECK(smg::test::relative_error(a.r, f.r) < 1e-7);
+    check_against_finite_differences(s, o);
   }
 }
 
 TEST_CASE("C-ARAP is bit-identical for 1, 2 and 7 threads (with spill blocks)") {
-  Rng rng(403);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 403);
   const Scene<double> s = smg::test::random_scene(37, 60, 6, rng);  // several short blocks
   smg::CarapOptions o;
   o.gaps = {{1, 1.0}, {3, 0.5}, {11, 1.0}};  // a gap longer than a block
-  const Grad a = run_carap(s, o, true, 1), b = run_carap(s, o, true, 2),
-             c = run_carap(s, o, true, 7);
-  CHECK(a.energy == b.energy);
-  CHECK(a.energy == c.energy);
-  CHECK(a.x == b.x);
-  CHECK(a.x == c.x);
-  CHECK(a.r == b.r);
-  CHECK(a.r == c.r);
+  const Grad a = run_carap(s, o, true, 1);
+  for (int threads : {2, 7}) {
+    CAPTURE(threads);
+    const Grad b = run_carap(s, o, true, threads);
+    CHECK(a.energy == b.energy);
+    CHECK(a.x == b.x);
+    CHECK(a.r == b.r);
+  }
   // And the long gap is right.
   CHECK(std::abs(a.energy - reference(s, o, true)) <= 1e-12 * a.energy);
 }
 
 TEST_CASE("C-ARAP gradient with long gaps and many blocks matches finite differences") {
-  Rng rng(404);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 404);
   const Scene<double> s = smg::test::random_scene(21, 5, 3, rng);
   smg::CarapOptions o;
   o.gaps = {{2, 1.0}, {9, 0.7}, {20, 1.5}};
-  const Grad a = run_carap(s, o, true);
-  const Grad f = finite_difference(s, o, true);
-  CHECK(smg::test::relative_error(a.x, f.x) < 1e-7);
-  CHECK(smg::test::relative_error(a.r, f.r) < 1e-7);
+  check_against_finite_differences(s, o);
 }
 
 TEST_CASE("C-ARAP is zero for a rigidly moving scene") {
-  Rng rng(405);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 405);
   const Scene<double> s =
       smg::test::rigid_scene(12, 80, 8, 0.1, Vector3<double>(0.03, -0.01, 0.02), rng);
   const Scene<double> noisy = smg::test::random_scene(12, 80, 8, rng, true);
@@ -170,8 +162,7 @@ TEST_CASE("C-ARAP is zero for a rigidly moving scene") {
 }
 
 TEST_CASE("C-ARAP and its gradients are invariant to a global rigid transform") {
-  Rng rng(406);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 406);
   const Scene<double> s = smg::test::random_scene(9, 20, 5, rng);
   const Quaternion<double> Q = rng.quaternion();
   const Scene<double> m = smg::test::transformed(s, Q, rng.vec3(10.0));
@@ -191,8 +182,7 @@ TEST_CASE("C-ARAP and its gradients are invariant to a global rigid transform") 
 }
 
 TEST_CASE("C-ARAP: all-zero confidences fall back to the alpha floor; ARAP is c = 1, alpha = 1") {
-  Rng rng(407);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 407);
   Scene<double> s = smg::test::random_scene(7, 15, 5, rng);
   smg::CarapOptions o;
   o.alpha = 0.35;
@@ -209,8 +199,7 @@ TEST_CASE("C-ARAP: all-zero confidences fall back to the alpha floor; ARAP is c 
 }
 
 TEST_CASE("C-ARAP: gradients accumulate into the caller's buffers; workspace reuse; weight") {
-  Rng rng(408);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 408);
   const Scene<double> s = smg::test::random_scene(11, 30, 6, rng);
   smg::CarapOptions o;
   const Grad a = run_carap(s, o, true);
@@ -236,8 +225,7 @@ TEST_CASE("C-ARAP: gradients accumulate into the caller's buffers; workspace reu
 }
 
 TEST_CASE("C-ARAP: float agrees with double") {
-  Rng rng(409);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 409);
   const Scene<double> s = smg::test::random_scene(20, 200, 8, rng, true);
   smg::CarapOptions o;
   const Grad d = run_carap(s, o, true);

@@ -12,13 +12,9 @@
 #include "smg/energy.hpp"
 #include "smg/energy/carap_directed.hpp"
 #include "support/autodiff.hpp"
-#include "support/finite_diff.hpp"
-#include "support/random.hpp"
+#include "support/prelude.hpp"
 
-using smg::Index;
-using smg::Vector3;
 using smg::test::AD;
-using smg::test::Rng;
 using smg::test::Scene;
 
 namespace {
@@ -60,8 +56,7 @@ smg::CarapOptions options() {
 }  // namespace
 
 TEST_CASE("carap_directed: energy and rotation update equal carap()'s; the position update differs") {
-  Rng rng(811);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 811);
   const Scene<double> s = smg::test::random_scene(10, 14, 5, rng);
   const smg::CarapOptions o = options();
   std::vector<double> gx(s.x.size(), 0.0), gr(s.x.size(), 0.0);
@@ -75,8 +70,7 @@ TEST_CASE("carap_directed: energy and rotation update equal carap()'s; the posit
 }
 
 TEST_CASE("carap_directed: node i's position update is the derivative of its own terms (FD and AutoDiff)") {
-  Rng rng(812);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 812);
   const Scene<double> s = smg::test::random_scene(8, 9, 4, rng);
   const smg::CarapOptions o = options();
   const Directed d = directed(s, o);

@@ -6,16 +6,15 @@
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <string>
+#include <utility>
 #include <vector>
-
-#include <sys/wait.h>
 
 #include "energy/scene.hpp"
 #include "npy.hpp"
 #include "smg/energy.hpp"
 #include "support/random.hpp"
+#include "support/run_program.hpp"
 
 #ifdef SMG_CLI_PATH
 
@@ -25,22 +24,8 @@ using smg::test::Scene;
 
 namespace {
 
-struct Run {
-  int code;
-  std::string out, err;
-};
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
-Run run_cli(const std::string& args) {
-  const fs::path dir = fs::temp_directory_path() / "smg_test_cli_energies_io";
-  fs::create_directories(dir);
-  const std::string cmd = std::string(SMG_CLI_PATH) + " " + args + " >" + (dir / "out").string() +
-                          " 2>" + (dir / "err").string();
-  const int status = std::system(cmd.c_str());
-  return {WEXITSTATUS(status), slurp(dir / "out"), slurp(dir / "err")};
-}
+using Run = smg::test::ProgramRun;
+Run run_cli(const std::string& args) { return smg::test::run_program(SMG_CLI_PATH, args, "smg_test_cli_energies_io"); }
 double json_number(const std::string& line, const std::string& key) {
   const auto p = line.find("\"" + key + "\":");
   REQUIRE(p != std::string::npos);
@@ -54,6 +39,15 @@ void write_case(const fs::path& dir, const Scene<double>& s, bool quats, bool vi
   if (vis) npy::write((dir / "visibility.npy").string(), s.v, {s.T, s.N});
   npy::write((dir / "graph_indices.npy").string(), s.idx, {s.N, s.K});
   npy::write((dir / "graph_weights.npy").string(), s.w, {s.N, s.K});
+}
+// The case folder smg_test_energies_case<tag> written from s (write_case), and the output
+// folder smg_test_energies_out<tag>, removed.
+std::pair<fs::path, fs::path> case_and_output(const std::string& tag, const Scene<double>& s, bool quats, bool vis) {
+  const fs::path c = fs::temp_directory_path() / ("smg_test_energies_case" + tag);
+  const fs::path o = fs::temp_directory_path() / ("smg_test_energies_out" + tag);
+  write_case(c, s, quats, vis);
+  fs::remove_all(o);
+  return {c, o};
 }
 std::vector<double> load(const fs::path& p, npy::DType want, const std::vector<std::int64_t>& shape) {
   const npy::Array a = npy::read(p.string());
@@ -77,10 +71,7 @@ double max_abs(const std::vector<double>& a) {
 TEST_CASE("smg_cli energies: outputs and summary match the library") {
   smg::test::Rng rng(901);
   const Scene<double> s = smg::test::random_scene(7, 25, 5, rng, true);
-  const fs::path c = fs::temp_directory_path() / "smg_test_energies_case";
-  const fs::path o = fs::temp_directory_path() / "smg_test_energies_out";
-  write_case(c, s, true, true);
-  fs::remove_all(o);
+  const auto [c, o] = case_and_output("", s, true, true);
   Run r = run_cli("energies " + c.string() + " " + o.string() +
                   " --gaps 1,3 --gap-weights 1,0.5 --huber-delta 0.02 --alpha 0.5 --k 8 --tau 0.8");
   REQUIRE(r.code == 0);
@@ -145,10 +136,7 @@ TEST_CASE("smg_cli energies: outputs and summary match the library") {
 TEST_CASE("smg_cli energies: optional quats and visibility; --detach-omega and --normalize") {
   smg::test::Rng rng(902);
   Scene<double> s = smg::test::random_scene(5, 12, 4, rng, true);
-  const fs::path c = fs::temp_directory_path() / "smg_test_energies_case2";
-  const fs::path o = fs::temp_directory_path() / "smg_test_energies_out2";
-  write_case(c, s, false, false);
-  fs::remove_all(o);
+  const auto [c, o] = case_and_output("2", s, false, false);
   Run r = run_cli("energies " + c.string() + " " + o.string() + " --detach-omega --normalize");
   REQUIRE(r.code == 0);
   // Identity rotations and all-visible nodes.
@@ -177,10 +165,7 @@ TEST_CASE("smg_cli energies: optional quats and visibility; --detach-omega and -
 TEST_CASE("smg_cli energies: errors are one line, exit code 2, nothing written") {
   smg::test::Rng rng(903);
   Scene<double> s = smg::test::random_scene(4, 6, 3, rng, true);
-  const fs::path c = fs::temp_directory_path() / "smg_test_energies_case3";
-  const fs::path o = fs::temp_directory_path() / "smg_test_energies_out3";
-  write_case(c, s, true, true);
-  fs::remove_all(o);
+  const auto [c, o] = case_and_output("3", s, true, true);
   Run r = run_cli("energies " + c.string() + " " + o.string() + " --gaps 1,2 --gap-weights 1");
   CHECK(r.code == 2);
   CHECK(r.err == "smg_cli energies: error: --gap-weights: needs one weight per gap (2), got 1\n");

@@ -10,12 +10,8 @@
 #include "energy/reference_energies.hpp"
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
-#include "support/random.hpp"
+#include "support/prelude.hpp"
 
-using smg::Index;
-using smg::Quaternion;
-using smg::Vector3;
-using smg::test::Rng;
 using smg::test::Scene;
 
 namespace {
@@ -48,8 +44,7 @@ double max_abs_diff(const std::vector<double>& a, const std::vector<double>& b) 
 }  // namespace
 
 TEST_CASE("confidence matches the reference, with and without visibility") {
-  Rng rng(301);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 301);
   for (Index T : {1, 2, 7}) {
     const Scene<double> s = smg::test::random_scene(T, 15, 6, rng);
     smg::ConfidenceOptions o;
@@ -77,8 +72,7 @@ TEST_CASE("confidence matches the reference, with and without visibility") {
 }
 
 TEST_CASE("confidence: visibility is only the final factor; outputs are optional") {
-  Rng rng(302);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 302);
   const Scene<double> s = smg::test::random_scene(6, 12, 5, rng);
   const Conf a = run(s, {}, true), b = run(s, {}, false);
   CHECK(a.m == b.m);
@@ -96,8 +90,7 @@ TEST_CASE("confidence: visibility is only the final factor; outputs are optional
 }
 
 TEST_CASE("confidence is bit-identical for 1, 2 and 7 threads") {
-  Rng rng(303);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 303);
   const Scene<double> s = smg::test::random_scene(9, 300, 8, rng);
   const Conf a = run(s, {}, true, 1), b = run(s, {}, true, 2), c = run(s, {}, true, 7);
   CHECK(a.c == b.c);
@@ -107,8 +100,7 @@ TEST_CASE("confidence is bit-identical for 1, 2 and 7 threads") {
 }
 
 TEST_CASE("confidence: a rigidly translating scene gives 1; a rotating one stays near 1") {
-  Rng rng(304);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 304);
   const Scene<double> tr = smg::test::rigid_scene(8, 200, 10, 0.0, Vector3<double>(0.01, 0.02, -0.03), rng);
   const Conf a = run(tr, {});
   for (double v : a.c) CHECK(v == doctest::Approx(1.0).epsilon(1e-9));
@@ -131,8 +123,7 @@ TEST_CASE("confidence: a rigidly translating scene gives 1; a rotating one stays
 }
 
 TEST_CASE("confidence: one corrupted node is flagged, its neighbours are not") {
-  Rng rng(305);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 305);
   Scene<double> s = smg::test::rigid_scene(6, 300, 12, 0.02, Vector3<double>(0.02, 0, 0), rng);
   const Index bad = 17, t = 3;
   s.set_pos(t, bad, s.pos(t, bad) + Vector3<double>(0.05, -0.04, 0.03));  // one-frame glitch
@@ -154,8 +145,7 @@ TEST_CASE("confidence: one corrupted node is flagged, its neighbours are not") {
 }
 
 TEST_CASE("confidence is invariant to a global rigid transform and covariant with scale") {
-  Rng rng(306);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 306);
   const Scene<double> s = smg::test::random_scene(6, 40, 6, rng);
   const Scene<double> m = smg::test::transformed(s, rng.quaternion(), rng.vec3(5.0));
   const Conf a = run(s, {}), b = run(m, {});
@@ -170,8 +160,7 @@ TEST_CASE("confidence is invariant to a global rigid transform and covariant wit
 }
 
 TEST_CASE("confidence: float agrees with double") {
-  Rng rng(307);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 307);
   const Scene<double> s = smg::test::random_scene(8, 100, 8, rng);
   const Conf d = run<double>(s, {}), f = run<float>(s, {});
   // c^r divides a difference of edge-length changes (E4) by their spread: where the motion is

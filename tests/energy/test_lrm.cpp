@@ -10,12 +10,8 @@
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
 #include "support/autodiff.hpp"
-#include "support/finite_diff.hpp"
-#include "support/random.hpp"
+#include "support/prelude.hpp"
 
-using smg::Index;
-using smg::Vector3;
-using smg::test::Rng;
 using smg::test::Scene;
 
 namespace {
@@ -43,8 +39,7 @@ std::vector<double> fd(const Scene<double>& s, const smg::LrmOptions& o, bool us
 }  // namespace
 
 TEST_CASE("LRM energy matches the reference") {
-  Rng rng(501);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 501);
   for (int rep = 0; rep < 3; ++rep) {
     const Scene<double> s = smg::test::random_scene(2 + rep * 3, 10, 6, rng);
     smg::LrmOptions o;
@@ -61,8 +56,7 @@ TEST_CASE("LRM energy matches the reference") {
 }
 
 TEST_CASE("LRM gradient matches central finite differences") {
-  Rng rng(502);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 502);
   for (int rep = 0; rep < 3; ++rep) {
     const Scene<double> s = smg::test::random_scene(2 + rep * 2, 9, 5, rng);
     for (double delta : {0.01, 0.05, 10.0})
@@ -85,8 +79,7 @@ TEST_CASE("LRM gradient matches central finite differences") {
 }
 
 TEST_CASE("LRM with omega held constant equals autodiff of the reference with omega detached") {
-  Rng rng(503);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 503);
   // At least 3 neighbours: with 2 (collinear x̃) the component of ω along the line is set by
   // μ and rounding, and a gradient that holds ω constant depends on it (the exact one does
   // not) — see docs/math/energy.md.
@@ -112,8 +105,7 @@ TEST_CASE("LRM with omega held constant equals autodiff of the reference with om
 }
 
 TEST_CASE("LRM is bit-identical for 1, 2 and 7 threads") {
-  Rng rng(504);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 504);
   const Scene<double> s = smg::test::random_scene(13, 150, 7, rng);
   smg::LrmOptions o;
   std::vector<double> a, b, c;
@@ -126,8 +118,7 @@ TEST_CASE("LRM is bit-identical for 1, 2 and 7 threads") {
 }
 
 TEST_CASE("LRM is zero for a rigidly translating scene") {
-  Rng rng(505);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 505);
   const Scene<double> s =
       smg::test::rigid_scene(6, 60, 8, 0.0, Vector3<double>(0.02, -0.03, 0.01), rng);
   std::vector<double> g;
@@ -141,8 +132,7 @@ TEST_CASE("LRM of a rigid rotation: residual O(theta^2), energy O(theta^4), omeg
   // + ...: the first term is a rigid twist and is fitted exactly; the second is symmetric in x
   // and is what remains, so the residual is O(θ²) and, in Huber's quadratic zone, the energy
   // ½ r² is O(θ⁴). The fitted ω equals the per-frame angular velocity up to O(θ²).
-  Rng rng(506);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 506);
   const Vector3<double> axis = Vector3<double>(0.3, -0.5, 0.8).normalized();
   double prev_r = 0, prev_e = 0, prev_w = 0;
   for (double theta : {0.08, 0.04, 0.02, 0.01}) {
@@ -182,8 +172,7 @@ TEST_CASE("LRM of a rigid rotation: residual O(theta^2), energy O(theta^4), omeg
 }
 
 TEST_CASE("LRM and its gradient are invariant to a global rigid transform") {
-  Rng rng(508);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 508);
   const Scene<double> s = smg::test::random_scene(7, 25, 6, rng);
   const smg::Quaternion<double> Q = rng.quaternion();
   const Scene<double> m = smg::test::transformed(s, Q, rng.vec3(20.0));
@@ -200,8 +189,7 @@ TEST_CASE("LRM and its gradient are invariant to a global rigid transform") {
 }
 
 TEST_CASE("LRM: confidences only reweight; all-zero confidences equal all-one (normalised)") {
-  Rng rng(509);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 509);
   Scene<double> s = smg::test::random_scene(5, 20, 5, rng);
   smg::LrmOptions o;
   std::vector<double> none, zero;
@@ -218,8 +206,7 @@ TEST_CASE("LRM: confidences only reweight; all-zero confidences equal all-one (n
 TEST_CASE("LRM: detached and exact gradients agree where Huber is quadratic (envelope)") {
   // With ρ = r²/2 everywhere, L_{t,i} is half the fit's own objective, so ∂L/∂ω = −μω ≈ 0 at
   // the fitted ω: holding ω constant changes the gradient only at the regulariser's level.
-  Rng rng(510);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 510);
   const Scene<double> s = smg::test::random_scene(6, 30, 6, rng);
   smg::LrmOptions o;
   o.huber_delta = 100.0;
@@ -236,8 +223,7 @@ TEST_CASE("LRM: detached and exact gradients agree where Huber is quadratic (env
 }
 
 TEST_CASE("LRM: float agrees with double; accumulation, normalisation and weight") {
-  Rng rng(511);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 511);
   const Scene<double> s = smg::test::random_scene(17, 120, 8, rng, true);
   smg::LrmOptions o;
   std::vector<double> gd;

@@ -11,18 +11,12 @@
 
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
-#include "support/finite_diff.hpp"
-#include "support/random.hpp"
+#include "support/prelude.hpp"
 
-using smg::Index;
-using smg::Quaternion;
-using smg::Vector3;
-using smg::test::Rng;
 using smg::test::Scene;
 
 TEST_CASE("C-ARAP residuals: sum of squares, 2 J^T r and the block count") {
-  Rng rng(701);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 701);
   const Scene<double> s = smg::test::random_scene(9, 12, 4, rng);
   smg::CarapOptions o;
   o.gaps = {{1, 1.0}, {3, 0.5}};
@@ -51,8 +45,7 @@ TEST_CASE("C-ARAP residuals: sum of squares, 2 J^T r and the block count") {
 }
 
 TEST_CASE("C-ARAP residual blocks: Jacobians match central finite differences") {
-  Rng rng(702);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 702);
   Scene<double> s = smg::test::random_scene(6, 8, 3, rng);
   smg::CarapOptions o;
   const double h = 1e-6;
@@ -104,8 +97,7 @@ TEST_CASE("C-ARAP residual blocks: Jacobians match central finite differences") 
 }
 
 TEST_CASE("LRM residuals: block energies, IRLS sum of squares and 2 J_f^T f") {
-  Rng rng(703);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 703);
   const Scene<double> s = smg::test::random_scene(6, 14, 5, rng);
   for (double delta : {0.02, 50.0})
     for (bool detach : {false, true}) {
@@ -137,8 +129,7 @@ TEST_CASE("LRM residuals: block energies, IRLS sum of squares and 2 J_f^T f") {
 }
 
 TEST_CASE("LRM residual blocks: Jacobians match finite differences of the raw residuals") {
-  Rng rng(704);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 704);
   Scene<double> s = smg::test::random_scene(5, 10, 5, rng);
   smg::test::random_graph(s, 5, 3, rng);
   const double h = 1e-6;
@@ -197,8 +188,7 @@ TEST_CASE("LRM residual blocks: Jacobians match finite differences of the raw re
 TEST_CASE("Levenberg-Marquardt on the residual forms decreases C-ARAP + LRM") {
   // A small solver written only against the residual API: dense J, (JᵀJ + λ diag) δ = −Jᵀr,
   // positions updated additively, rotations by q ⊗ Exp(δφ) (the right tangent).
-  Rng rng(705);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 705);
   Scene<double> s = smg::test::rigid_scene(5, 10, 4, 0.05, Vector3<double>(0.02, 0, 0), rng);
   for (double& v : s.x) v += rng.uniform(-0.03, 0.03);  // non-rigid noise
   for (Index t = 0; t < s.T; ++t)
@@ -289,8 +279,7 @@ TEST_CASE("Levenberg-Marquardt on the residual forms decreases C-ARAP + LRM") {
 }
 
 TEST_CASE("quaternion manifold (right, full angle): plus/minus and their Jacobians") {
-  Rng rng(706);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 706);
   for (int rep = 0; rep < 20; ++rep) {
     const Quaternion<double> q = rng.quaternion();
     double qa[4] = {q.w(), q.x(), q.y(), q.z()};

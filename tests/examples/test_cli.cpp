@@ -7,37 +7,21 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
 
-#include <sys/wait.h>
-
 #include "cli_args.hpp"
 #include "json_line.hpp"
 #include "npy.hpp"
+#include "support/run_program.hpp"
 
 namespace fs = std::filesystem;
 
 namespace {
-struct Run {
-  int code;
-  std::string out, err;
-};
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
 #ifdef SMG_CLI_PATH
-Run run_cli(const std::string& args) {
-  const fs::path dir = fs::temp_directory_path() / "smg_test_cli_io";
-  fs::create_directories(dir);
-  const std::string cmd = std::string(SMG_CLI_PATH) + " " + args + " >" + (dir / "out").string() +
-                          " 2>" + (dir / "err").string();
-  const int status = std::system(cmd.c_str());
-  return {WEXITSTATUS(status), slurp(dir / "out"), slurp(dir / "err")};
-}
+using Run = smg::test::ProgramRun;
+Run run_cli(const std::string& args) { return smg::test::run_program(SMG_CLI_PATH, args, "smg_test_cli_io"); }
 #endif
 }  // namespace
 

@@ -25,24 +25,16 @@
 #include <vector>
 
 #include <sys/stat.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include "npy.hpp"
+#include "support/run_program.hpp"
 
 namespace fs = std::filesystem;
+using smg::test::slurp;
+using smg::test::write_bytes;
 
 namespace {
-
-std::string slurp_bin(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
-
-void write_bytes(const fs::path& p, const std::string& bytes) {
-  std::ofstream f(p, std::ios::binary | std::ios::trunc);
-  f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-}
 
 // A raw .npy file (version 1.0) with a hand-written header dict and `data` bytes.
 std::string raw_npy(const std::string& dict, const std::string& data, int major = 1) {
@@ -71,7 +63,7 @@ std::map<std::string, std::string> snapshot(const fs::path& root) {
     if (fs::is_symlink(st)) s[rel] = "l:" + fs::read_symlink(p).string();
     else if (fs::is_directory(st)) s[rel] = "d";
     else if (fs::is_fifo(st)) s[rel] = "p";
-    else s[rel] = "f:" + slurp_bin(p);
+    else s[rel] = "f:" + slurp(p);
   }
   return s;
 }
@@ -82,24 +74,15 @@ std::string shell_quote(const std::string& s) {
   return out + "'";
 }
 
-struct Run {
-  int code = -1;
-  std::string out, err;
-};
-
 #ifdef SMG_CLI_PATH
+using Run = smg::test::ProgramRun;
 Run run_cli(const std::string& args, const std::string& env = "") {
-  const fs::path dir = fs::temp_directory_path() / "smg_test_cli_robustness_io";
-  fs::create_directories(dir);
-  // `timeout`: a regression that blocks (a FIFO input) fails the case instead of hanging ctest.
-  const std::string cmd = env + " timeout 20 " + std::string(SMG_CLI_PATH) + " " + args + " >" +
-                          (dir / "out").string() + " 2>" + (dir / "err").string() + " </dev/null";
-  const int status = std::system(cmd.c_str());
-  Run r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = slurp_bin(dir / "out");
-  r.err = slurp_bin(dir / "err");
-  return r;
+  smg::test::RunOptions o;
+  o.env = env;
+  o.timeout_s = 20;  // a regression that blocks (a FIFO input) fails the case instead of hanging ctest
+  o.no_stdin = true;
+  o.require_exit = false;
+  return smg::test::run_program(SMG_CLI_PATH, args, "smg_test_cli_robustness_io", o);
 }
 #endif
 
@@ -197,7 +180,7 @@ std::vector<Case> robustness_cases() {
   std::vector<Case> cs = {
       // --- npy format ---
       {"truncated data", "graph", "", [](Ctx& c) {
-         const std::string b = slurp_bin(c.case_dir / "positions.npy");
+         const std::string b = slurp(c.case_dir / "positions.npy");
          put(c, "positions.npy", b.substr(0, b.size() - 8)); }, file_("positions.npy")},
       {"bad magic", "energies", "", [](Ctx& c) { put(c, "positions.npy", "NOTNUMPY" + std::string(120, ' ')); },
        file_("positions.npy")},
@@ -454,7 +437,7 @@ TEST_CASE("smg_cli outputs: planted symlinks at staging names are never followed
   Run r = run_cli("graph " + shell_quote(case_dir.string()) + " " + shell_quote(out.string()) + " --k 4");
   CAPTURE(r.err);
   REQUIRE(r.code == 0);
-  CHECK(slurp_bin(root / "victim") == "victim file\n");
+  CHECK(slurp(root / "victim") == "victim file\n");
   for (const char* f : {"graph_indices.npy", "graph_weights.npy", "distances.npy", "features.npy"}) {
     CAPTURE(f);
     CHECK(fs::is_regular_file(fs::symlink_status(out / f)));
@@ -478,7 +461,7 @@ TEST_CASE("smg_cli outputs: planted symlinks at staging names are never followed
   write_bytes(nested / "notes.txt", "mine");
   r = run_cli("graph " + shell_quote(case_dir.string()) + " " + shell_quote(nested.string()) + " --k 4");
   REQUIRE(r.code == 0);
-  CHECK(slurp_bin(nested / "notes.txt") == "mine");
+  CHECK(slurp(nested / "notes.txt") == "mine");
   int entries = 0;
   for (const auto& e : fs::directory_iterator(nested)) {
     (void)e;

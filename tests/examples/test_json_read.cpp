@@ -7,24 +7,15 @@
 #include <string>
 
 #include "json_read.hpp"
+#include "support/errors.hpp"
 
 namespace {
 std::string error_of(const std::string& text, int max_depth = 64) {
-  try {
-    json::parse(text, max_depth);
-  } catch (const json::Error& e) {
-    return e.what();
-  }
-  return "";
+  return smg::test::error_message<json::Error>([&] { json::parse(text, max_depth); });
 }
 template <class F>
 std::string helper_error(F&& f) {
-  try {
-    f();
-  } catch (const json::Error& e) {
-    return e.what();
-  }
-  return "";
+  return smg::test::error_message<json::Error>(f);
 }
 }  // namespace
 

@@ -7,7 +7,6 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
@@ -15,6 +14,8 @@
 #include "case_dir.hpp"
 #include "npy.hpp"
 #include "output_set.hpp"
+#include "support/errors.hpp"
+#include "support/files.hpp"
 
 namespace fs = std::filesystem;
 
@@ -25,21 +26,10 @@ fs::path temp_dir(const std::string& name) {
   fs::create_directories(p);
   return p;
 }
-void write_bytes(const fs::path& p, const std::string& bytes) {
-  std::ofstream f(p, std::ios::binary);
-  f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-}
-std::string read_bytes(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
+using smg::test::write_bytes;
+std::string read_bytes(const fs::path& p) { return smg::test::slurp(p); }
 std::string error_of(const std::string& path) {
-  try {
-    npy::read(path);
-  } catch (const npy::Error& e) {
-    return e.what();
-  }
-  return "";
+  return smg::test::error_message<npy::Error>([&] { npy::read(path); });
 }
 // A v1.0 file exactly as numpy.save writes it (header padded with spaces to 64 bytes, '\n').
 std::string numpy_file(const std::string& dict, const std::string& data) {

@@ -1,7 +1,8 @@
 // tests/graph/reference.hpp — deliberately plain re-implementations of the graph equations
 // (docs/math/graph.md), written independently of the library's kernels: collect all
 // co-visible distances, sort, aggregate; all pairs for the KNN; all pairs of samples for the
-// descriptor scores. Slow and simple, for small cases only.
+// descriptor scores. Slow and simple, for small cases only. Plus scene_trajectories, the
+// trajectories of a synthetic scene (synthetic_scene.hpp) for the tests that compare against them.
 #pragma once
 
 #include <algorithm>
@@ -11,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "graph/synthetic_scene.hpp"
 #include "smg/graph/trajectory_distance.hpp"
 
 namespace smg::test {
@@ -29,6 +31,23 @@ struct Trajectories {
   S& at(Index t, Index i, int c) { return x[static_cast<std::size_t>((t * N + i) * 3 + c)]; }
   bool vis(Index t, Index i) const { return v.empty() || v[static_cast<std::size_t>(t * N + i)] != 0; }
 };
+
+// The trajectories of a synthetic scene of moving objects (synthetic_scene.hpp's defaults
+// otherwise).
+template <class S>
+Trajectories<S> scene_trajectories(Index nodes, Index frames, std::uint64_t seed) {
+  SceneOptions so;
+  so.nodes = nodes;
+  so.frames = frames;
+  so.seed = seed;
+  Scene<S> sc = make_scene<S>(so);
+  Trajectories<S> tr;
+  tr.T = sc.T;
+  tr.N = sc.N;
+  tr.x = std::move(sc.positions);
+  tr.v = std::move(sc.visibility);
+  return tr;
+}
 
 // (G1)-(G3) the plain way; +inf when the pair is not a candidate.
 template <class S>

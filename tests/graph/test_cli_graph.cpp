@@ -6,16 +6,14 @@
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
 
-#include <sys/wait.h>
-
 #include "graph/synthetic_scene.hpp"
 #include "npy.hpp"
 #include "smg/graph.hpp"
+#include "support/run_program.hpp"
 
 #ifdef SMG_CLI_PATH
 
@@ -24,24 +22,8 @@ using smg::Index;
 
 namespace {
 
-struct Run {
-  int code;
-  std::string out, err;
-};
-
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
-
-Run run_cli(const std::string& args) {
-  const fs::path dir = fs::temp_directory_path() / "smg_test_cli_graph_io";
-  fs::create_directories(dir);
-  const std::string cmd = std::string(SMG_CLI_PATH) + " " + args + " >" + (dir / "out").string() + " 2>" +
-                          (dir / "err").string();
-  const int status = std::system(cmd.c_str());
-  return {WEXITSTATUS(status), slurp(dir / "out"), slurp(dir / "err")};
-}
+using Run = smg::test::ProgramRun;
+Run run_cli(const std::string& args) { return smg::test::run_program(SMG_CLI_PATH, args, "smg_test_cli_graph_io"); }
 
 struct Case {
   fs::path dir;
@@ -146,7 +128,7 @@ TEST_CASE("smg_cli graph: feature samples, outputs equal the library, --threads"
   const fs::path out1 = c.dir / "out1";
   REQUIRE(run_cli("graph " + c.dir.string() + " " + out1.string() + " --threads 1").code == 0);
   for (const char* f : {"graph_indices.npy", "graph_weights.npy", "distances.npy", "features.npy"})
-    CHECK(slurp(out / f) == slurp(out1 / f));
+    CHECK(smg::test::slurp(out / f) == smg::test::slurp(out1 / f));
 }
 
 TEST_CASE("smg_cli graph: flags reach the library; --float writes float32") {

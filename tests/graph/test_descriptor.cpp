@@ -29,6 +29,17 @@ struct Samples {
   }
 };
 
+// T x N x C samples, all `value`, all visible.
+template <class S>
+Samples<S> samples(Index T, Index N, Index C, S value = S(0)) {
+  Samples<S> s;
+  s.T = T;
+  s.N = N;
+  s.C = C;
+  s.g.assign(static_cast<std::size_t>(T * N * C), value);
+  return s;
+}
+
 template <class S>
 std::vector<S> describe(const Samples<S>& s, double rho, smg::DescriptorStats* stats = nullptr, int threads = 0) {
   std::vector<S> f(static_cast<std::size_t>(s.N * s.C), S(-9));
@@ -82,10 +93,7 @@ TEST_CASE_TEMPLATE("descriptor: hand-computed cases", S, float, double) {
   // One node, C = 2. Frames: a = (2, 0), a' = (0.5, 0) (same direction), b = (0, 3).
   // Scores: a: (1 + 0) / 2, a': (1 + 0) / 2, b: 0. rho = 0.5: keep floor(1.5) = 1, the tie
   // between a and a' goes to the earlier frame: f = (1, 0).
-  Samples<S> s;
-  s.T = 3;
-  s.N = 1;
-  s.C = 2;
+  Samples<S> s = samples<S>(3, 1, 2);
   s.g = {S(2), S(0), S(0.5), S(0), S(0), S(3)};
   auto f = describe(s, 0.5);
   CHECK(f[0] == doctest::Approx(1.0));
@@ -109,19 +117,14 @@ TEST_CASE_TEMPLATE("descriptor: hand-computed cases", S, float, double) {
 }
 
 TEST_CASE("descriptor: a few outlier samples do not move it") {
-  smg::test::Rng rng(31);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 31);
   const Index C = 16, T = 20;
   Eigen::VectorXd truth(C), wrong(C);
   for (Index c = 0; c < C; ++c) truth(c) = rng.normal();
   for (Index c = 0; c < C; ++c) wrong(c) = rng.normal();
   truth.normalize();
   wrong.normalize();
-  Samples<double> s;
-  s.T = T;
-  s.N = 1;
-  s.C = C;
-  s.g.resize(static_cast<std::size_t>(T * C));
+  Samples<double> s = samples<double>(T, 1, C);
   for (Index t = 0; t < T; ++t) {
     // 5 of 20 samples agree with each other on a wrong direction (e.g. an occluder), with
     // large norms; the others are noisy and rescaled copies of the truth.
@@ -141,14 +144,10 @@ TEST_CASE("descriptor: a few outlier samples do not move it") {
 }
 
 TEST_CASE("descriptor: equals the pairwise reference; invisible frames are ignored; scale-invariant") {
-  smg::test::Rng rng(32);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 32);
   for (int trial = 0; trial < 10; ++trial) {
-    Samples<double> s;
-    s.T = rng.integer(1, 40);
-    s.N = 12;
-    s.C = rng.integer(1, 9);
-    s.g.resize(static_cast<std::size_t>(s.T * s.N * s.C));
+    const Index T = rng.integer(1, 40), C = rng.integer(1, 9);
+    Samples<double> s = samples<double>(T, 12, C);
     for (auto& x : s.g) x = rng.normal() + 0.7;  // a common bias: scores are not all ties
     s.v.resize(static_cast<std::size_t>(s.T * s.N));
     for (auto& b : s.v) b = rng.uniform(0, 1) < 0.6 ? 1 : 0;
@@ -177,11 +176,7 @@ TEST_CASE("descriptor: equals the pairwise reference; invisible frames are ignor
 }
 
 TEST_CASE("descriptor: zero samples, invisible nodes, and counts") {
-  Samples<double> s;
-  s.T = 3;
-  s.N = 3;
-  s.C = 2;
-  s.g.assign(18, 0.0);
+  Samples<double> s = samples<double>(3, 3, 2);
   s.v = {1, 0, 1,   // t = 0
          1, 0, 0,   // t = 1
          0, 0, 0};  // t = 2
@@ -194,10 +189,7 @@ TEST_CASE("descriptor: zero samples, invisible nodes, and counts") {
   CHECK(st.nodes_without_visible_frame == 1);
   CHECK(st.zero_descriptors == 2);
   // Two opposite samples cancel: zero descriptor with rho = 1.
-  Samples<double> o;
-  o.T = 2;
-  o.N = 1;
-  o.C = 2;
+  Samples<double> o = samples<double>(2, 1, 2);
   o.g = {1, 1, -2, -2};
   CHECK(describe(o, 1.0, &st) == std::vector<double>{0, 0});
   CHECK(st.zero_descriptors == 1);
@@ -205,18 +197,10 @@ TEST_CASE("descriptor: zero samples, invisible nodes, and counts") {
 }
 
 TEST_CASE("descriptor: float agrees with double; bit-identical for 1, 2 and 7 threads") {
-  smg::test::Rng rng(33);
-  CAPTURE(rng.seed);
-  Samples<double> d;
-  d.T = 25;
-  d.N = 700;
-  d.C = 8;
-  d.g.resize(static_cast<std::size_t>(d.T * d.N * d.C));
+  SMG_TEST_RNG(rng, 33);
+  Samples<double> d = samples<double>(25, 700, 8);
   for (auto& x : d.g) x = static_cast<float>(rng.normal() + 0.5);
-  Samples<float> f;
-  f.T = d.T;
-  f.N = d.N;
-  f.C = d.C;
+  Samples<float> f = samples<float>(d.T, d.N, d.C);
   f.g.assign(d.g.begin(), d.g.end());
   const auto fd = describe(d, 0.5, nullptr, 1);
   const auto ff = describe(f, 0.5, nullptr, 1);
@@ -235,11 +219,7 @@ TEST_CASE("descriptor: float agrees with double; bit-identical for 1, 2 and 7 th
 }
 
 TEST_CASE("descriptor: validation") {
-  Samples<double> s;
-  s.T = 2;
-  s.N = 3;
-  s.C = 4;
-  s.g.assign(24, 1.0);
+  Samples<double> s = samples<double>(2, 3, 4, 1.0);
   std::vector<double> out(12);
   smg::DescriptorOptions o;
   auto msg = [&](const Samples<double>& x, const smg::DescriptorOptions& opt, Index rows, Index cols) {

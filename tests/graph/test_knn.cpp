@@ -9,7 +9,6 @@
 #include <vector>
 
 #include "graph/reference.hpp"
-#include "graph/synthetic_scene.hpp"
 #include "smg/graph/knn.hpp"
 #include "support/random.hpp"
 
@@ -86,8 +85,7 @@ TEST_CASE("knn: a hand-checked line of nodes") {
 }
 
 TEST_CASE_TEMPLATE("knn: fast search equals brute force and the plain reference on random scenes", S, float, double) {
-  smg::test::Rng rng(21);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 21);
   for (int trial = 0; trial < 24; ++trial) {
     CAPTURE(trial);
     const Index T = std::vector<Index>{1, 2, 7, 63, 64, 65, 130}[static_cast<std::size_t>(rng.integer(0, 6))];
@@ -115,16 +113,7 @@ TEST_CASE_TEMPLATE("knn: fast search equals brute force and the plain reference 
 }
 
 TEST_CASE("knn: exact on a synthetic scene of moving objects, every segment length") {
-  smg::test::SceneOptions so;
-  so.nodes = 600;
-  so.frames = 40;
-  so.seed = 5;
-  const auto sc = smg::test::make_scene<double>(so);
-  smg::test::Trajectories<double> tr;
-  tr.T = sc.T;
-  tr.N = sc.N;
-  tr.x = sc.positions;
-  tr.v = sc.visibility;
+  const auto tr = smg::test::scene_trajectories<double>(600, 40, 5);
   for (Aggregation a : {Aggregation::paper, Aggregation::robust_max}) {
     KnnOptions o;
     o.distance.aggregation = a;
@@ -171,8 +160,7 @@ TEST_CASE("knn: exact ties are broken by index, like brute force") {
 }
 
 TEST_CASE_TEMPLATE("knn: small cases (T = 1, N <= k, N = 1, N = 0) pad with -1", S, float, double) {
-  smg::test::Rng rng(22);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 22);
   for (Index N : {0, 1, 2, 5, 16, 17}) {
     auto tr = smg::test::random_trajectories<S>(rng, 1, N, 1.0);
     KnnOptions o;  // k = 16
@@ -192,8 +180,7 @@ TEST_CASE_TEMPLATE("knn: small cases (T = 1, N <= k, N = 1, N = 0) pad with -1",
 }
 
 TEST_CASE("knn: nodes without a visible frame or without co-visible partners get empty rows") {
-  smg::test::Rng rng(23);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 23);
   auto tr = smg::test::random_trajectories<double>(rng, 6, 20, 1.0);
   tr.v.assign(static_cast<std::size_t>(tr.T * tr.N), 1);
   for (Index t = 0; t < tr.T; ++t) {
@@ -216,16 +203,7 @@ TEST_CASE("knn: nodes without a visible frame or without co-visible partners get
 }
 
 TEST_CASE("knn: bit-identical for 1, 2 and 7 threads") {
-  smg::test::SceneOptions so;
-  so.nodes = 900;
-  so.frames = 30;
-  so.seed = 9;
-  const auto sc = smg::test::make_scene<float>(so);
-  smg::test::Trajectories<float> tr;
-  tr.T = sc.T;
-  tr.N = sc.N;
-  tr.x = sc.positions;
-  tr.v = sc.visibility;
+  const auto tr = smg::test::scene_trajectories<float>(900, 30, 9);
   KnnOptions o;
   o.parallel.threads = 1;
   const auto one = run(tr, o);

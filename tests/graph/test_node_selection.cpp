@@ -10,7 +10,6 @@
 #include <vector>
 
 #include "graph/reference.hpp"
-#include "graph/synthetic_scene.hpp"
 #include "smg/graph/node_selection.hpp"
 #include "support/random.hpp"
 
@@ -49,8 +48,7 @@ Index visible_count(const smg::test::Trajectories<S>& tr, Index i) {
 }  // namespace
 
 TEST_CASE_TEMPLATE("node selection: coverage, separation, nearest assignment, preference", S, float, double) {
-  smg::test::Rng rng(51);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 51);
   for (int trial = 0; trial < 6; ++trial) {
     CAPTURE(trial);
     auto tr = smg::test::random_trajectories<S>(rng, rng.integer(1, 40), 150, trial % 2 ? 0.5 : 1.0, 1.0, 0.02);
@@ -108,17 +106,8 @@ TEST_CASE_TEMPLATE("node selection: coverage, separation, nearest assignment, pr
 }
 
 TEST_CASE("node selection: the node count adapts to the unit") {
-  smg::test::SceneOptions so;
-  so.nodes = 1500;
-  so.frames = 30;
-  so.seed = 7;
-  const auto sc = smg::test::make_scene<double>(so);
-  smg::test::Trajectories<double> tr;
-  tr.T = sc.T;
-  tr.N = sc.N;
-  tr.x = sc.positions;
-  tr.v = sc.visibility;
-  Index previous = sc.N + 1;
+  const auto tr = smg::test::scene_trajectories<double>(1500, 30, 7);
+  Index previous = tr.N + 1;
   for (double unit : {0.01, 0.05, 0.1, 0.2, 0.4, 100.0}) {
     smg::NodeSelectionOptions o;
     o.unit = unit;
@@ -161,16 +150,7 @@ TEST_CASE("node selection: identical trajectories, eligibility, tiny unit") {
 }
 
 TEST_CASE("node selection: bit-identical for 1, 2 and 7 threads") {
-  smg::test::SceneOptions so;
-  so.nodes = 1200;
-  so.frames = 25;
-  so.seed = 8;
-  const auto sc = smg::test::make_scene<float>(so);
-  smg::test::Trajectories<float> tr;
-  tr.T = sc.T;
-  tr.N = sc.N;
-  tr.x = sc.positions;
-  tr.v = sc.visibility;
+  const auto tr = smg::test::scene_trajectories<float>(1200, 25, 8);
   smg::NodeSelectionOptions o;
   o.unit = 0.1;
   o.parallel.threads = 1;

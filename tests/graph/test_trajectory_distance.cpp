@@ -83,8 +83,7 @@ TEST_CASE_TEMPLATE("trajectory distance: hand-computed values for both aggregati
 }
 
 TEST_CASE_TEMPLATE("trajectory distance equals the plain reference, is symmetric, D_ii = 0", S, float, double) {
-  smg::test::Rng rng(11);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 11);
   for (int trial = 0; trial < 20; ++trial) {
     const Index T = rng.integer(1, 70), N = 6;
     auto tr = smg::test::random_trajectories<S>(rng, T, N, trial % 3 == 0 ? 1.0 : 0.6);
@@ -114,8 +113,7 @@ TEST_CASE_TEMPLATE("trajectory distance equals the plain reference, is symmetric
 }
 
 TEST_CASE("trajectory distance is invariant to a rigid motion per frame") {
-  smg::test::Rng rng(12);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 12);
   auto tr = smg::test::random_trajectories<double>(rng, 30, 5, 0.7);
   auto moved = tr;
   for (Index t = 0; t < tr.T; ++t) {
@@ -144,8 +142,7 @@ TEST_CASE("trajectory distance is invariant to a rigid motion per frame") {
 }
 
 TEST_CASE("trajectory distance: float agrees with double") {
-  smg::test::Rng rng(13);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 13);
   auto td = smg::test::random_trajectories<double>(rng, 40, 8, 0.8);
   smg::test::Trajectories<float> tf;
   tf.T = td.T;

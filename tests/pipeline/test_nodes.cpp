@@ -21,6 +21,17 @@ namespace {
 
 using trainer::Nodes;
 
+// N nodes over T frames, visible everywhere, positions and rotations zero (for the caller to fill).
+Nodes visible_nodes(int N, int T) {
+  Nodes n;
+  n.frames = T;
+  n.count = N;
+  n.positions.resize(static_cast<std::size_t>(T) * N * 3);
+  n.rotations.assign(static_cast<std::size_t>(T) * N * 4, 0.0);
+  n.visible.assign(static_cast<std::size_t>(T) * N, 1);
+  return n;
+}
+
 // N nodes over T frames: a cloud ~0.3 m wide moving rigidly-ish plus noise, random rotations,
 // about a quarter of the samples unobserved, observations off by 0-4 cm (both sides of the data
 // term's Huber threshold, never within 2 mm of it).
@@ -87,8 +98,7 @@ TEST_CASE("NodeObjective: exact gradients match finite differences for every var
     CAPTURE(name);
     trainer::VariantSpec spec;
     REQUIRE(trainer::parse_variant(name, &spec));
-    smg::test::Rng rng(7201);
-    CAPTURE(rng.seed);
+    SMG_TEST_RNG(rng, 7201);
     const int N = 12, T = 5;
     Nodes n = random_nodes(rng, N, T, options.data_huber);
     knn_graph(n, rng, 5);
@@ -152,8 +162,7 @@ TEST_CASE("NodeObjective: the ladder's terms are consistent across variants") {
   // Same nodes and graph for every variant: rungs that share a term must report the same value;
   // C-ARAP's confidence-weighted edges (alpha < 1) give less energy than plain ARAP.
   const trainer::NodeLossOptions options;
-  smg::test::Rng rng(7202);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 7202);
   Nodes n = random_nodes(rng, 12, 5, options.data_huber);
   knn_graph(n, rng, 5);
   const auto terms = [&](const char* name) {
@@ -182,8 +191,7 @@ TEST_CASE("NodeObjective: the ladder's terms are consistent across variants") {
 TEST_CASE("NodeObjective: scale 0 reports the unscaled terms and adds nothing") {
   // Stage 2 may run with node_weight = 0 (logging only): the terms must still be reported.
   const trainer::NodeLossOptions options;
-  smg::test::Rng rng(7203);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 7203);
   Nodes n = random_nodes(rng, 12, 5, options.data_huber);
   knn_graph(n, rng, 5);
   trainer::NodeObjective obj(trainer::variant_spec(trainer::Variant::full), options);
@@ -200,15 +208,9 @@ TEST_CASE("NodeObjective: scale 0 reports the unscaled terms and adds nothing") 
 }
 
 TEST_CASE("init_rotations: recovers a rigid per-frame rotation; identity at frame 0") {
-  smg::test::Rng rng(7301);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 7301);
   const int N = 10, T = 4;
-  Nodes n;
-  n.frames = T;
-  n.count = N;
-  n.positions.resize(static_cast<std::size_t>(T) * N * 3);
-  n.rotations.assign(static_cast<std::size_t>(T) * N * 4, 0.0);
-  n.visible.assign(static_cast<std::size_t>(T) * N, 1);
+  Nodes n = visible_nodes(N, T);
   std::vector<Eigen::Vector3d> x0(N);
   for (auto& x : x0) x = 0.3 * rng.vec3();
   std::vector<Eigen::Quaterniond> Rt(T);
@@ -259,17 +261,11 @@ TEST_CASE("init_rotations: recovers a rigid per-frame rotation; identity at fram
 }
 
 TEST_CASE("init_rotations: identity for collinear neighbourhoods and for fewer than two neighbours") {
-  smg::test::Rng rng(7302);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 7302);
   // Node 0: neighbours 1, 2, 3 on a line through it. Node 1: one neighbour. Node 4: none.
   // Node 5: general position (neighbours 0, 4, 6), so the motion is not a no-op.
   const int N = 7, T = 3, K = 3;
-  Nodes n;
-  n.frames = T;
-  n.count = N;
-  n.positions.resize(static_cast<std::size_t>(T) * N * 3);
-  n.rotations.assign(static_cast<std::size_t>(T) * N * 4, 0.0);
-  n.visible.assign(static_cast<std::size_t>(T) * N, 1);
+  Nodes n = visible_nodes(N, T);
   const Eigen::Vector3d origin = rng.vec3(), dir = rng.unit3();
   std::vector<Eigen::Vector3d> x0 = {origin, origin + 0.1 * dir, origin - 0.25 * dir, origin + 0.4 * dir,
                                      rng.vec3(), rng.vec3(), rng.vec3()};

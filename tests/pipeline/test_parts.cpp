@@ -68,8 +68,7 @@ TEST_CASE("parse_variant: the six rungs of the ladder and their specs") {
 }
 
 TEST_CASE("photometric_loss<double>: values and gradient against finite differences") {
-  smg::test::Rng rng(7401);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 7401);
   const int W = 7, H = 5, n = W * H;
   const double lambda = 0.37;
   std::vector<double> image(3 * n), depth(n);
@@ -143,8 +142,7 @@ TEST_CASE("photometric_loss<double>: values and gradient against finite differen
 }
 
 TEST_CASE("Adam::step: first step is lr against the gradient's sign; a quadratic decreases") {
-  smg::test::Rng rng(7501);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 7501);
   const int n = 6;
   std::vector<double> x(n), a(n), c(n), g(n);
   for (int k = 0; k < n; ++k) {
@@ -180,8 +178,7 @@ TEST_CASE("Adam::step: first step is lr against the gradient's sign; a quadratic
 }
 
 TEST_CASE("Adam::step_rotations: unit quaternions, steps against the right-tangent gradient") {
-  smg::test::Rng rng(7502);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 7502);
   // L = Σ_r |Log(target_r^-1 q_r)|^2; its right-tangent gradient is 2 Log(target_r^-1 q_r).
   const int n = 3;
   std::vector<Eigen::Quaterniond> target(n);
@@ -228,8 +225,7 @@ TEST_CASE("Adam::step_rotations: unit quaternions, steps against the right-tange
 TEST_CASE("Adam: steps run in parallel chunks, bit-identical for any thread count and grain") {
   // The steps are per value (per row for rotations), so splitting them differently must not
   // change a bit (stage 2 relies on it: its metrics do not depend on --threads).
-  smg::test::Rng rng(7503);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 7503);
   const int n = 1001;  // rows: not a multiple of any grain used below
   std::vector<float> x0(3 * n), g(3 * n);
   std::vector<double> q0(4 * n), gq(3 * n);

@@ -35,6 +35,14 @@ const QuickStage0& quick() {
   return q;
 }
 
+// Stage 1's starting point: the nodes of the lifted tracks (with or without the semantic graph),
+// their rotations initialised.
+trainer::Nodes initial_nodes(const QuickStage0& q, bool semantic_graph, const smg::ParallelOptions& par) {
+  trainer::Nodes nodes = trainer::make_nodes(q.lifted, q.config.nodes, semantic_graph, par);
+  trainer::init_rotations(nodes);
+  return nodes;
+}
+
 const trainer::Progress& silent() {
   static const trainer::Progress p(nullptr, true);
   return p;
@@ -47,8 +55,7 @@ TEST_CASE("stage 1 (full variant, quick scene): node EPE below the lifted EPE") 
   const trainer::TrainerConfig& c = q.config;
   REQUIRE(c.variant.variant == trainer::Variant::full);
   const smg::ParallelOptions par{2, 0};
-  trainer::Nodes nodes = trainer::make_nodes(q.lifted, c.nodes, c.variant.semantic_graph, par);
-  trainer::init_rotations(nodes);
+  trainer::Nodes nodes = initial_nodes(q, c.variant.semantic_graph, par);
   REQUIRE(nodes.count > 10);
   const trainer::TrackMetrics lifted = trainer::track_metrics(q.data.scene, nodes);
   trainer::NodeObjective objective(c.variant, c.node_loss, par);
@@ -88,8 +95,7 @@ TEST_CASE("stage 1 (base variant): observed samples stay at their lifted value")
   trainer::TrainerConfig c = q.config;
   REQUIRE(trainer::parse_variant("base", &c.variant));
   const smg::ParallelOptions par{2, 0};
-  trainer::Nodes nodes = trainer::make_nodes(q.lifted, c.nodes, c.variant.semantic_graph, par);
-  trainer::init_rotations(nodes);
+  trainer::Nodes nodes = initial_nodes(q, c.variant.semantic_graph, par);
   const trainer::TrackMetrics lifted = trainer::track_metrics(q.data.scene, nodes);
   const std::vector<double> start = nodes.positions;
   trainer::Stage1Options s1 = c.stage1;
@@ -122,8 +128,7 @@ TEST_CASE("stage 0 + stage 1 are bit-identical for 1, 2 and 7 threads") {
   std::vector<std::vector<std::int32_t>> graphs;
   for (int threads : {1, 2, 7}) {
     const smg::ParallelOptions par{threads, 0};
-    trainer::Nodes nodes = trainer::make_nodes(q.lifted, c.nodes, c.variant.semantic_graph, par);
-    trainer::init_rotations(nodes);
+    trainer::Nodes nodes = initial_nodes(q, c.variant.semantic_graph, par);
     trainer::NodeObjective objective(c.variant, c.node_loss, par);
     trainer::fit_nodes(nodes, objective, s1, silent());
     positions.push_back(nodes.positions);
@@ -143,12 +148,10 @@ TEST_CASE("stage 0 + stage 1 are bit-identical for 1, 2 and 7 threads") {
 
 TEST_CASE("C-ARAP options: the directed reading keeps the energy and rotation gradient, changes the positions'") {
   const QuickStage0& q = quick();
-  const trainer::TrainerConfig& c = q.config;
   const smg::ParallelOptions par{2, 0};
-  trainer::Nodes nodes = trainer::make_nodes(q.lifted, c.nodes, true, par);
-  trainer::init_rotations(nodes);
+  trainer::Nodes nodes = initial_nodes(q, true, par);
   const trainer::VariantSpec no_lrm = trainer::variant_spec(trainer::Variant::no_lrm);
-  trainer::NodeLossOptions o = c.node_loss;
+  trainer::NodeLossOptions o = q.config.node_loss;
   trainer::NodeObjective sym(no_lrm, o, par);
   o.carap_reading = trainer::CarapReading::directed;
   trainer::NodeObjective dir(no_lrm, o, par);
@@ -173,8 +176,7 @@ TEST_CASE("C-ARAP options: confidences from the estimate follow it, from the lif
   const QuickStage0& q = quick();
   const trainer::TrainerConfig& c = q.config;
   const smg::ParallelOptions par{2, 0};
-  trainer::Nodes nodes = trainer::make_nodes(q.lifted, c.nodes, true, par);
-  trainer::init_rotations(nodes);
+  trainer::Nodes nodes = initial_nodes(q, true, par);
   const trainer::VariantSpec full = trainer::variant_spec(trainer::Variant::full);
   const auto confidences_before_after = [&](trainer::ConfidenceSource source) {
     trainer::Nodes n = nodes;

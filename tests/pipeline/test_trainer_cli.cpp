@@ -23,18 +23,13 @@ namespace fs = std::filesystem;
 namespace {
 using Run = smg::test::ProgramRun;
 using smg::test::slurp;
-Run run(const std::string& args) {
-  return smg::test::run_program(SMG_TRAINER_PATH, args, "smg_test_pipeline_trainer_io");
-}
-int lines(const std::string& s) { return smg::test::count_lines(s); }
+Run run(const std::string& args) { return smg::test::run_program(SMG_TRAINER_PATH, args, "smg_test_pipeline_trainer_io"); }
 }  // namespace
 
 TEST_CASE("smg_trainer: usage errors are one line on stderr and exit code 2") {
   const fs::path file = fs::temp_directory_path() / "smg_test_pipeline_plain_file";
-  std::ofstream(file) << "x";
-  const struct {
-    std::string args, message;
-  } cases[] = {
+  smg::test::write_bytes(file, "x");
+  smg::test::check_usage_errors(run, "smg_trainer", {
       {"--bogus", "bogus"},
       {"--variant nope", "variant"},
       {"--variant Full", "variant"},
@@ -53,17 +48,7 @@ TEST_CASE("smg_trainer: usage errors are one line on stderr and exit code 2") {
       {"stray", "unexpected argument 'stray'"},
       {"--out /proc/forbidden_dir", "/proc/forbidden_dir"},
       {"--out " + (file / "sub").string(), "cannot create output folder"},
-  };
-  for (const auto& c : cases) {
-    CAPTURE(c.args);
-    const Run r = run(c.args);
-    CAPTURE(r.err);
-    CHECK(r.code == 2);
-    CHECK(r.out.empty());
-    CHECK(lines(r.err) == 1);
-    CHECK(r.err.rfind("smg_trainer: error: ", 0) == 0);
-    CHECK(r.err.find(c.message) != std::string::npos);
-  }
+  });
   fs::remove(file);
 }
 
@@ -77,7 +62,7 @@ TEST_CASE("smg_trainer: a tiny run writes metrics.json and the pictures") {
   REQUIRE(r.code == 0);
   REQUIRE(fs::exists(out / "metrics.json"));
   const std::string metrics = slurp(out / "metrics.json");
-  CHECK(lines(metrics) == 1);
+  CHECK(smg::test::count_lines(metrics) == 1);
   for (const char* key : {"\"scene\":\"occluder\"", "\"alpha\":0.5", "\"carap_reading\":\"directed\"",
                           "\"confidence_from\":\"lifted\"", "\"conf_spearman_error\":", "\"conf_weight_directed_low\":",
                           "\"program\":\"smg_trainer\"", "\"variant\":\"full\"", "\"T\":6", "\"width\":48",
@@ -117,7 +102,7 @@ TEST_CASE("smg_trainer: --export-case writes the stage-1 problem and exits witho
   CHECK_FALSE(fs::exists(out));  // no training, no pictures
   REQUIRE(fs::exists(dir / "case.json"));
   const std::string json = slurp(dir / "case.json");
-  CHECK(lines(json) == 1);
+  CHECK(smg::test::count_lines(json) == 1);
   for (const char* key : {"\"T\":6", "\"N\":", "\"K\":16", "\"variant\":\"full\"", "\"w_rigidity\":",
                           "\"w_lrm\":", "\"lr_position\":", "\"iterations\":20", "\"extent\":"}) {
     const std::string k = key;
@@ -171,7 +156,7 @@ TEST_CASE("smg_trainer: --export-case into a folder that cannot be created is a 
   CAPTURE(r.err);
   CHECK(r.code == 2);
   CHECK(r.out.empty());
-  CHECK(lines(r.err) == 1);
+  CHECK(smg::test::count_lines(r.err) == 1);
   CHECK(r.err.find("/proc/forbidden_case_dir") != std::string::npos);
 }
 #else

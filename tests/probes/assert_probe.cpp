@@ -1,4 +1,4 @@
-// smg_assert_probe MODE — misuses a view or an entry point on purpose, built with
+// smg_assert_probe MODE — misuses a view or an operator (MODE: its name) on purpose, built with
 // SMG_ENABLE_ASSERTS, so that tests/api/test_asserts.cpp can check that a debug build fails
 // loudly (one "smg: assertion failed" line, abort) instead of writing out of bounds.
 #include <cstdio>
@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "smg/smg.hpp"
+#include "support/operators.hpp"
 
 int main(int argc, char** argv) {
   const std::string mode = argc > 1 ? argv[1] : "";
@@ -22,15 +23,18 @@ int main(int argc, char** argv) {
   const smg::QuaternionsView<const double> Q(q.data(), T, N);
   if (mode == "view") {
     std::printf("%g\n", X(T, 0)(0));  // frame T does not exist
-  } else if (mode == "carap") {
-    // A gradient buffer for 2 nodes where there are 3.
-    smg::carap<double>(X, Q, {}, g, smg::CarapOptions{}, {small.data(), T, 2});
-  } else if (mode == "lrm") {
-    smg::lrm<double>(X, {}, g, smg::LrmOptions{}, {small.data(), T, 2});
   } else if (mode == "ok") {
     std::printf("%g\n", double(smg::carap<double>(X, Q, {}, g, smg::CarapOptions{})));
     return 0;
   }
+  // Each operator of tests/support/operators.hpp, its name as the mode: output buffers for 2 nodes
+  // where there are 3.
+  smg::test::for_each_operator([&](auto op) {
+    if (mode != op.name) return;
+    std::vector<double> small_r(small.size(), 0.0), small_c(T * 2, 0.0);
+    op.run(smg::test::OperatorInputs<double>{X, Q, {}, {}, g},
+           {{small.data(), T, 2}, {small_r.data(), T, 2}, {small_c.data(), T, 2}});
+  });
   std::printf("no assertion fired\n");
   return 3;
 }

@@ -6,17 +6,14 @@
 
 #include <cstring>
 #include <functional>
+#include <utility>
 #include <vector>
 
 #include "skin/skin_test_support.hpp"
+#include "support/prelude.hpp"
 
-using smg::Index;
-using smg::Quaternion;
 using smg::SkinMethod;
-using smg::Vector3;
-using smg::test::relative_error;
 using smg::test::Scene;
-using Eigen::VectorXd;
 
 namespace {
 
@@ -116,6 +113,13 @@ Blended run_blend(const Setup& u, SkinMethod m, int threads, bool jacobians) {
   smg::skin_blend(u.nodes(), u.points(), u.query(), out, opt);
   return b;
 }
+// Every output bit-identical.
+void check_identical(const Blended& a, const Blended& b) {
+  CHECK(a.pos == b.pos);
+  CHECK(a.quat == b.quat);
+  CHECK(a.Jd == b.Jd);
+  CHECK(a.Jp == b.Jp);
+}
 
 // Output gradients and the gradient buffers of skin_blend_backward.
 struct Grads {
@@ -128,6 +132,17 @@ Grads random_output_grads(smg::test::Rng& rng, const Setup& u) {
   for (Index i = 0; i < u.Q * u.s.P * 3; ++i) g.grot.push_back(rng.normal());
   for (Index i = 0; i < u.Q * u.s.P * 4; ++i) g.gquat.push_back(rng.normal());
   return g;
+}
+// Every accumulated gradient bit-identical.
+void check_identical(const Grads& a, const Grads& b) {
+  using Buffer = std::vector<double> Grads::*;
+  const std::pair<const char*, Buffer> buffers[] = {{"nx", &Grads::nx}, {"nr", &Grads::nr}, {"px", &Grads::px},
+                                                    {"pr", &Grads::pr}, {"pq", &Grads::pq}, {"w", &Grads::w}};
+  for (const auto& buffer : buffers) {
+    const char* name = buffer.first;
+    CAPTURE(name);
+    CHECK(a.*buffer.second == b.*buffer.second);
+  }
 }
 void run_backward(const Setup& u, SkinMethod m, int threads, Grads& g,
                   smg::SkinWorkspace<double>& ws) {
@@ -159,8 +174,7 @@ void run_backward(const Setup& u, SkinMethod m, int threads, Grads& g,
 }  // namespace
 
 TEST_CASE("skin_drivers: the anchor, then its valid neighbours, then -1 padding") {
-  smg::test::Rng rng(521);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 521);
   const Setup u = make_setup(rng, 2, 12, 4, 40, 1);
   for (Index p = 0; p < u.s.P; ++p) {
     const std::int32_t a = u.s.anchor[p];
@@ -182,8 +196,7 @@ TEST_CASE("skin_drivers: the anchor, then its valid neighbours, then -1 padding"
 }
 
 TEST_CASE("skinning_weights batch equals the per-point weights; fallbacks are counted") {
-  smg::test::Rng rng(522);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 522);
   Setup u = make_setup(rng, 3, 10, 4, 50, 1);
   for (Index p = 0; p < u.s.P; ++p) {
     const auto d = gather(u, p, 0);
@@ -210,8 +223,7 @@ TEST_CASE("skinning_weights batch equals the per-point weights; fallbacks are co
 }
 
 TEST_CASE("skin_blend equals skin_point on every (query, point), values and Jacobians") {
-  smg::test::Rng rng(523);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 523);
   for (bool with_quats : {true, false}) {
     Setup u = make_setup(rng, 4, 12, 5, 30, 3);
     u.with_point_quats = with_quats;
@@ -246,8 +258,7 @@ TEST_CASE("skin_blend equals skin_point on every (query, point), values and Jaco
 }
 
 TEST_CASE("skin_blend_backward equals a dense serial accumulation of per-point VJPs") {
-  smg::test::Rng rng(524);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 524);
   Setup u = make_setup(rng, 3, 9, 4, 40, 4);
   u.t_query = {0, 2, 0, 1};  // repeated frames, and frames that are some points' t_ref
   const Index T = u.s.T, N = u.s.N, P = u.s.P;
@@ -314,8 +325,7 @@ TEST_CASE("skin_blend_backward equals a dense serial accumulation of per-point V
 TEST_CASE("whole pipeline against central differences: weights from the state, then the blend") {
   // L = Σ a·p' + Σ b·q' (raw 4-vector) with weights = skinning_weights(state). Its gradient is
   // skin_blend_backward (weights as inputs) + skinning_weights_backward(dL/dw).
-  smg::test::Rng rng(525);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 525);
   for (SkinMethod m : kMethods) {
     const std::string method_name = smg::to_string(m);
     CAPTURE(method_name);
@@ -386,8 +396,7 @@ TEST_CASE("whole pipeline against central differences: weights from the state, t
 }
 
 TEST_CASE("results are bit-identical for 1, 2 and 7 threads") {
-  smg::test::Rng rng(526);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 526);
   Setup u = make_setup(rng, 4, 60, 6, 3000, 2);
   for (SkinMethod m : kMethods) {
     const std::string method_name = smg::to_string(m);
@@ -400,18 +409,10 @@ TEST_CASE("results are bit-identical for 1, 2 and 7 threads") {
     for (int threads : {2, 7}) {
       CAPTURE(threads);
       const Blended b = run_blend(u, m, threads, true);
-      CHECK(b.pos == b1.pos);
-      CHECK(b.quat == b1.quat);
-      CHECK(b.Jd == b1.Jd);
-      CHECK(b.Jp == b1.Jp);
+      check_identical(b, b1);
       Grads& g = threads == 2 ? g2 : g7;
       run_backward(u, m, threads, g, ws);  // the same workspace, reused
-      CHECK(g.nx == g1.nx);
-      CHECK(g.nr == g1.nr);
-      CHECK(g.px == g1.px);
-      CHECK(g.pr == g1.pr);
-      CHECK(g.pq == g1.pq);
-      CHECK(g.w == g1.w);
+      check_identical(g, g1);
     }
   }
   // Weights and their backward.
@@ -449,8 +450,7 @@ TEST_CASE("results are bit-identical for 1, 2 and 7 threads") {
 }
 
 TEST_CASE("a point set whose nodes all move rigidly together moves rigidly") {
-  smg::test::Rng rng(527);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 527);
   Setup u = make_setup(rng, 3, 15, 5, 200, 2);
   // Frame t = G · frame t_ref for every node, with every point's t_ref = 0.
   const Quaternion<double> g = rng.rotation_with_angle(2.5);
@@ -499,8 +499,7 @@ TEST_CASE("a point set whose nodes all move rigidly together moves rigidly") {
 }
 
 TEST_CASE("validation names the argument and the problem") {
-  smg::test::Rng rng(528);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 528);
   Setup u = make_setup(rng, 3, 8, 3, 10, 2);
   smg::SkinBlendOutputs<double> out;
   std::vector<double> pos(u.Q * u.s.P * 3);

@@ -5,15 +5,10 @@
 
 #include "skin/skin_test_support.hpp"
 #include "support/autodiff.hpp"
+#include "support/prelude.hpp"
 
-using smg::Index;
-using smg::Quaternion;
 using smg::SkinMethod;
-using smg::Vector3;
 using smg::test::Drivers;
-using smg::test::relative_error;
-using Eigen::MatrixXd;
-using Eigen::VectorXd;
 
 namespace {
 constexpr SkinMethod kMethods[] = {SkinMethod::dqb, SkinMethod::lbs};
@@ -25,8 +20,7 @@ void blend(SkinMethod m, const Drivers& d, const Vector3<double>& p, const Quate
 }  // namespace
 
 TEST_CASE("DQB matches a reference built from core dual quaternions; LBS matches matrix blending") {
-  smg::test::Rng rng(501);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 501);
   for (int trial = 0; trial < 200; ++trial) {
     const int D = rng.integer(1, 9);
     const Drivers d = smg::test::random_drivers(rng, D);
@@ -48,8 +42,7 @@ TEST_CASE("DQB matches a reference built from core dual quaternions; LBS matches
 }
 
 TEST_CASE("all drivers with the same motion give exactly that motion") {
-  smg::test::Rng rng(502);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 502);
   for (int trial = 0; trial < 50; ++trial) {
     // Motion G = (g, u): every node's pose at t is G applied to its pose at t_ref.
     const Quaternion<double> g = rng.quaternion();
@@ -75,8 +68,7 @@ TEST_CASE("all drivers with the same motion give exactly that motion") {
 }
 
 TEST_CASE("a weight of 1 (others 0) gives that driver's motion") {
-  smg::test::Rng rng(503);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 503);
   for (int trial = 0; trial < 50; ++trial) {
     const int D = rng.integer(2, 8);
     Drivers d = smg::test::random_drivers(rng, D);
@@ -97,8 +89,7 @@ TEST_CASE("a weight of 1 (others 0) gives that driver's motion") {
 }
 
 TEST_CASE("negating any input quaternion changes nothing") {
-  smg::test::Rng rng(504);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 504);
   for (int trial = 0; trial < 50; ++trial) {
     const int D = rng.integer(1, 8);
     const Drivers d = smg::test::random_drivers(rng, D);
@@ -137,8 +128,7 @@ TEST_CASE("negating any input quaternion changes nothing") {
 }
 
 TEST_CASE("Jacobians of DQB and LBS against central differences") {
-  smg::test::Rng rng(505);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 505);
   for (int trial = 0; trial < 30; ++trial) {
     const int D = rng.integer(1, 6);
     const Drivers d = smg::test::random_drivers(rng, D);
@@ -176,8 +166,7 @@ TEST_CASE("Jacobians of DQB and LBS against central differences") {
 
 TEST_CASE("Jacobians against AutoDiffScalar") {
   using smg::test::AD;
-  smg::test::Rng rng(506);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 506);
   for (int trial = 0; trial < 6; ++trial) {
     const int D = rng.integer(1, 4);
     const Drivers d = smg::test::random_drivers(rng, D);
@@ -222,8 +211,7 @@ TEST_CASE("Jacobians against AutoDiffScalar") {
 }
 
 TEST_CASE("the vector-Jacobian product equals Jᵀ g") {
-  smg::test::Rng rng(507);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 507);
   for (int trial = 0; trial < 30; ++trial) {
     const int D = rng.integer(1, 8);
     const Drivers d = smg::test::random_drivers(rng, D);
@@ -251,8 +239,7 @@ TEST_CASE("the vector-Jacobian product equals Jᵀ g") {
 }
 
 TEST_CASE("float against double: values and Jacobians") {
-  smg::test::Rng rng(508);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 508);
   double worst_value = 0, worst_jac = 0;
   for (int trial = 0; trial < 50; ++trial) {
     const int D = rng.integer(1, 8);

@@ -12,9 +12,7 @@
 #include <vector>
 
 #include "skin/skin_test_support.hpp"
-
-using smg::Index;
-using smg::Vector3;
+#include "support/prelude.hpp"
 
 namespace {
 constexpr double kPi = 3.14159265358979323846;

@@ -9,13 +9,7 @@
 
 #include "skin/skin_test_support.hpp"
 #include "support/autodiff.hpp"
-
-using smg::Index;
-using smg::Vector3;
-using smg::test::central_jacobian;
-using smg::test::relative_error;
-using Eigen::MatrixXd;
-using Eigen::VectorXd;
+#include "support/prelude.hpp"
 
 namespace {
 struct Case {
@@ -40,8 +34,7 @@ VectorXd weights(const Case& c) {
 }  // namespace
 
 TEST_CASE("weights are the normalised exp(-|p - x_k|^2 / 2 sigma_k^2)") {
-  smg::test::Rng rng(511);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 511);
   for (int trial = 0; trial < 100; ++trial) {
     const int D = rng.integer(1, 17);
     const Case c = random_case(rng, D);
@@ -113,8 +106,7 @@ TEST_CASE("weights stay exact when every exp underflows; defined fallback when e
 
 TEST_CASE("weight Jacobians against central differences and AutoDiffScalar; VJP = Jᵀ g") {
   using smg::test::AD;
-  smg::test::Rng rng(512);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 512);
   for (int trial = 0; trial < 20; ++trial) {
     const int D = rng.integer(1, 9);
     const Case c = random_case(rng, D);
@@ -181,8 +173,7 @@ TEST_CASE("weight Jacobians against central differences and AutoDiffScalar; VJP 
 }
 
 TEST_CASE("weights: float against double") {
-  smg::test::Rng rng(513);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 513);
   double worst = 0, worst_j = 0;
   for (int trial = 0; trial < 100; ++trial) {
     const int D = rng.integer(1, 17);

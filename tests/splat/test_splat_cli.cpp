@@ -6,14 +6,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <string>
 #include <vector>
 
-#include <sys/wait.h>
-
 #include "npy.hpp"
 #include "splat_scene.hpp"
+#include "support/run_program.hpp"
 
 namespace fs = std::filesystem;
 using namespace smg;
@@ -21,22 +19,8 @@ using namespace smg::splat;
 
 #ifdef SMG_CLI_PATH
 namespace {
-struct CliRun {
-  int code;
-  std::string out, err;
-};
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
-CliRun cli(const std::string& args) {
-  const fs::path dir = fs::temp_directory_path() / "smg_test_splat_cli_io";
-  fs::create_directories(dir);
-  const std::string cmd = std::string(SMG_CLI_PATH) + " " + args + " >" + (dir / "out").string() +
-                          " 2>" + (dir / "err").string();
-  const int status = std::system(cmd.c_str());
-  return {WEXITSTATUS(status), slurp(dir / "out"), slurp(dir / "err")};
-}
+using CliRun = smg::test::ProgramRun;
+CliRun cli(const std::string& args) { return smg::test::run_program(SMG_CLI_PATH, args, "smg_test_splat_cli_io"); }
 
 // Writes a case directory for `scene` seen by `cam`.
 void write_case(const fs::path& dir, const test::SplatScene<double>& s, const Camera<double>& cam) {

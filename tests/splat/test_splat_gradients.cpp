@@ -96,8 +96,7 @@ SplatScene<double> large_scene(test::Rng& rng, const Camera<double>& cam, Index 
 }  // namespace
 
 TEST_CASE("render gradients match central differences: RGB, background, image+alpha+depth") {
-  test::Rng rng(601);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 601);
   const auto cam = test::test_camera<double>(24, 20, 18.0, rng.quaternion(), rng.vec3(0.3));
   const auto scene = large_scene(rng, cam, 6, 3);
   const double bg[3] = {0.2, -0.4, 0.7};
@@ -110,8 +109,7 @@ TEST_CASE("render gradients match central differences: RGB, background, image+al
 TEST_CASE("render gradients match central differences: SH degrees 0..3") {
   for (int degree = 0; degree <= 3; ++degree) {
     CAPTURE(degree);
-    test::Rng rng(610 + std::uint64_t(degree));
-    CAPTURE(rng.seed);
+    SMG_TEST_RNG(rng, 610 + std::uint64_t(degree));
     const auto cam = test::test_camera<double>(20, 18, 16.0, rng.quaternion(), rng.vec3(0.3));
     auto scene = large_scene(rng, cam, 4, 3);
     scene.sh_degree = degree;
@@ -128,8 +126,7 @@ TEST_CASE("render gradients: dynamic channel count, small Gaussians crossing til
   // Smaller Gaussians (about 3 px) on a 40x36 image with 8-pixel tiles: pixels at the
   // alpha = 1/255 contour and Gaussians binned to subsets of tiles. The seed is fixed; no
   // pixel sits within h of a discontinuity.
-  test::Rng rng(620);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 620);
   const auto cam = test::test_camera<double>(40, 36, 30.0, rng.quaternion(), rng.vec3(0.2));
   const auto scene = test::random_scene(rng, cam, 12, 2, 3.0, 2.0, 5.0, 0.3, 0.8);
   SplatSettings<double> set;
@@ -144,8 +141,7 @@ TEST_CASE("render gradients with the 0.99 clamp and early termination active") {
   // Opaque Gaussians stacked on the same pixels: alpha_raw > 0.99 near their centres (the
   // clamp's flat side passes no opacity/footprint gradient) and the transmittance reaches
   // 1e-4 after a few of them (later ones get no gradient from those pixels).
-  test::Rng rng(630);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 630);
   const auto cam = test::test_camera<double>(24, 20, 18.0);
   SplatScene<double> scene;
   scene.C = 3;

@@ -37,8 +37,7 @@ Matrix2<double> closed_form_cov2d(const Camera<double>& cam, const Vector3<doubl
 }  // namespace
 
 TEST_CASE("one Gaussian: projected mean, radius and footprint match the closed form") {
-  test::Rng rng(701);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 701);
   const auto cam = test::test_camera<double>(50, 40, 40.0, rng.rotation_with_angle(0.3),
                                              Vector3<double>(0.1, -0.2, 0.3));
   const Vector3<double> mean = test::world_at_pixel(cam, 21.3, 17.8, 3.5);
@@ -187,8 +186,7 @@ TEST_CASE("alpha skip: opacity just below 1/255 draws nothing, just above draws"
 TEST_CASE("with radius_sigmas >= 3.33 the image does not depend on the tile size") {
   // Every pixel with alpha >= 1/255 lies within sqrt(2 ln(255 * 0.99)) = 3.32 sigma, so a
   // 3.4-sigma radius bins each Gaussian to every tile it can draw on, for any tile size.
-  test::Rng rng(702);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 702);
   const auto cam = test::test_camera<double>(70, 45, 60.0, rng.rotation_with_angle(0.2));
   const auto scene = test::random_scene(rng, cam, 300, 3, 2.5);
   SplatSettings<double> set;
@@ -222,8 +220,7 @@ TEST_CASE("with radius_sigmas >= 3.33 the image does not depend on the tile size
 }
 
 TEST_CASE("forward and backward are bit-identical for 1, 2 and 7 threads") {
-  test::Rng rng(703);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 703);
   const auto cam = test::test_camera<float>(97, 61, 80.0f, rng.rotation_with_angle(0.4));
   const auto scene = test::random_scene(rng, cam, 2000, 3, 2.0).cast<float>();
   const auto w = test::random_weights(rng, cam.height, cam.width, 3);
@@ -272,8 +269,7 @@ TEST_CASE("a warmed-up workspace is reused without reallocation") {
 }
 
 TEST_CASE("float agrees with double on images and gradients") {
-  test::Rng rng(705);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 705);
   const auto camd = test::test_camera<double>(80, 60, 70.0, rng.rotation_with_angle(0.3));
   const auto camf = test::test_camera<float>(80, 60, 70.0, Quaternion<double>(camd.viewmat.topLeftCorner<3, 3>()));
   const auto scene = test::random_scene(rng, camd, 800, 3, 2.5);

@@ -11,12 +11,8 @@
 
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
-#include "support/finite_diff.hpp"
-#include "support/random.hpp"
+#include "support/prelude.hpp"
 
-using smg::Index;
-using smg::Vector3;
-using smg::test::Rng;
 using smg::test::Scene;
 
 namespace {
@@ -90,8 +86,7 @@ Scene<double> star(Index T, Index n, Rng& rng,
 }  // namespace
 
 TEST_CASE("collinear neighbourhood: finite everything; the regularised solve is smooth") {
-  Rng rng(801);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 801);
   const Vector3<double> dir = Vector3<double>(1, 2, -1).normalized();
   Scene<double> s = star(5, 6, rng, [&](Index t, Index k) {
     return Vector3<double>((0.3 * double(k) + 0.05 * double(t * k % 3)) * dir +
@@ -110,8 +105,7 @@ TEST_CASE("collinear neighbourhood: finite everything; the regularised solve is 
 }
 
 TEST_CASE("coincident neighbours: trace(A) = 0 gives omega = 0 and finite gradients") {
-  Rng rng(802);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 802);
   const Vector3<double> p0(0.2, -0.1, 0.4);
   Scene<double> s = star(4, 5, rng, [&](Index t, Index k) {
     return Vector3<double>(p0 + Vector3<double>(0.01 * double(t * (k + 1)), 0, 0) * (t == 2 ? 0.0 : 1.0));
@@ -139,8 +133,7 @@ TEST_CASE("a single neighbour: LRM adds exactly 0 (x̃ = ũ = 0)") {
 }
 
 TEST_CASE("zero-length edges: the length term's derivative at 0 is 0; central FD agrees") {
-  Rng rng(804);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 804);
   Scene<double> s = smg::test::random_scene(6, 6, 3, rng);
   // Node idx[0] coincides with node 0 at frames 1 and 4.
   const Index j = s.idx[0];
@@ -156,8 +149,7 @@ TEST_CASE("zero-length edges: the length term's derivative at 0 is 0; central FD
 }
 
 TEST_CASE("isolated nodes and empty rows: pinned confidence, zero energy terms") {
-  Rng rng(805);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 805);
   Scene<double> s = smg::test::random_scene(5, 8, 3, rng);
   for (Index k = 0; k < s.K; ++k) {  // node 3 has no neighbours
     s.idx[3 * s.K + k] = -1;
@@ -189,8 +181,7 @@ TEST_CASE("isolated nodes and empty rows: pinned confidence, zero energy terms")
 }
 
 TEST_CASE("T = 1 and T = 2: velocities by the pinned time rule") {
-  Rng rng(806);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 806);
   const Scene<double> one = smg::test::random_scene(1, 10, 4, rng);
   const All a = evaluate(one);
   CHECK(all_finite(a));
@@ -206,8 +197,7 @@ TEST_CASE("T = 1 and T = 2: velocities by the pinned time rule") {
 }
 
 TEST_CASE("huge and tiny coordinates: energies scale as s^2, gradients as s, float included") {
-  Rng rng(807);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 807);
   const Scene<double> s = smg::test::random_scene(6, 30, 6, rng, true);
   smg::LrmOptions lo;
   lo.huber_delta = 1e9;  // quadratic zone at every scale (δ_H is a length per frame)

@@ -52,8 +52,7 @@ smg::test::Trajectories<S> scaled(const smg::test::Trajectories<double>& tr, dou
 }  // namespace
 
 TEST_CASE("graph hard cases: huge and tiny coordinates") {
-  smg::test::Rng rng(61);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 61);
   const auto base = smg::test::random_trajectories<double>(rng, 20, 80, 0.7, 1.0, 0.05);
   smg::KnnOptions o;
   o.k = 6;
@@ -87,8 +86,7 @@ TEST_CASE("graph hard cases: huge and tiny coordinates") {
 }
 
 TEST_CASE("graph hard cases: identical trajectories, sparse visibility, min_covisible above T") {
-  smg::test::Rng rng(62);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 62);
   // 40 copies of one trajectory: every distance is 0, rows are the smallest other indices.
   auto one = smg::test::random_trajectories<double>(rng, 10, 1, 1.0);
   smg::test::Trajectories<double> same;
@@ -134,8 +132,7 @@ TEST_CASE("graph hard cases: identical trajectories, sparse visibility, min_covi
 }
 
 TEST_CASE("graph hard cases: fast movers under every segment length") {
-  smg::test::Rng rng(63);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 63);
   // Steps as large as the scene: boxes of long segments cover everything; still exact.
   const auto tr = smg::test::random_trajectories<double>(rng, 33, 120, 0.8, 1.0, 1.0);
   for (smg::Aggregation a : {smg::Aggregation::paper, smg::Aggregation::robust_max})

@@ -8,11 +8,9 @@
 #include <vector>
 
 #include "skin/skin_test_support.hpp"
+#include "support/prelude.hpp"
 
-using smg::Index;
-using smg::Quaternion;
 using smg::SkinMethod;
-using smg::Vector3;
 using smg::test::Drivers;
 
 namespace {
@@ -35,8 +33,7 @@ Drivers pair(double angle, const Vector3<double>& axis, double w, bool negate0, 
 }  // namespace
 
 TEST_CASE("blends of rotations 179.9 degrees apart stay finite and continuous") {
-  smg::test::Rng rng(531);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 531);
   const Vector3<double> p(0.1, 0.4, -0.2);
   const Quaternion<double> qp = rng.quaternion();
   for (double degrees : {179.9, 180.0, 180.1}) {
@@ -106,8 +103,7 @@ TEST_CASE("pivot switch at equal weights is continuous; exactly 180 degrees pick
 }
 
 TEST_CASE("the blend's real part never vanishes: |b_r| >= max weight (sign alignment)") {
-  smg::test::Rng rng(532);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 532);
   for (int trial = 0; trial < 2000; ++trial) {
     const int D = rng.integer(1, 17);
     Drivers d = smg::test::random_drivers(rng, D);
@@ -125,8 +121,7 @@ TEST_CASE("the blend's real part never vanishes: |b_r| >= max weight (sign align
 }
 
 TEST_CASE("a node without neighbours drives its points alone; zero-weight drivers add nothing") {
-  smg::test::Rng rng(533);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 533);
   smg::test::Scene s = smg::test::random_scene(rng, 2, 6, 3, 12);
   for (auto& v : s.graph_idx) v = -1;  // every node isolated
   for (auto& v : s.graph_w) v = 0;
@@ -159,8 +154,7 @@ TEST_CASE("a node without neighbours drives its points alone; zero-weight driver
 }
 
 TEST_CASE("huge and tiny coordinates: relative accuracy and translation covariance") {
-  smg::test::Rng rng(534);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 534);
   for (double scale : {1e-6, 1.0, 1e6}) {
     CAPTURE(scale);
     for (int trial = 0; trial < 20; ++trial) {
@@ -206,8 +200,7 @@ TEST_CASE("huge and tiny coordinates: relative accuracy and translation covarian
 }
 
 TEST_CASE("far points: weights underflow without NaN; the blend stays defined") {
-  smg::test::Rng rng(535);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 535);
   smg::test::Scene s = smg::test::random_scene(rng, 2, 8, 3, 20);
   for (auto& x : s.points) x += 1e4;  // thousands of sigmas away from every node
   const Index D = 4;
@@ -243,8 +236,7 @@ TEST_CASE("far points: weights underflow without NaN; the blend stays defined") 
 }
 
 TEST_CASE("NaN and Inf inputs are rejected by validation, naming the argument") {
-  smg::test::Rng rng(536);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 536);
   smg::test::Scene s = smg::test::random_scene(rng, 2, 5, 2, 4);
   const Index D = 3;
   std::vector<std::int32_t> drivers(s.P * D);

@@ -7,16 +7,10 @@
 
 #include "smg/core/dual_quaternion.hpp"
 #include "smg/core/so3.hpp"
-#include "support/finite_diff.hpp"
-#include "support/random.hpp"
-
-using smg::Matrix3;
-using smg::Quaternion;
-using smg::Vector3;
+#include "support/prelude.hpp"
 
 TEST_CASE("near-pi rotations: Log is accurate and the inverse right Jacobian stays finite") {
-  smg::test::Rng rng(41);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 41);
   for (double eps : {1e-3, 1e-6, 1e-9, 1e-12, 0.0}) {
     CAPTURE(eps);
     const Vector3<double> axis = rng.unit3();
@@ -32,8 +26,7 @@ TEST_CASE("near-pi rotations: Log is accurate and the inverse right Jacobian sta
 }
 
 TEST_CASE("antipodal quaternions: q and -q are the same rotation everywhere") {
-  smg::test::Rng rng(42);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 42);
   for (int k = 0; k < 50; ++k) {
     const Quaternion<double> q = rng.quaternion();
     const Quaternion<double> mq(-q.coeffs());
@@ -74,8 +67,7 @@ TEST_CASE("angles beyond pi: Exp is 2pi-periodic up to sign and Log wraps into [
 }
 
 TEST_CASE("huge and tiny translations in dual quaternions") {
-  smg::test::Rng rng(43);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 43);
   for (double scale : {1e-9, 1.0, 1e6, 1e12}) {
     CAPTURE(scale);
     const Quaternion<double> q = rng.quaternion();

@@ -43,3 +43,8 @@ struct Rng {
 };
 
 }  // namespace smg::test
+
+// Declares `Rng name(seed)` and CAPTUREs its seed (doctest) for the rest of the scope.
+#define SMG_TEST_RNG(name, seed_value) \
+  ::smg::test::Rng name(seed_value);   \
+  CAPTURE(name.seed)

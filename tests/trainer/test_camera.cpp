@@ -45,8 +45,7 @@ TEST_CASE("pixel centres are at +0.5: the centre ray of pixel (i, j) goes throug
 }
 
 TEST_CASE("project/unproject and the pixel ray round-trip for random cameras and points") {
-  smg::test::Rng rng(71);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 71);
   for (int k = 0; k < 200; ++k) {
     const Vector3d eye = rng.vec3(3.0), target = rng.vec3(0.5);
     const Camera cam = trainer::look_at(eye, target, Vector3d::UnitZ(), 160, 120, rng.uniform(0.4, 1.5));

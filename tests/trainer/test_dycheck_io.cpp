@@ -8,13 +8,16 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <functional>
+#include <initializer_list>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "npy.hpp"
+#include "support/errors.hpp"
+#include "support/files.hpp"
 #include "trainer/dycheck.hpp"
 #include "trainer/file_formats.hpp"
 #include "trainer/image_io.hpp"
@@ -22,6 +25,8 @@
 using trainer::DataError;
 using trainer::DycheckScene;
 namespace fs = std::filesystem;
+using smg::test::slurp;
+using smg::test::write_bytes;
 
 namespace {
 
@@ -30,28 +35,20 @@ fs::path temp_dir(const std::string& name) {
   fs::remove_all(p);
   return p;
 }
-std::string read_text(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(f), {});
-}
-void write_text(const fs::path& p, const std::string& s) {
-  std::ofstream f(p, std::ios::binary | std::ios::trunc);
-  f.write(s.data(), static_cast<std::streamsize>(s.size()));
-}
 // Replaces the first occurrence of `from` in a file.
 void replace_in(const fs::path& p, const std::string& from, const std::string& by) {
-  std::string text = read_text(p);
+  std::string text = slurp(p);
   const auto at = text.find(from);
   REQUIRE(at != std::string::npos);
-  write_text(p, text.replace(at, from.size(), by));
+  write_bytes(p, text.replace(at, from.size(), by));
 }
 // Replaces the text after `prefix` up to the next ',' (a number in a camera file).
 void replace_value(const fs::path& p, const std::string& prefix, const std::string& by) {
-  std::string text = read_text(p);
+  std::string text = slurp(p);
   const auto at = text.find(prefix);
   REQUIRE(at != std::string::npos);
   const auto begin = at + prefix.size(), end = text.find(',', begin);
-  write_text(p, text.replace(begin, end - begin, by));
+  write_bytes(p, text.replace(begin, end - begin, by));
 }
 
 trainer::Camera camera(int index, int width, int height) {
@@ -147,21 +144,60 @@ fs::path fresh(const std::string& name, const std::function<void(DycheckScene&)>
   return dir;
 }
 std::string read_error(const fs::path& dir, const trainer::DycheckReadOptions& o = {}) {
-  try {
-    trainer::read_dycheck(dir.string(), o);
-  } catch (const DataError& e) {
-    return e.what();
-  }
-  return "no error";
+  return smg::test::error_message<DataError>([&] { trainer::read_dycheck(dir.string(), o); }, "no error");
 }
 bool starts_with(const std::string& s, const std::string& prefix) { return s.compare(0, prefix.size(), prefix) == 0; }
-#define CHECK_ERROR(dir, prefix)                  \
-  do {                                            \
-    const std::string msg_ = read_error(dir);     \
-    INFO(msg_);                                   \
-    CHECK(starts_with(msg_, prefix));             \
-    CHECK(msg_.find('\n') == std::string::npos);  \
-  } while (0)
+
+// One broken scene: the synthetic scene, changed by `change` before it is written (when given),
+// written to the folder `name`, its files then broken by `breaks` (when given); reading it must
+// fail with the message `error` (Match::prefix: a one-line message that starts with `error`).
+using Dir = const fs::path&;
+enum class Match { exact, prefix };
+struct Broken {
+  std::string name;
+  std::function<void(Dir)> breaks;
+  std::string error;
+  Match match = Match::exact;
+  std::function<void(DycheckScene&)> change = {};
+};
+void check_broken(const std::vector<Broken>& cases) {
+  for (const Broken& c : cases) {
+    CAPTURE(c.name);
+    const fs::path d = c.change ? fresh(c.name, c.change) : fresh(c.name);
+    if (c.breaks) c.breaks(d);
+    const std::string msg = read_error(d);
+    if (c.match == Match::exact) {
+      CHECK(msg == c.error);
+    } else {
+      INFO(msg);
+      CHECK(starts_with(msg, c.error));
+      CHECK(msg.find('\n') == std::string::npos);
+    }
+  }
+}
+
+// The common ways to break a written scene: a file removed, the first `from` in it replaced (or
+// the number after `prefix`), its bytes replaced, an image or an array written in its place.
+std::function<void(Dir)> removed(const std::string& file) {
+  return [file](Dir d) { fs::remove(d / file); };
+}
+std::function<void(Dir)> replaced(const std::string& file, const std::string& from, const std::string& by) {
+  return [=](Dir d) { replace_in(d / file, from, by); };
+}
+std::function<void(Dir)> value_replaced(const std::string& file, const std::string& prefix, const std::string& by) {
+  return [=](Dir d) { replace_value(d / file, prefix, by); };
+}
+std::function<void(Dir)> written(const std::string& file, const std::string& bytes) {
+  return [=](Dir d) { write_bytes(d / file, bytes); };
+}
+std::function<void(Dir)> png_written(const std::string& file, const trainer::Image& image) {
+  return [=](Dir d) { trainer::write_png((d / file).string(), image); };
+}
+template <class T>
+std::function<void(Dir)> npy_written(const std::string& file, const std::vector<T>& values,
+                                     const std::vector<std::int64_t>& shape) {
+  return [=](Dir d) { npy::write((d / file).string(), values, shape); };
+}
 
 void write_tracks(const fs::path& dir, const std::vector<float>& uv, const std::vector<std::int64_t>& uv_shape,
                   const std::vector<std::uint8_t>& vis, const std::vector<std::int64_t>& vis_shape,
@@ -170,7 +206,7 @@ void write_tracks(const fs::path& dir, const std::vector<float>& uv, const std::
       {{"uv", npy::to_bytes(uv.data(), uv_shape)},
        {"visible", npy::to_bytes(reinterpret_cast<const bool*>(vis.data()), vis_shape)},
        {"query_t", npy::to_bytes(qt.data(), {static_cast<std::int64_t>(qt.size())})}});
-  write_text(dir / "priors/tracks.npz", npz);
+  write_bytes(dir / "priors/tracks.npz", npz);
 }
 
 }  // namespace
@@ -185,7 +221,7 @@ TEST_CASE("dycheck: a written scene reads back unchanged") {
   CHECK(!fs::exists(dir / "priors/masks/0_00002.png"));      // has_mask 0
   CHECK(!fs::exists(dir / "priors/features/0_00004.npy"));  // has_features 0
   // The camera file is at 1x.
-  const std::string cam = read_text(dir / "camera/0_00000.json");
+  const std::string cam = slurp(dir / "camera/0_00000.json");
   CHECK(cam.find("\"image_size\": [16, 12]") != std::string::npos);
 
   const DycheckScene b = trainer::read_dycheck(dir.string());
@@ -235,11 +271,11 @@ TEST_CASE("dycheck: a written scene reads back unchanged") {
 
 TEST_CASE("dycheck: training frames are sorted by time; extra keys and files are tolerated; float16 features") {
   const fs::path dir = fresh("tolerant");
-  write_text(dir / "splits/train.json",
+  write_bytes(dir / "splits/train.json",
              "{\"frame_names\": [\"0_00004\", \"0_00000\", \"0_00002\"], \"time_ids\": [4, 0, 2], "
              "\"camera_ids\": [0, 0, 0], \"comment\": {\"any\": [1, 2]}}");
   replace_in(dir / "camera/0_00002.json", "\"skew\"", "\"unused\": [null, true], \"skew\"");
-  write_text(dir / "notes.txt", "extra file");
+  write_bytes(dir / "notes.txt", "extra file");
   // Features of frame 0 as float16 (the values are multiples of 1/8, exact in half precision).
   const DycheckScene a = synthetic();
   std::vector<std::uint16_t> half(60);
@@ -261,7 +297,7 @@ TEST_CASE("dycheck: training frames are sorted by time; extra keys and files are
   std::string f16 = f32.substr(0, f32.size() - 240);
   f16.replace(f16.find("<f4"), 3, "<f2");
   f16.append(reinterpret_cast<const char*>(half.data()), 120);
-  write_text(dir / "priors/features/0_00000.npy", f16);
+  write_bytes(dir / "priors/features/0_00000.npy", f16);
 
   const DycheckScene b = trainer::read_dycheck(dir.string());
   REQUIRE(b.frames() == 3);
@@ -272,66 +308,30 @@ TEST_CASE("dycheck: training frames are sorted by time; extra keys and files are
 }
 
 TEST_CASE("dycheck: broken camera files name the camera file") {
-  {
-    const fs::path d = fresh("cam_missing");
-    fs::remove(d / "camera/0_00002.json");
-    CHECK(read_error(d) == "camera/0_00002.json: file is missing");
-  }
-  {
-    const fs::path d = fresh("cam_key");
-    replace_in(d / "camera/0_00002.json", "\"focal_length\"", "\"focal\"");
-    CHECK(read_error(d) == "camera/0_00002.json: missing key 'focal_length'");
-  }
-  {
-    const fs::path d = fresh("cam_nan");
-    replace_value(d / "camera/0_00004.json", "\"focal_length\": ", "NaN");
-    CHECK(read_error(d) == "camera/0_00004.json: focal_length is NaN");
-  }
-  {
-    const fs::path d = fresh("cam_position_inf");
-    replace_value(d / "camera/0_00000.json", "\"position\": [", "-Infinity");
-    CHECK(read_error(d) == "camera/0_00000.json: position[0] is infinite");
-  }
-  {
-    const fs::path d = fresh("cam_distortion");
-    replace_in(d / "camera/0_00000.json", "\"radial_distortion\": [0, ", "\"radial_distortion\": [0.01, ");
-    CHECK(read_error(d) ==
-          "camera/0_00000.json: non-zero radial_distortion (distortion is not supported; undistort the images)");
-  }
-  {
-    const fs::path d = fresh("cam_tangential");
-    replace_in(d / "camera/0_00000.json", "\"tangential_distortion\": [0, 0]", "\"tangential_distortion\": [0, 1e-4]");
-    CHECK_ERROR(d, "camera/0_00000.json: non-zero tangential_distortion");
-  }
-  {
-    const fs::path d = fresh("cam_no_distortion_keys");  // absent distortion keys are zero
-    replace_in(d / "camera/0_00000.json", "\"tangential_distortion\": [0, 0],", "");
-    CHECK(read_error(d) == "no error");
-  }
-  {
-    const fs::path d = fresh("cam_rotation", [](DycheckScene& s) { s.train_cameras[1].world_to_camera.topLeftCorner<3, 3>() *= 1.01; });
-    CHECK_ERROR(d, "camera/0_00002.json: orientation is not a rotation");
-  }
-  {
-    // A reflection is orthogonal but not a rotation.
-    const fs::path d = fresh("cam_reflection", [](DycheckScene& s) { s.val_cameras[0].world_to_camera.row(0) *= -1; });
-    CHECK_ERROR(d, "camera/1_00001.json: orientation is not a rotation");
-  }
-  {
-    const fs::path d = fresh("cam_syntax");
-    write_text(d / "camera/0_00000.json", "{\"orientation\": [[1, 0, 0], [0, 1, 0], [0, 0, 1],}");
-    CHECK(read_error(d) == "camera/0_00000.json: line 1, column 50: unexpected character '}'");
-  }
-  {
-    const fs::path d = fresh("cam_skew");
-    replace_in(d / "camera/0_00000.json", "\"skew\": 0.0", "\"skew\": 0.5");
-    CHECK_ERROR(d, "camera/0_00000.json: skew is 0.5");
-  }
-  {
-    const fs::path d = fresh("cam_size");  // another size than the other training frames
-    replace_in(d / "camera/0_00004.json", "\"image_size\": [16, 12]", "\"image_size\": [18, 12]");
-    CHECK_ERROR(d, "camera/0_00004.json: image size 9x6 at 2x differs");
-  }
+  const std::string c0 = "camera/0_00000.json", c2 = "camera/0_00002.json", c4 = "camera/0_00004.json";
+  check_broken({
+      {"cam_missing", removed(c2), "camera/0_00002.json: file is missing"},
+      {"cam_key", replaced(c2, "\"focal_length\"", "\"focal\""), "camera/0_00002.json: missing key 'focal_length'"},
+      {"cam_nan", value_replaced(c4, "\"focal_length\": ", "NaN"), "camera/0_00004.json: focal_length is NaN"},
+      {"cam_position_inf", value_replaced(c0, "\"position\": [", "-Infinity"), "camera/0_00000.json: position[0] is infinite"},
+      {"cam_distortion", replaced(c0, "\"radial_distortion\": [0, ", "\"radial_distortion\": [0.01, "),
+       "camera/0_00000.json: non-zero radial_distortion (distortion is not supported; undistort the images)"},
+      {"cam_tangential", replaced(c0, "\"tangential_distortion\": [0, 0]", "\"tangential_distortion\": [0, 1e-4]"),
+       "camera/0_00000.json: non-zero tangential_distortion", Match::prefix},
+      // Absent distortion keys are zero.
+      {"cam_no_distortion_keys", replaced(c0, "\"tangential_distortion\": [0, 0],", ""), "no error"},
+      {"cam_rotation", {}, "camera/0_00002.json: orientation is not a rotation", Match::prefix,
+       [](DycheckScene& s) { s.train_cameras[1].world_to_camera.topLeftCorner<3, 3>() *= 1.01; }},
+      // A reflection is orthogonal but not a rotation.
+      {"cam_reflection", {}, "camera/1_00001.json: orientation is not a rotation", Match::prefix,
+       [](DycheckScene& s) { s.val_cameras[0].world_to_camera.row(0) *= -1; }},
+      {"cam_syntax", written(c0, "{\"orientation\": [[1, 0, 0], [0, 1, 0], [0, 0, 1],}"),
+       "camera/0_00000.json: line 1, column 50: unexpected character '}'"},
+      {"cam_skew", replaced(c0, "\"skew\": 0.0", "\"skew\": 0.5"), "camera/0_00000.json: skew is 0.5", Match::prefix},
+      // Another size than the other training frames.
+      {"cam_size", replaced(c4, "\"image_size\": [16, 12]", "\"image_size\": [18, 12]"),
+       "camera/0_00004.json: image size 9x6 at 2x differs", Match::prefix},
+  });
 }
 
 TEST_CASE("dycheck: the 2x size rounds like Dycheck (Python's round, halves to even)") {
@@ -349,27 +349,49 @@ TEST_CASE("dycheck: the 2x size rounds like Dycheck (Python's round, halves to e
 }
 
 TEST_CASE("dycheck: broken images, depth, covisible and splits name their file") {
-  {
-    const fs::path d = fresh("rgb_size");
-    trainer::write_png((d / "rgb/2x/0_00002.png").string(), rgb(7, 6, 0));
-    CHECK(read_error(d) == "rgb/2x/0_00002.png: image is 7x6, camera/0_00002.json gives 8x6 at 2x");
-  }
-  {
-    const fs::path d = fresh("rgb_garbage");
-    write_text(d / "rgb/2x/0_00000.png", "this is not a PNG file at all");
-    CHECK_ERROR(d, "rgb/2x/0_00000.png: not a PNG image");
-  }
-  {
-    const fs::path d = fresh("rgb_truncated");
-    const std::string png = read_text(d / "rgb/2x/0_00000.png");
-    write_text(d / "rgb/2x/0_00000.png", png.substr(0, png.size() / 2));
-    CHECK_ERROR(d, "rgb/2x/0_00000.png: corrupt PNG");
-  }
-  {
-    const fs::path d = fresh("rgb_grey");
-    trainer::write_png((d / "rgb/2x/0_00000.png").string(), trainer::Image(8, 6, 1, 0.5f));
-    CHECK(read_error(d) == "rgb/2x/0_00000.png: expected an RGB or RGBA image, found 1 channel(s)");
-  }
+  const trainer::Image grey(8, 6, 1, 0.5f), white(8, 6, 1, 1.0f);
+  const std::vector<float> depth = synthetic().depth;
+  check_broken({
+      {"rgb_size", png_written("rgb/2x/0_00002.png", rgb(7, 6, 0)),
+       "rgb/2x/0_00002.png: image is 7x6, camera/0_00002.json gives 8x6 at 2x"},
+      {"rgb_garbage", written("rgb/2x/0_00000.png", "this is not a PNG file at all"), "rgb/2x/0_00000.png: not a PNG image",
+       Match::prefix},
+      {"rgb_truncated",
+       [](Dir d) {
+         const std::string png = slurp(d / "rgb/2x/0_00000.png");
+         write_bytes(d / "rgb/2x/0_00000.png", png.substr(0, png.size() / 2));
+       },
+       "rgb/2x/0_00000.png: corrupt PNG", Match::prefix},
+      {"rgb_grey", png_written("rgb/2x/0_00000.png", grey), "rgb/2x/0_00000.png: expected an RGB or RGBA image, found 1 channel(s)"},
+      {"depth_missing", removed("depth/2x/0_00004.npy"), "depth/2x/0_00004.npy: file is missing"},
+      {"depth_negative", {}, "depth/2x/0_00002.npy: negative depth -0.5 at pixel (3, 2)", Match::exact,
+       [](DycheckScene& s) { s.depth[48 + 8 * 2 + 3] = -0.5f; }},
+      {"depth_nan", {}, "depth/2x/0_00000.npy: depth is NaN at pixel (5, 0)", Match::exact,
+       [](DycheckScene& s) { s.depth[5] = std::numeric_limits<float>::quiet_NaN(); }},
+      {"depth_shape", npy_written("depth/2x/0_00000.npy", std::vector<float>(96, 1.0f), {6, 8, 2}),
+       "depth/2x/0_00000.npy: shape [6, 8, 2], expected [6, 8, 1] (the 2x image size)"},
+      // [H, W] is accepted.
+      {"depth_2d", npy_written("depth/2x/0_00000.npy", std::vector<float>(depth.begin(), depth.begin() + 48), {6, 8}), "no error"},
+      {"depth_int", npy_written("depth/2x/0_00000.npy", std::vector<std::int32_t>(48, 1), {6, 8, 1}),
+       "depth/2x/0_00000.npy: dtype int32, expected float32"},
+      {"depth_fortran", replaced("depth/2x/0_00002.npy", "False,", "True, "),
+       "depth/2x/0_00002.npy: Fortran-order arrays are not supported (save C-order)"},
+      {"covisible_missing", removed("covisible/2x/val/2_00003.png"), "covisible/2x/val/2_00003.png: file is missing"},
+      {"covisible_grey", png_written("covisible/2x/val/2_00003.png", grey),
+       "covisible/2x/val/2_00003.png: value 128 at pixel (0, 0) is neither 0 nor 255"},
+      {"covisible_size", png_written("covisible/2x/val/1_00001.png", white), "covisible/2x/val/1_00001.png: image is 8x6, expected 10x8"},
+      {"split_lengths", written("splits/val.json", "{\"frame_names\": [\"1_00001\"], \"time_ids\": [1, 3], \"camera_ids\": [1]}"),
+       "splits/val.json: frame_names, time_ids and camera_ids have different lengths (1, 2, 1)"},
+      {"split_missing_key", written("splits/train.json", "{\"frame_names\": [\"0_00000\"], \"time_ids\": [0]}"),
+       "splits/train.json: missing key 'camera_ids'"},
+      {"split_duplicate_time",
+       written("splits/train.json",
+               "{\"frame_names\": [\"0_00000\", \"0_00002\", \"1_00002\"], \"time_ids\": [0, 2, 2], \"camera_ids\": [0, 0, 1]}"),
+       "splits/train.json: time id 2 appears more than once"},
+      {"split_name", written("splits/train.json", "{\"frame_names\": [\"0_0000\"], \"time_ids\": [0], \"camera_ids\": [0]}"),
+       "splits/train.json: frame_names[0] is '0_0000', expected '0_00000' for camera_ids[0] = 0, time_ids[0] = 0"},
+      {"split_missing", removed("splits/train.json"), "splits/train.json: file is missing"},
+  });
   {
     // RGBA: alpha is ignored.
     const fs::path d = fresh("rgba");
@@ -383,100 +405,51 @@ TEST_CASE("dycheck: broken images, depth, covisible and splits name their file")
     trainer::write_png((d / "rgb/2x/0_00000.png").string(), im);
     CHECK(trainer::read_dycheck(d.string()).train_rgb[0].pixels == src.pixels);
   }
-  {
-    const fs::path d = fresh("depth_missing");
-    fs::remove(d / "depth/2x/0_00004.npy");
-    CHECK(read_error(d) == "depth/2x/0_00004.npy: file is missing");
-  }
-  {
-    const fs::path d = fresh("depth_negative", [](DycheckScene& s) { s.depth[48 + 8 * 2 + 3] = -0.5f; });
-    CHECK(read_error(d) == "depth/2x/0_00002.npy: negative depth -0.5 at pixel (3, 2)");
-  }
-  {
-    const fs::path d = fresh("depth_nan", [](DycheckScene& s) { s.depth[5] = std::numeric_limits<float>::quiet_NaN(); });
-    CHECK(read_error(d) == "depth/2x/0_00000.npy: depth is NaN at pixel (5, 0)");
-  }
-  {
-    const fs::path d = fresh("depth_shape");
-    const std::vector<float> z(96, 1.0f);
-    npy::write((d / "depth/2x/0_00000.npy").string(), z, {6, 8, 2});
-    CHECK(read_error(d) == "depth/2x/0_00000.npy: shape [6, 8, 2], expected [6, 8, 1] (the 2x image size)");
-  }
-  {
-    const fs::path d = fresh("depth_2d");  // [H, W] is accepted
-    const DycheckScene a = synthetic();
-    npy::write((d / "depth/2x/0_00000.npy").string(), std::vector<float>(a.depth.begin(), a.depth.begin() + 48), {6, 8});
-    CHECK(read_error(d) == "no error");
-  }
-  {
-    const fs::path d = fresh("depth_int");
-    npy::write((d / "depth/2x/0_00000.npy").string(), std::vector<std::int32_t>(48, 1), {6, 8, 1});
-    CHECK(read_error(d) == "depth/2x/0_00000.npy: dtype int32, expected float32");
-  }
-  {
-    const fs::path d = fresh("depth_fortran");
-    std::string bytes = read_text(d / "depth/2x/0_00002.npy");
-    bytes.replace(bytes.find("False,"), 6, "True, ");
-    write_text(d / "depth/2x/0_00002.npy", bytes);
-    CHECK(read_error(d) == "depth/2x/0_00002.npy: Fortran-order arrays are not supported (save C-order)");
-  }
-  {
-    const fs::path d = fresh("covisible_missing");
-    fs::remove(d / "covisible/2x/val/2_00003.png");
-    CHECK(read_error(d) == "covisible/2x/val/2_00003.png: file is missing");
-  }
-  {
-    const fs::path d = fresh("covisible_grey");
-    trainer::write_png((d / "covisible/2x/val/2_00003.png").string(), trainer::Image(8, 6, 1, 0.5f));
-    CHECK(read_error(d) == "covisible/2x/val/2_00003.png: value 128 at pixel (0, 0) is neither 0 nor 255");
-  }
-  {
-    const fs::path d = fresh("covisible_size");
-    trainer::write_png((d / "covisible/2x/val/1_00001.png").string(), trainer::Image(8, 6, 1, 1.0f));
-    CHECK(read_error(d) == "covisible/2x/val/1_00001.png: image is 8x6, expected 10x8");
-  }
-  {
-    const fs::path d = fresh("split_lengths");
-    write_text(d / "splits/val.json", "{\"frame_names\": [\"1_00001\"], \"time_ids\": [1, 3], \"camera_ids\": [1]}");
-    CHECK(read_error(d) == "splits/val.json: frame_names, time_ids and camera_ids have different lengths (1, 2, 1)");
-  }
-  {
-    const fs::path d = fresh("split_missing_key");
-    write_text(d / "splits/train.json", "{\"frame_names\": [\"0_00000\"], \"time_ids\": [0]}");
-    CHECK(read_error(d) == "splits/train.json: missing key 'camera_ids'");
-  }
-  {
-    const fs::path d = fresh("split_duplicate_time");
-    write_text(d / "splits/train.json",
-               "{\"frame_names\": [\"0_00000\", \"0_00002\", \"1_00002\"], \"time_ids\": [0, 2, 2], \"camera_ids\": [0, 0, 1]}");
-    CHECK(read_error(d) == "splits/train.json: time id 2 appears more than once");
-  }
-  {
-    const fs::path d = fresh("split_name");
-    write_text(d / "splits/train.json", "{\"frame_names\": [\"0_0000\"], \"time_ids\": [0], \"camera_ids\": [0]}");
-    CHECK(read_error(d) ==
-          "splits/train.json: frame_names[0] is '0_0000', expected '0_00000' for camera_ids[0] = 0, time_ids[0] = 0");
-  }
-  {
-    const fs::path d = fresh("split_missing");
-    fs::remove(d / "splits/train.json");
-    CHECK(read_error(d) == "splits/train.json: file is missing");
-  }
 }
 
 TEST_CASE("dycheck: broken tracks, masks and features name their file") {
   const std::vector<std::uint8_t> vis(15, 1);
   const std::vector<float> uv(30, 2.0f);
-  {
-    const fs::path d = fresh("tracks_t");
-    write_tracks(d, std::vector<float>(20, 1.0f), {5, 2, 2}, std::vector<std::uint8_t>(10, 1), {5, 2}, {0, 0, 0, 0, 0});
-    CHECK(read_error(d) == "priors/tracks.npz: uv has T = 2 frames, splits/train.json has 3 training frames");
-  }
-  {
-    const fs::path d = fresh("tracks_q");
-    write_tracks(d, uv, {5, 3, 2}, std::vector<std::uint8_t>(12, 1), {4, 3}, {0, 0, 0, 0, 0});
-    CHECK(read_error(d) == "priors/tracks.npz: visible has shape [4, 3], expected [5, 3]");
-  }
+  const std::string tracks = "priors/tracks.npz", f2 = "priors/features/0_00002.npy";
+  check_broken({
+      {"tracks_t",
+       [](Dir d) { write_tracks(d, std::vector<float>(20, 1.0f), {5, 2, 2}, std::vector<std::uint8_t>(10, 1), {5, 2}, {0, 0, 0, 0, 0}); },
+       "priors/tracks.npz: uv has T = 2 frames, splits/train.json has 3 training frames"},
+      {"tracks_q", [&](Dir d) { write_tracks(d, uv, {5, 3, 2}, std::vector<std::uint8_t>(12, 1), {4, 3}, {0, 0, 0, 0, 0}); },
+       "priors/tracks.npz: visible has shape [4, 3], expected [5, 3]"},
+      {"tracks_nan", {}, "priors/tracks.npz: uv[3][0] is NaN", Match::exact,
+       [](DycheckScene& s) { s.tracks.uv[7] = std::numeric_limits<float>::quiet_NaN(); }},
+      {"tracks_query", [&](Dir d) { write_tracks(d, uv, {5, 3, 2}, vis, {5, 3}, {0, 2, 4, 3, 0}); },
+       "priors/tracks.npz: query_t[3] = 3 is not a training time id"},
+      {"tracks_member", written(tracks, trainer::files::npz_bytes({{"uv", npy::to_bytes(uv.data(), {5, 3, 2})}})),
+       "priors/tracks.npz: missing array 'visible'"},
+      {"tracks_truncated",
+       [&](Dir d) {
+         const std::string z = slurp(d / tracks);
+         write_bytes(d / tracks, z.substr(0, z.size() - 30));
+       },
+       "priors/tracks.npz: truncated archive (no end of central directory)"},
+      {"tracks_crc",
+       [&](Dir d) {
+         std::string z = slurp(d / tracks);
+         z[30 + 6 + 130] = static_cast<char>(z[30 + 6 + 130] ^ 0x01);  // a data byte of uv.npy
+         write_bytes(d / tracks, z);
+       },
+       "priors/tracks.npz: CRC-32 mismatch in member 'uv.npy' (corrupt archive)"},
+      {"tracks_missing", removed(tracks), "priors/tracks.npz: file is missing"},
+      {"mask_values", png_written("priors/masks/0_00002.png", trainer::Image(8, 6, 1, 0.5f)),
+       "priors/masks/0_00002.png: value 128 at pixel (0, 0) is neither 0 nor 255"},
+      {"mask_size", png_written("priors/masks/0_00000.png", trainer::Image(6, 8, 1, 1.0f)),
+       "priors/masks/0_00000.png: image is 6x8, expected 8x6"},
+      {"features_c0", npy_written(f2, std::vector<float>{}, {3, 4, 0}),
+       "priors/features/0_00002.npy: C = 0 feature channels (1 .. 64 allowed)"},
+      {"features_c65", npy_written(f2, std::vector<float>(3 * 4 * 65, 0.5f), {3, 4, 65}),
+       "priors/features/0_00002.npy: C = 65 feature channels (1 .. 64 allowed)"},
+      {"features_size", npy_written(f2, std::vector<float>(2 * 4 * 5, 0.5f), {2, 4, 5}),
+       "priors/features/0_00002.npy: shape [2, 4, 5] differs from priors/features/0_00000.npy's [3, 4, 5]"},
+      {"features_nan", {}, "priors/features/0_00002.npy: non-finite feature value at flat index 10", Match::exact,
+       [](DycheckScene& s) { s.features[70] = std::numeric_limits<float>::infinity(); }},
+  });
   {
     const fs::path d = fresh("tracks_far", [](DycheckScene& s) {
       s.tracks.uv[2 * (2 * 5 + 1)] = -70.0f;  // t = 2 (time id 4), q = 1, visible
@@ -487,67 +460,6 @@ TEST_CASE("dycheck: broken tracks, masks and features name their file") {
     trainer::DycheckReadOptions wide;
     wide.track_margin_px = 100;
     CHECK(read_error(d, wide) == "no error");
-  }
-  {
-    const fs::path d = fresh("tracks_nan", [](DycheckScene& s) { s.tracks.uv[7] = std::numeric_limits<float>::quiet_NaN(); });
-    CHECK(read_error(d) == "priors/tracks.npz: uv[3][0] is NaN");
-  }
-  {
-    const fs::path d = fresh("tracks_query");
-    write_tracks(d, uv, {5, 3, 2}, vis, {5, 3}, {0, 2, 4, 3, 0});
-    CHECK(read_error(d) == "priors/tracks.npz: query_t[3] = 3 is not a training time id");
-  }
-  {
-    const fs::path d = fresh("tracks_member");
-    write_text(d / "priors/tracks.npz", trainer::files::npz_bytes({{"uv", npy::to_bytes(uv.data(), {5, 3, 2})}}));
-    CHECK(read_error(d) == "priors/tracks.npz: missing array 'visible'");
-  }
-  {
-    const fs::path d = fresh("tracks_truncated");
-    const std::string z = read_text(d / "priors/tracks.npz");
-    write_text(d / "priors/tracks.npz", z.substr(0, z.size() - 30));
-    CHECK(read_error(d) == "priors/tracks.npz: truncated archive (no end of central directory)");
-  }
-  {
-    const fs::path d = fresh("tracks_crc");
-    std::string z = read_text(d / "priors/tracks.npz");
-    z[30 + 6 + 130] = static_cast<char>(z[30 + 6 + 130] ^ 0x01);  // a data byte of uv.npy
-    write_text(d / "priors/tracks.npz", z);
-    CHECK(read_error(d) == "priors/tracks.npz: CRC-32 mismatch in member 'uv.npy' (corrupt archive)");
-  }
-  {
-    const fs::path d = fresh("tracks_missing");
-    fs::remove(d / "priors/tracks.npz");
-    CHECK(read_error(d) == "priors/tracks.npz: file is missing");
-  }
-  {
-    const fs::path d = fresh("mask_values");
-    trainer::write_png((d / "priors/masks/0_00002.png").string(), trainer::Image(8, 6, 1, 0.5f));
-    CHECK(read_error(d) == "priors/masks/0_00002.png: value 128 at pixel (0, 0) is neither 0 nor 255");
-  }
-  {
-    const fs::path d = fresh("mask_size");
-    trainer::write_png((d / "priors/masks/0_00000.png").string(), trainer::Image(6, 8, 1, 1.0f));
-    CHECK(read_error(d) == "priors/masks/0_00000.png: image is 6x8, expected 8x6");
-  }
-  {
-    const fs::path d = fresh("features_c0");
-    npy::write((d / "priors/features/0_00002.npy").string(), std::vector<float>{}, {3, 4, 0});
-    CHECK(read_error(d) == "priors/features/0_00002.npy: C = 0 feature channels (1 .. 64 allowed)");
-  }
-  {
-    const fs::path d = fresh("features_c65");
-    npy::write((d / "priors/features/0_00002.npy").string(), std::vector<float>(3 * 4 * 65, 0.5f), {3, 4, 65});
-    CHECK(read_error(d) == "priors/features/0_00002.npy: C = 65 feature channels (1 .. 64 allowed)");
-  }
-  {
-    const fs::path d = fresh("features_size");
-    npy::write((d / "priors/features/0_00002.npy").string(), std::vector<float>(2 * 4 * 5, 0.5f), {2, 4, 5});
-    CHECK(read_error(d) == "priors/features/0_00002.npy: shape [2, 4, 5] differs from priors/features/0_00000.npy's [3, 4, 5]");
-  }
-  {
-    const fs::path d = fresh("features_nan", [](DycheckScene& s) { s.features[70] = std::numeric_limits<float>::infinity(); });
-    CHECK(read_error(d) == "priors/features/0_00002.npy: non-finite feature value at flat index 10");
   }
 }
 
@@ -599,79 +511,39 @@ TEST_CASE("npz: the writer's archive is a valid ZIP (CRC-32 check value, round t
 }
 
 namespace {
-void put_le(std::string& s, std::uint64_t v, int bytes) {
-  for (int k = 0; k < bytes; ++k) s += static_cast<char>((v >> (8 * k)) & 0xFFu);
+// Appends each (value, byte count) field, little-endian.
+void put_le(std::string& s, std::initializer_list<std::pair<std::uint64_t, int>> fields) {
+  for (const auto& [v, bytes] : fields)
+    for (int k = 0; k < bytes; ++k) s += static_cast<char>((v >> (8 * k)) & 0xFFu);
 }
 // A one-member stored archive that uses every ZIP64 field: sizes and offset 0xFFFFFFFF in the
 // headers with their 64-bit values in the extra fields, a ZIP64 end of central directory record
 // and its locator, and 0xFFFF / 0xFFFFFFFF in the classic end record.
 std::string zip64_archive(const std::string& name, const std::string& data) {
   const std::uint32_t crc = trainer::files::crc32(reinterpret_cast<const unsigned char*>(data.data()), data.size());
+  const std::uint64_t size = data.size(), name_size = name.size(), ff = 0xFFFFFFFF;
+  // Local header: signature, version 4.5, flags, method (stored), time and date, CRC, the two
+  // sizes (in the extra field), name and extra lengths; then the name and the ZIP64 extra field.
   std::string z;
-  put_le(z, 0x04034b50, 4);
-  put_le(z, 45, 2);
-  put_le(z, 0, 2);
-  put_le(z, 0, 2);
-  put_le(z, 0, 4);  // time, date
-  put_le(z, crc, 4);
-  put_le(z, 0xFFFFFFFF, 4);
-  put_le(z, 0xFFFFFFFF, 4);
-  put_le(z, name.size(), 2);
-  put_le(z, 20, 2);
+  put_le(z, {{0x04034b50, 4}, {45, 2}, {0, 2}, {0, 2}, {0, 4}, {crc, 4}, {ff, 4}, {ff, 4}, {name_size, 2}, {20, 2}});
   z += name;
-  put_le(z, 0x0001, 2);
-  put_le(z, 16, 2);
-  put_le(z, data.size(), 8);
-  put_le(z, data.size(), 8);
+  put_le(z, {{0x0001, 2}, {16, 2}, {size, 8}, {size, 8}});
   z += data;
+  // Central directory entry: as the local header plus comment length, disk, attributes and the
+  // local header's offset, whose 64-bit value follows the sizes in the extra field (4 + 24 bytes).
   const std::uint64_t cd_offset = z.size();
   std::string cd;
-  put_le(cd, 0x02014b50, 4);
-  put_le(cd, 45, 2);
-  put_le(cd, 45, 2);
-  put_le(cd, 0, 2);
-  put_le(cd, 0, 2);
-  put_le(cd, 0, 4);
-  put_le(cd, crc, 4);
-  put_le(cd, 0xFFFFFFFF, 4);
-  put_le(cd, 0xFFFFFFFF, 4);
-  put_le(cd, name.size(), 2);
-  put_le(cd, 28, 2);  // extra: 4 + 24
-  put_le(cd, 0, 2);
-  put_le(cd, 0, 2);
-  put_le(cd, 0, 2);
-  put_le(cd, 0, 4);
-  put_le(cd, 0xFFFFFFFF, 4);
+  put_le(cd, {{0x02014b50, 4}, {45, 2}, {45, 2}, {0, 2}, {0, 2}, {0, 4}, {crc, 4}, {ff, 4}, {ff, 4}, {name_size, 2}, {28, 2}});
+  put_le(cd, {{0, 2}, {0, 2}, {0, 2}, {0, 4}, {ff, 4}});
   cd += name;
-  put_le(cd, 0x0001, 2);
-  put_le(cd, 24, 2);
-  put_le(cd, data.size(), 8);  // uncompressed
-  put_le(cd, data.size(), 8);  // compressed
-  put_le(cd, 0, 8);            // local header offset
+  put_le(cd, {{0x0001, 2}, {24, 2}, {size, 8}, {size, 8}, {0, 8}});
   z += cd;
+  // ZIP64 end of central directory record (44 bytes after its size field), its locator, and the
+  // classic end record with every count, size and offset saturated.
   const std::uint64_t z64 = z.size();
-  put_le(z, 0x06064b50, 4);
-  put_le(z, 44, 8);
-  put_le(z, 45, 2);
-  put_le(z, 45, 2);
-  put_le(z, 0, 4);
-  put_le(z, 0, 4);
-  put_le(z, 1, 8);
-  put_le(z, 1, 8);
-  put_le(z, cd.size(), 8);
-  put_le(z, cd_offset, 8);
-  put_le(z, 0x07064b50, 4);
-  put_le(z, 0, 4);
-  put_le(z, z64, 8);
-  put_le(z, 1, 4);
-  put_le(z, 0x06054b50, 4);
-  put_le(z, 0, 2);
-  put_le(z, 0, 2);
-  put_le(z, 0xFFFF, 2);
-  put_le(z, 0xFFFF, 2);
-  put_le(z, 0xFFFFFFFF, 4);
-  put_le(z, 0xFFFFFFFF, 4);
-  put_le(z, 0, 2);
+  put_le(z, {{0x06064b50, 4}, {44, 8}, {45, 2}, {45, 2}, {0, 4}, {0, 4}, {1, 8}, {1, 8}, {cd.size(), 8}, {cd_offset, 8}});
+  put_le(z, {{0x07064b50, 4}, {0, 4}, {z64, 8}, {1, 4}});
+  put_le(z, {{0x06054b50, 4}, {0, 2}, {0, 2}, {0xFFFF, 2}, {0xFFFF, 2}, {ff, 4}, {ff, 4}, {0, 2}});
   return z;
 }
 }  // namespace
@@ -716,7 +588,7 @@ TEST_CASE("npz: every truncation and every flipped byte is an error or a valid r
 TEST_CASE("dycheck: the writer names the file or folder it cannot write, and refuses an inconsistent scene") {
   const fs::path d = temp_dir("write_errors");
   fs::create_directories(d);
-  write_text(d / "rgb", "a file where the rgb folder should be");
+  write_bytes(d / "rgb", "a file where the rgb folder should be");
   try {
     trainer::write_dycheck(d.string(), synthetic());
     FAIL("no error");

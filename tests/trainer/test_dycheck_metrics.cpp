@@ -11,21 +11,20 @@
 #include <string>
 #include <vector>
 
+#include "support/errors.hpp"
 #include "support/random.hpp"
+#include "trainer/ssim_reference.hpp"
 #include "trainer/dycheck_metrics.hpp"
 #include "trainer/metrics.hpp"
 
 using trainer::Image;
+using trainer::test::gauss;
+using trainer::test::plain_ssim;
+using trainer::test::random_image;
 
 namespace {
 
 using Mask = std::vector<std::uint8_t>;
-
-Image random_image(smg::test::Rng& rng, int w, int h, int c = 3) {
-  Image im(w, h, c);
-  for (float& v : im.pixels) v = static_cast<float>(rng.uniform(0, 1));
-  return im;
-}
 
 // pred = gt + noise, so that the SSIM is far from both 0 and 1.
 Image noisy_copy(smg::test::Rng& rng, const Image& gt, double amplitude) {
@@ -38,12 +37,6 @@ Mask random_mask(smg::test::Rng& rng, int w, int h, double p_one) {
   Mask m(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
   for (auto& v : m) v = rng.uniform(0, 1) < p_one ? 1 : 0;
   return m;
-}
-
-double gauss(int i) {
-  double sum = 0;
-  for (int k = 0; k < 11; ++k) sum += std::exp(-0.5 * ((k - 5) / 1.5) * ((k - 5) / 1.5));
-  return std::exp(-0.5 * ((i - 5) / 1.5) * ((i - 5) / 1.5)) / sum;
 }
 
 // Dycheck's compute_ssim map written per output position, with no intermediate images: the
@@ -96,35 +89,6 @@ std::vector<double> direct_map(const Image& a, const Image& b, const Mask& mask,
   return out;
 }
 
-// Plain SSIM (Wang et al. 2004) with the 2D Gaussian window f_i f_j and centred moments; the mean
-// over valid positions and channels.
-double plain_ssim(const Image& a, const Image& b) {
-  double total = 0;
-  long long n = 0;
-  for (int c = 0; c < a.channels; ++c)
-    for (int y = 0; y + 11 <= a.height; ++y)
-      for (int x = 0; x + 11 <= a.width; ++x) {
-        double mx = 0, my = 0;
-        for (int i = 0; i < 11; ++i)
-          for (int j = 0; j < 11; ++j) {
-            mx += gauss(i) * gauss(j) * a.at(x + j, y + i, c);
-            my += gauss(i) * gauss(j) * b.at(x + j, y + i, c);
-          }
-        double vx = 0, vy = 0, cxy = 0;
-        for (int i = 0; i < 11; ++i)
-          for (int j = 0; j < 11; ++j) {
-            const double w = gauss(i) * gauss(j);
-            const double dx = a.at(x + j, y + i, c) - mx, dy = b.at(x + j, y + i, c) - my;
-            vx += w * dx * dx;
-            vy += w * dy * dy;
-            cxy += w * dx * dy;
-          }
-        total += (2 * mx * my + 1e-4) * (2 * cxy + 9e-4) / ((mx * mx + my * my + 1e-4) * (vx + vy + 9e-4));
-        ++n;
-      }
-  return total / double(n);
-}
-
 double max_abs_diff(const std::vector<double>& a, const std::vector<double>& b) {
   REQUIRE(a.size() == b.size());
   double d = 0;
@@ -134,12 +98,7 @@ double max_abs_diff(const std::vector<double>& a, const std::vector<double>& b) 
 
 template <class F>
 std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const std::invalid_argument& e) {
-    return e.what();
-  }
-  return "(no std::invalid_argument)";
+  return smg::test::error_message<std::invalid_argument>(f, "(no std::invalid_argument)");
 }
 
 }  // namespace

@@ -8,50 +8,15 @@
 
 #include "support/random.hpp"
 #include "trainer/metrics.hpp"
+#include "trainer/ssim_reference.hpp"
 
 using trainer::Image;
+using trainer::test::plain_ssim;
+using trainer::test::random_image;
 
 namespace {
 
 Image constant(int w, int h, int c, float v) { return Image(w, h, c, v); }
-
-Image random_image(smg::test::Rng& rng, int w, int h, int c) {
-  Image im(w, h, c);
-  for (float& v : im.pixels) v = static_cast<float>(rng.uniform(0, 1));
-  return im;
-}
-
-// SSIM straight from Wang et al. (2004): for each valid 11x11 window position, Gaussian-weighted
-// means, variances and covariance; then the mean over positions and channels.
-double direct_ssim(const Image& a, const Image& b) {
-  double w[11][11], sum = 0;
-  for (int i = 0; i < 11; ++i)
-    for (int j = 0; j < 11; ++j) sum += w[i][j] = std::exp(-((i - 5) * (i - 5) + (j - 5) * (j - 5)) / (2 * 1.5 * 1.5));
-  double total = 0;
-  long long n = 0;
-  for (int c = 0; c < a.channels; ++c)
-    for (int y = 0; y + 11 <= a.height; ++y)
-      for (int x = 0; x + 11 <= a.width; ++x) {
-        double mx = 0, my = 0;
-        for (int i = 0; i < 11; ++i)
-          for (int j = 0; j < 11; ++j) {
-            mx += w[i][j] / sum * a.at(x + j, y + i, c);
-            my += w[i][j] / sum * b.at(x + j, y + i, c);
-          }
-        double vx = 0, vy = 0, cxy = 0;
-        for (int i = 0; i < 11; ++i)
-          for (int j = 0; j < 11; ++j) {
-            const double dx = a.at(x + j, y + i, c) - mx, dy = b.at(x + j, y + i, c) - my;
-            vx += w[i][j] / sum * dx * dx;
-            vy += w[i][j] / sum * dy * dy;
-            cxy += w[i][j] / sum * dx * dy;
-          }
-        const double C1 = 1e-4, C2 = 9e-4;
-        total += (2 * mx * my + C1) * (2 * cxy + C2) / ((mx * mx + my * my + C1) * (vx + vy + C2));
-        ++n;
-      }
-  return total / n;
-}
 
 }  // namespace
 
@@ -80,8 +45,7 @@ TEST_CASE("psnr: identical images are infinite, a uniform error of 0.1 is 20 dB,
 }
 
 TEST_CASE("ssim: identical images give 1, constant images the luminance term, symmetric") {
-  smg::test::Rng rng(2);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 2);
   const Image a = random_image(rng, 24, 20, 3);
   CHECK(trainer::ssim(a, a) == doctest::Approx(1.0).epsilon(1e-12));
   // Constant images: zero variances, so SSIM = (2 mu_x mu_y + C1) / (mu_x^2 + mu_y^2 + C1).
@@ -99,8 +63,7 @@ TEST_CASE("ssim: identical images give 1, constant images the luminance term, sy
 }
 
 TEST_CASE("ssim: the separable implementation equals the direct definition; decreases with noise") {
-  smg::test::Rng rng(9);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 9);
   Image a = random_image(rng, 30, 22, 3);
   // Smooth it a bit so that the structure term matters.
   for (int y = 0; y < a.height; ++y)
@@ -111,7 +74,7 @@ TEST_CASE("ssim: the separable implementation equals the direct definition; decr
     Image b = a;
     for (float& v : b.pixels) v = static_cast<float>(std::clamp(v + sigma * rng.normal(), 0.0, 1.0));
     const double s = trainer::ssim(a, b);
-    CHECK(s == doctest::Approx(direct_ssim(a, b)).epsilon(1e-6));
+    CHECK(s == doctest::Approx(plain_ssim(a, b)).epsilon(1e-6));
     CHECK(s < previous);
     previous = s;
   }

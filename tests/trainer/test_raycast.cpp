@@ -180,8 +180,7 @@ TEST_CASE("capsule: side, both caps, the rim, rays along the axis") {
 }
 
 TEST_CASE("every closed primitive agrees with a ray-marched signed distance (distance and normal)") {
-  smg::test::Rng rng(5);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 5);
   const Shape shapes[] = {{ShapeKind::sphere, {0.7, 0, 0}},
                           {ShapeKind::box, {0.3, 0.6, 0.45}},
                           {ShapeKind::capsule, {1.2, 0.35, 0}}};
@@ -240,8 +239,7 @@ TEST_CASE("point_visible: occlusion by another body and by the body's own near s
 TEST_CASE("the generated scene: hit points in body frames map back to the world under the motion") {
   const Dataset& d = test::small_dataset();
   const Scene& s = d.scene;
-  smg::test::Rng rng(11);
-  CAPTURE(rng.seed);
+  SMG_TEST_RNG(rng, 11);
   int checked = 0;
   for (int k = 0; k < 400; ++k) {
     const int t = rng.integer(0, s.frames() - 1);

@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <string>
 
 #include <sys/wait.h>
@@ -19,10 +18,7 @@ namespace fs = std::filesystem;
 #ifdef SMG_SCENE_PREVIEW_PATH
 namespace {
 using Run = smg::test::ProgramRun;
-Run run(const std::string& args) {
-  return smg::test::run_program(SMG_SCENE_PREVIEW_PATH, args, "smg_test_scene_preview_io");
-}
-int lines(const std::string& s) { return smg::test::count_lines(s); }
+Run run(const std::string& args) { return smg::test::run_program(SMG_SCENE_PREVIEW_PATH, args, "smg_test_scene_preview_io"); }
 }  // namespace
 
 TEST_CASE("scene_preview writes its pictures and one JSON line") {
@@ -31,7 +27,7 @@ TEST_CASE("scene_preview writes its pictures and one JSON line") {
   const Run r = run("--out " + out.string() + " --frames 4 --width 48 --height 36 --tracks 40 --show 2");
   CHECK(r.code == 0);
   CHECK(r.err.empty());
-  CHECK(lines(r.out) == 1);
+  CHECK(smg::test::count_lines(r.out) == 1);
   for (const char* key : {"\"program\":\"scene_preview\"", "\"T\":4", "\"width\":48", "\"tracks\":40",
                           "\"visible_fraction\":", "\"outlier_fraction\":", "\"seconds_total\":"})
     CHECK(r.out.find(key) != std::string::npos);
@@ -46,10 +42,8 @@ TEST_CASE("scene_preview writes its pictures and one JSON line") {
 
 TEST_CASE("scene_preview: bad flags and unwritable folders are one line on stderr and exit code 2") {
   const fs::path file = fs::temp_directory_path() / "smg_test_scene_preview_plain_file";
-  std::ofstream(file) << "x";
-  const struct {
-    std::string args, message;
-  } cases[] = {
+  smg::test::write_bytes(file, "x");
+  smg::test::check_usage_errors(run, "scene_preview", {
       {"--nope 1", "--nope: unknown flag"},
       {"--frames", "--frames: needs a value"},
       {"--frames abc", "--frames: expects an integer"},
@@ -57,16 +51,7 @@ TEST_CASE("scene_preview: bad flags and unwritable folders are one line on stder
       {"--jitter-px -1", "jitter_px"},
       {"stray", "unexpected argument 'stray'"},
       {"--out " + (file / "sub").string(), "cannot create output folder"},
-  };
-  for (const auto& c : cases) {
-    CAPTURE(c.args);
-    const Run r = run(c.args);
-    CHECK(r.code == 2);
-    CHECK(r.out.empty());
-    CHECK(lines(r.err) == 1);
-    CHECK(r.err.rfind("scene_preview: error: ", 0) == 0);
-    CHECK(r.err.find(c.message) != std::string::npos);
-  }
+  });
   if (::geteuid() != 0) {  // root can write anywhere
     const fs::path ro = fs::temp_directory_path() / "smg_test_scene_preview_readonly";
     fs::create_directories(ro);

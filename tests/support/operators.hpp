@@ -1,0 +1,102 @@
+// tests/support/operators.hpp — the regularisers as one list (Operators), for the tests that must
+// treat every operator the same way (int64 graphs, callers' executors, debug assertions): each
+// iterates over the list, so an operator added here is covered by all of them.
+#pragma once
+
+#include <cstdint>
+#include <tuple>
+
+#include "smg/energy.hpp"
+
+namespace smg::test {
+
+// What an operator may read: positions [T][N][3], rotations [T][N][4], visibility [T][N] (empty:
+// all visible), confidences [T][N] (empty: all 1) and the graph [N][K].
+template <class S, class I = std::int32_t>
+struct OperatorInputs {
+  PositionsView<const S> positions;
+  QuaternionsView<const S> rotations;
+  VisibilityView<const std::uint8_t> visibility;
+  FrameScalarsView<const S> confidence;
+  NeighborsView<S, I> graph;
+};
+
+// The inputs of a test scene (tests/energy/scene.hpp) with graph g and confidences c.
+template <class Scene, class S, class I>
+OperatorInputs<S, I> inputs_of(const Scene& s, const NeighborsView<S, I>& g, FrameScalarsView<const S> c) {
+  return {s.positions(), s.rotations(), s.visibility(), c, g};
+}
+
+// What an operator may write (any view may be empty): position gradients or updates [T][N][3]
+// and rotation gradients or updates in the right tangent [T][N][3], added to; confidences [T][N],
+// overwritten.
+template <class S>
+struct OperatorOutputs {
+  PositionsView<S> positions;
+  TangentsView<S> rotations;
+  FrameScalarsView<S> confidence;
+};
+
+// Each operator: `name` (also the smg_assert_probe mode that misuses it) and
+// run(in, out, workspace, parallel), with default options; returns the energy (0 for the
+// confidences, which have none). Preconditions: the operator's validate_* with the same views.
+struct Confidences {
+  static constexpr const char* name = "confidences";
+  template <class S, class I>
+  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+                    ParallelOptions parallel = {}) {
+    node_confidences<S>(in.positions, in.visibility, in.graph, ConfidenceOptions{}, out.confidence, {}, {}, workspace,
+                        parallel);
+    return 0;
+  }
+};
+
+struct Carap {
+  static constexpr const char* name = "carap";
+  template <class S, class I>
+  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+                    ParallelOptions parallel = {}) {
+    return carap<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions, out.rotations,
+                    workspace, parallel);
+  }
+};
+
+struct Arap {
+  static constexpr const char* name = "arap";
+  template <class S, class I>
+  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+                    ParallelOptions parallel = {}) {
+    return arap<S>(in.positions, in.rotations, in.graph, ArapOptions{}, out.positions, out.rotations, workspace, parallel);
+  }
+};
+
+// The directed reading of C-ARAP (its updates go to the gradient views); it takes no workspace.
+struct CarapDirected {
+  static constexpr const char* name = "carap_directed";
+  template <class S, class I>
+  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* = nullptr,
+                    ParallelOptions parallel = {}) {
+    return carap_directed<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
+                             out.rotations, parallel);
+  }
+};
+
+struct Lrm {
+  static constexpr const char* name = "lrm";
+  template <class S, class I>
+  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+                    ParallelOptions parallel = {}) {
+    return lrm<S>(in.positions, in.confidence, in.graph, LrmOptions{}, out.positions, workspace, parallel);
+  }
+};
+
+// The list. A new regulariser gets a struct like the ones above and an entry here.
+using Operators = std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm>;
+
+// Calls f(Op{}) for each operator of the list, in its order.
+template <class F>
+void for_each_operator(F&& f) {
+  std::apply([&](auto... op) { (f(op), ...); }, Operators{});
+}
+
+}  // namespace smg::test
