@@ -22,7 +22,9 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 
+#include "smg/core/scalar.hpp"
 #include "smg/core/types.hpp"
 #include "smg/splat/settings.hpp"
 #include "smg/splat/workspace.hpp"
@@ -54,20 +56,12 @@ constexpr int grad_stride(Index channels) {
 // ternary; a loop with such a branch is not vectorised. So every per-pixel choice below is
 // a bitwise select between values computed unconditionally, and exp's clamp works on bits.
 template <class S>
-struct Bits;
-template <>
-struct Bits<float> {
-  using U = std::uint32_t;
-};
-template <>
-struct Bits<double> {
-  using U = std::uint64_t;
-};
+using Bits = typename smg::detail::FloatBits<S>::Unsigned;  // S's bits as an unsigned integer
 
 // c ? a : b, bitwise.
 template <class S>
 inline S select(bool c, S a, S b) {
-  using U = typename Bits<S>::U;
+  using U = Bits<S>;
   U ua, ub;
   std::memcpy(&ua, &a, sizeof(S));
   std::memcpy(&ub, &b, sizeof(S));
@@ -80,8 +74,8 @@ inline S select(bool c, S a, S b) {
 
 // x with |x| limited to lim_bits (the bit pattern of a positive limit), sign kept.
 template <class S>
-inline S clamp_magnitude(S x, typename Bits<S>::U lim_bits) {
-  using U = typename Bits<S>::U;
+inline S clamp_magnitude(S x, Bits<S> lim_bits) {
+  using U = Bits<S>;
   constexpr U sign_bit = U(1) << (8 * sizeof(S) - 1);
   U u;
   std::memcpy(&u, &x, sizeof(S));
@@ -89,6 +83,23 @@ inline S clamp_magnitude(S x, typename Bits<S>::U lim_bits) {
   u = (u & sign_bit) | (mag < lim_bits ? mag : lim_bits);
   std::memcpy(&x, &u, sizeof(S));
   return x;
+}
+
+// 2^n from tn = n + magic, n an integer rounded by the 1.5·2^p trick (p the mantissa bits): the
+// low bits of tn − magic are n, so the exponent field n + bias is (tn − magic) + bias in integer
+// arithmetic, shifted into place. Precondition: n + bias in [1, 2·bias].
+template <class S>
+SMG_FORCE_INLINE S exp2_rounded(S tn, S magic) {
+  using U = Bits<S>;
+  constexpr int mantissa = std::numeric_limits<S>::digits - 1;        // 23 or 52
+  constexpr U bias = U(std::numeric_limits<S>::max_exponent - 1);     // 127 or 1023
+  U tb, mb;
+  std::memcpy(&tb, &tn, sizeof(S));
+  std::memcpy(&mb, &magic, sizeof(S));
+  const U bits = (tb - mb + bias) << mantissa;
+  S scale;
+  std::memcpy(&scale, &bits, sizeof(S));
+  return scale;
 }
 
 // exp(-x) for the alpha of (R10), vectorisable (a libm call is not): |x| clamped to 87
@@ -111,13 +122,7 @@ inline float exp_neg(float x) {
   p = p * r + 1.6666665459e-1f;
   p = p * r + 5.0000001201e-1f;
   const float er = p * z + r + 1.0f;
-  std::uint32_t tb, mb;
-  std::memcpy(&tb, &tn, 4);
-  std::memcpy(&mb, &magic, 4);
-  const std::uint32_t bits = (tb - mb + 127u) << 23;  // n + 127 in [1, 253]
-  float scale;
-  std::memcpy(&scale, &bits, 4);
-  return er * scale;
+  return er * exp2_rounded(tn, magic);  // n + 127 in [1, 253]
 }
 inline double exp_neg(double x) {
   x = clamp_magnitude(x, 0x4085e00000000000ull);  // 700.0
@@ -140,13 +145,7 @@ inline double exp_neg(double x) {
   p = p * r + 0.5;
   p = p * r + 1.0;
   p = p * r + 1.0;
-  std::uint64_t tb, mb;
-  std::memcpy(&tb, &tn, 8);
-  std::memcpy(&mb, &magic, 8);
-  const std::uint64_t bits = (tb - mb + 1023u) << 52;  // n + 1023 in [13, 2033]
-  double scale;
-  std::memcpy(&scale, &bits, 8);
-  return p * scale;
+  return p * exp2_rounded(tn, magic);  // n + 1023 in [13, 2033]
 }
 
 // sigma of (R9) with the per-row terms c dy², b dy hoisted; forward and backward call this one
