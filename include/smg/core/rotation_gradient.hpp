@@ -63,6 +63,8 @@ void for_each_rotation(const Q& quaternions, const GT& g_tangent, const GQ& g_qu
   const Index T = quaternions.frames(), N = quaternions.nodes();
   SMG_ASSERT(g_tangent.frames() == T && g_tangent.nodes() == N, "g_tangent shape");
   SMG_ASSERT(g_quaternions.frames() == T && g_quaternions.nodes() == N, "g_quaternions shape");
+  (void)g_tangent;  // read by the assertions only (compiled out in Release)
+  (void)g_quaternions;
   if (T * N == 0) return;
   parallel_for(
       T * N,
@@ -80,11 +82,9 @@ void quaternion_gradient_from_tangent(QuaternionsView<const S> quaternions,
                                       TangentsView<const S> g_tangent,
                                       QuaternionsView<S> g_quaternions,
                                       ParallelOptions parallel = {}) {
-  const S* q = quaternions.data();
-  const S* g = g_tangent.data();
-  S* out = g_quaternions.data();
   detail::for_each_rotation(quaternions, g_tangent, g_quaternions, parallel, [&](Index k) {
-    add_quaternion_gradient_from_tangent(q + 4 * k, g + 3 * k, out + 4 * k);
+    add_quaternion_gradient_from_tangent(quaternions.data() + 4 * k, g_tangent.data() + 3 * k,
+                                         g_quaternions.data() + 4 * k);
   });
 }
 
@@ -94,11 +94,9 @@ template <class S>
 void tangent_gradient_from_quaternion(QuaternionsView<const S> quaternions,
                                       QuaternionsView<const S> g_quaternions,
                                       TangentsView<S> g_tangent, ParallelOptions parallel = {}) {
-  const S* q = quaternions.data();
-  const S* g = g_quaternions.data();
-  S* out = g_tangent.data();
   detail::for_each_rotation(quaternions, g_tangent, g_quaternions, parallel, [&](Index k) {
-    add_tangent_gradient_from_quaternion(q + 4 * k, g + 4 * k, out + 3 * k);
+    add_tangent_gradient_from_quaternion(quaternions.data() + 4 * k, g_quaternions.data() + 4 * k,
+                                         g_tangent.data() + 3 * k);
   });
 }
 

@@ -179,8 +179,8 @@ struct TrajectoryIndex {
   int segment_frames = 0;
   std::vector<SegmentTree<S>> trees;
 
-  void build(PositionsView<const S> x, VisibilityView<const std::uint8_t> v, int requested_frames,
-             ParallelOptions parallel) {
+  TrajectoryIndex(PositionsView<const S> x, VisibilityView<const std::uint8_t> v,
+                  int requested_frames, ParallelOptions parallel) {
     store.build(x, v, parallel);
     segment_frames = requested_frames > 0
                          ? std::min<int>(requested_frames, static_cast<int>(x.frames()))
@@ -208,13 +208,12 @@ KnnStats trajectory_knn(detail::NonDeducedT<PositionsView<const S>> x,
   const Index N = x.nodes(), T = x.frames();
   stats.nodes = N;
   stats.frames = T;
-  detail::TrajectoryIndex<S> index;
-  index.build(x, v, o.segment_frames, o.parallel);
+  const detail::TrajectoryIndex<S> index(x, v, o.segment_frames, o.parallel);
+  stats.scratch_bytes = index.bytes();
+  stats.segment_frames = index.segment_frames;
+  stats.segments = static_cast<Index>(index.trees.size());
   const detail::TrajectoryStore<S>& st = index.store;
   const auto& trees = index.trees;
-  stats.segment_frames = index.segment_frames;
-  stats.segments = static_cast<Index>(trees.size());
-  stats.scratch_bytes = index.bytes();
 
   const int k = o.k;
   const int seeds = std::max(1, o.seed_segments);

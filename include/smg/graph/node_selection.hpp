@@ -102,12 +102,11 @@ NodeSelectionStats<S> select_nodes(detail::NonDeducedT<PositionsView<const S>> x
   NodeSelectionStats<S> stats;
   const Index N = x.nodes();
   stats.trajectories = N;
-  detail::TrajectoryIndex<S> index;
-  index.build(x, v, o.segment_frames, o.parallel);
+  const detail::TrajectoryIndex<S> index(x, v, o.segment_frames, o.parallel);
+  stats.scratch_bytes = index.bytes();
+  stats.segment_frames = index.segment_frames;
   const detail::TrajectoryStore<S>& st = index.store;
   const auto& trees = index.trees;
-  stats.segment_frames = index.segment_frames;
-  stats.scratch_bytes = index.bytes();
 
   const int need = std::max(1, o.min_visible);
   std::vector<std::int32_t> pref;

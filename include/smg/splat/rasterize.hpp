@@ -204,6 +204,15 @@ inline void lane_groups(const S* rec, S dy, int x0, int* g0, int* g1) {
   *g1 = (l1 + kGroup - 1) / kGroup;
 }
 
+// Row r of a Gaussian's footprint in the tile at (x0, y0): returns dy = mean_y − (y0 + r + 0.5),
+// the vertical offset of the row's pixel centres in (R9), and the lane groups [g0, g1) it covers.
+template <class S, int W>
+SMG_FORCE_INLINE S footprint_row(const S* rec, S my, int y0, int r, int x0, int* g0, int* g1) {
+  const S dy = my - (S(y0 + r) + S(0.5));
+  lane_groups<S, W>(rec, dy, x0, g0, g1);
+  return dy;
+}
+
 // Scratch of one tile (per parallel chunk), in S values.
 template <int W>
 constexpr Index tile_scratch_size(Index channels) {
@@ -292,6 +301,7 @@ void forward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index 
       for (int p = 0; p < WW; ++p) any = any || T[p] > S(0);
       if (!any) break;
     }
+    const S irel = S(i - begin);
     if (i + kPrefetchAhead < end)
       prefetch(ws.proj.data() + Index(ws.tile_gauss[i + kPrefetchAhead]) * stride);
     const S* rec = ws.proj.data() + Index(ws.tile_gauss[i]) * stride;
@@ -300,11 +310,9 @@ void forward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index 
     const S* col = rec + kRecordFields;
     int r0, r1;
     row_range(my, rec[kExtY], y0, wy, &r0, &r1);
-    const S irel = S(i - begin);
     for (int r = r0; r <= r1; ++r) {
-      const S dy = my - (S(y0 + r) + S(0.5));
       int g0, g1;
-      lane_groups<S, W>(rec, dy, x0, &g0, &g1);
+      const S dy = footprint_row<S, W>(rec, my, y0, r, x0, &g0, &g1);
       const S cdy2 = c * dy * dy, bdy = b * dy;
       const int row = r * W;
       for (int gq = g0; gq < g1; ++gq) {
@@ -499,6 +507,7 @@ void backward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index
   const int nfields = kGradFields + nc;
 
   for (std::int64_t i = begin; i <= max_last; ++i) {
+    const S irel = S(i - begin);
     if (i + kPrefetchAhead <= max_last)
       prefetch(ws.proj.data() + Index(ws.tile_gauss[i + kPrefetchAhead]) * stride);
     const S* rec = ws.proj.data() + Index(ws.tile_gauss[i]) * stride;
@@ -508,11 +517,9 @@ void backward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index
     for (int k = 0; k < nfields * kGroup; ++k) lg[k] = S(0);
     int r0, r1;
     row_range(my, rec[kExtY], y0, wy, &r0, &r1);
-    const S irel = S(i - begin);
     for (int r = r0; r <= r1; ++r) {
-      const S dy = my - (S(y0 + r) + S(0.5));
       int g0, g1;
-      lane_groups<S, W>(rec, dy, x0, &g0, &g1);
+      const S dy = footprint_row<S, W>(rec, my, y0, r, x0, &g0, &g1);
       if (g0 >= g1) continue;
       const S cdy2 = c * dy * dy, bdy = b * dy;
       const int row = r * W;
