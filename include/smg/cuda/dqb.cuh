@@ -22,7 +22,6 @@
 #include <string>
 #include <vector>
 
-#include "smg/core/quaternion.hpp"
 #include "smg/core/rotation_gradient.hpp"
 #include "smg/skin/blend.hpp"
 #include "smg/skin/blend_point.hpp"

@@ -7,9 +7,6 @@
 
 #include <type_traits>
 
-#include <Eigen/Core>
-
-#include "smg/core/scalar.hpp"
 #include "smg/core/types.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"

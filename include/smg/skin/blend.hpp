@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "smg/core/parallel.hpp"
+#include "smg/core/quaternion.hpp"
 #include "smg/core/rotation_gradient.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/skin/blend_point.hpp"
