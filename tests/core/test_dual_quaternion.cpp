@@ -3,6 +3,7 @@
 #include <doctest/doctest.h>
 
 #include "smg/core/dual_quaternion.hpp"
+#include "smg/core/so3.hpp"
 #include "support/autodiff.hpp"
 #include "support/prelude.hpp"
 

@@ -10,6 +10,7 @@
 
 #include "graph/synthetic_scene.hpp"
 #include "smg/graph/descriptor.hpp"
+#include "smg/graph/neighbors.hpp"
 #include "smg/graph/semantic_graph.hpp"
 #include "support/random.hpp"
 

@@ -12,7 +12,6 @@
 #include <cmath>
 
 #include "smg/core/quaternion.hpp"
-#include "smg/core/so3.hpp"
 #include "smg/core/types.hpp"
 
 namespace smg {

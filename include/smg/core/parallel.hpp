@@ -324,4 +324,40 @@ T parallel_reduce(Index n, const T& identity, Map&& map, Combine&& combine,
   return result;
 }
 
+namespace detail {
+
+// Hands out scratch slots to concurrently running chunks. A chunk takes a free slot, clears
+// what it reads, and gives it back: which slot a chunk gets never affects its result, so the
+// output stays bit-identical for any thread count while scratch memory scales with the number
+// of threads, not of blocks.
+// A caller's executor may run more chunks at once than there are slots: acquire() then waits
+// for a slot (a chunk holding one always finishes without waiting, so this cannot deadlock).
+class SlotPool {
+ public:
+  explicit SlotPool(Index slots) {
+    for (Index s = slots; s-- > 0;) free_.push_back(s);
+  }
+  Index acquire() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    available_.wait(lock, [this] { return !free_.empty(); });
+    const Index s = free_.back();
+    free_.pop_back();
+    return s;
+  }
+  void release(Index s) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      free_.push_back(s);
+    }
+    available_.notify_one();
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable available_;
+  std::vector<Index> free_;
+};
+
+}  // namespace detail
+
 }  // namespace smg

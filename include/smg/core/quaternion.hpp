@@ -90,4 +90,26 @@ SMG_HOST_DEVICE inline Quaternion<S> canonical(const Quaternion<S>& q) {
   return q.w() < S(0) ? Quaternion<S>(-q.coeffs()) : q;
 }
 
+namespace detail {
+
+// Row-major 3x3 rotation matrix R of q / |q| from the 4 raw coefficients q = (w, x, y, z),
+// without a square root (the kernels of C-ARAP, CPU and CUDA, and the residual form call it).
+template <class S>
+SMG_HOST_DEVICE inline void rotation_from_wxyz(const S* q, S* R) {
+  using L = Literal<S>;
+  const S w = q[0], x = q[1], y = q[2], z = q[3];
+  const S s = L(2) / (w * w + x * x + y * y + z * z);
+  R[0] = L(1) - s * (y * y + z * z);
+  R[1] = s * (x * y - w * z);
+  R[2] = s * (x * z + w * y);
+  R[3] = s * (x * y + w * z);
+  R[4] = L(1) - s * (x * x + z * z);
+  R[5] = s * (y * z - w * x);
+  R[6] = s * (x * z - w * y);
+  R[7] = s * (y * z + w * x);
+  R[8] = L(1) - s * (x * x + y * y);
+}
+
+}  // namespace detail
+
 }  // namespace smg

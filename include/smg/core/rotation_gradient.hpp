@@ -53,6 +53,28 @@ inline void add_tangent_gradient_from_quaternion(const S* q, const S* g_q, S* g_
   g_phi[2] += L(0.5) * (-z * gw + y * gx - x * gy + w * gz);
 }
 
+namespace detail {
+// Calls convert(k) for every rotation k = t·N + i of quaternions [T][N][4], in parallel chunks
+// (each k touches only its own rows: deterministic); the two gradient arrays must be [T][N]
+// (asserted in debug builds).
+template <class Q, class GT, class GQ, class F>
+void for_each_rotation(const Q& quaternions, const GT& g_tangent, const GQ& g_quaternions,
+                       ParallelOptions parallel, F&& convert) {
+  const Index T = quaternions.frames(), N = quaternions.nodes();
+  SMG_ASSERT(g_tangent.frames() == T && g_tangent.nodes() == N, "g_tangent shape");
+  SMG_ASSERT(g_quaternions.frames() == T && g_quaternions.nodes() == N, "g_quaternions shape");
+  (void)g_tangent;  // read by the assertions only (compiled out in Release)
+  (void)g_quaternions;
+  if (T * N == 0) return;
+  parallel_for(
+      T * N,
+      [&](Index begin, Index end) {
+        for (Index k = begin; k < end; ++k) convert(k);
+      },
+      parallel);
+}
+}  // namespace detail
+
 // Batched (Q5): g_quaternions [T][N][4] += raw gradient of quaternions [T][N][4] given
 // g_tangent [T][N][3]. Shapes must agree (asserted in debug builds). Deterministic.
 template <class S>
@@ -60,20 +82,10 @@ void quaternion_gradient_from_tangent(QuaternionsView<const S> quaternions,
                                       TangentsView<const S> g_tangent,
                                       QuaternionsView<S> g_quaternions,
                                       ParallelOptions parallel = {}) {
-  const Index T = quaternions.frames(), N = quaternions.nodes();
-  SMG_ASSERT(g_tangent.frames() == T && g_tangent.nodes() == N, "g_tangent shape");
-  SMG_ASSERT(g_quaternions.frames() == T && g_quaternions.nodes() == N, "g_quaternions shape");
-  if (T * N == 0) return;
-  const S* q = quaternions.data();
-  const S* g = g_tangent.data();
-  S* out = g_quaternions.data();
-  parallel_for(
-      T * N,
-      [&](Index begin, Index end) {
-        for (Index k = begin; k < end; ++k)
-          add_quaternion_gradient_from_tangent(q + 4 * k, g + 3 * k, out + 4 * k);
-      },
-      parallel);
+  detail::for_each_rotation(quaternions, g_tangent, g_quaternions, parallel, [&](Index k) {
+    add_quaternion_gradient_from_tangent(quaternions.data() + 4 * k, g_tangent.data() + 3 * k,
+                                         g_quaternions.data() + 4 * k);
+  });
 }
 
 // Batched (Q3): g_tangent [T][N][3] += right-tangent gradient given the raw gradient
@@ -82,20 +94,10 @@ template <class S>
 void tangent_gradient_from_quaternion(QuaternionsView<const S> quaternions,
                                       QuaternionsView<const S> g_quaternions,
                                       TangentsView<S> g_tangent, ParallelOptions parallel = {}) {
-  const Index T = quaternions.frames(), N = quaternions.nodes();
-  SMG_ASSERT(g_tangent.frames() == T && g_tangent.nodes() == N, "g_tangent shape");
-  SMG_ASSERT(g_quaternions.frames() == T && g_quaternions.nodes() == N, "g_quaternions shape");
-  if (T * N == 0) return;
-  const S* q = quaternions.data();
-  const S* g = g_quaternions.data();
-  S* out = g_tangent.data();
-  parallel_for(
-      T * N,
-      [&](Index begin, Index end) {
-        for (Index k = begin; k < end; ++k)
-          add_tangent_gradient_from_quaternion(q + 4 * k, g + 4 * k, out + 3 * k);
-      },
-      parallel);
+  detail::for_each_rotation(quaternions, g_tangent, g_quaternions, parallel, [&](Index k) {
+    add_tangent_gradient_from_quaternion(quaternions.data() + 4 * k, g_quaternions.data() + 4 * k,
+                                         g_tangent.data() + 3 * k);
+  });
 }
 
 // Where an entry point adds a rotation gradient [T][N][...]: either the right tangent

@@ -1,7 +1,10 @@
-// smg/core/scalar.hpp — per-Scalar numeric constants used by the small-angle branches.
+// smg/core/scalar.hpp — per-Scalar numeric constants used by the small-angle branches, and the
+// integer types of a scalar's bits.
 #pragma once
 
 #include "smg/core/config.hpp"
+
+#include <cstdint>
 
 #include <Eigen/Core>
 
@@ -34,5 +37,22 @@ SMG_HOST_DEVICE inline typename Eigen::NumTraits<S>::Real unit_tolerance() {
   using Real = typename Eigen::NumTraits<S>::Real;
   return Real(1e3) * Eigen::NumTraits<Real>::epsilon();
 }
+
+namespace detail {
+// The integer types of S's size (32 bits for float, 64 for double), for work on a value's bits:
+// the masks of SIMD lanes (energy/lanes.hpp), the rasteriser's branch-free selects and exp.
+template <class S>
+struct FloatBits;
+template <>
+struct FloatBits<float> {
+  using Signed = std::int32_t;
+  using Unsigned = std::uint32_t;
+};
+template <>
+struct FloatBits<double> {
+  using Signed = std::int64_t;
+  using Unsigned = std::uint64_t;
+};
+}  // namespace detail
 
 }  // namespace smg

@@ -43,43 +43,43 @@ SMG_HOST_DEVICE inline Vector3<typename Derived::Scalar> vee(const Eigen::Matrix
 namespace detail {
 // The coefficients of the right Jacobian and its inverse as functions of theta^2:
 //   b = (1 - cos θ)/θ²,  c = (θ - sin θ)/θ³,  d = 1/θ² - (1 + cos θ)/(2 θ sin θ).
-// Series through θ^8 below series_threshold (no sqrt, so autodiff is finite at 0).
+// Series through θ^8 below series_threshold (no sqrt, so autodiff is finite at 0); use_series
+// says which side of it θ² = t2 lies on.
+template <class S>
+SMG_HOST_DEVICE inline bool use_series(const S& t2) {
+  const auto thr = series_threshold<S>();
+  return t2 < thr * thr;
+}
 template <class S>
 SMG_HOST_DEVICE inline S coeff_b(const S& t2) {
   using L = Literal<S>;
+  if (use_series(t2))
+    return L(1) / 2 - t2 * (L(1) / 24 - t2 * (L(1) / 720 - t2 * (L(1) / 40320 - t2 / L(3628800))));
   using std::sin;
   using std::sqrt;
-  const auto thr = series_threshold<S>();
-  if (t2 < thr * thr) {
-    return L(1) / 2 - t2 * (L(1) / 24 - t2 * (L(1) / 720 - t2 * (L(1) / 40320 - t2 / L(3628800))));
-  }
   const S s = sin(sqrt(t2) / 2);  // half-angle form: no cancellation in 1 - cos
   return L(2) * s * s / t2;
 }
 template <class S>
 SMG_HOST_DEVICE inline S coeff_c(const S& t2) {
   using L = Literal<S>;
-  using std::sin;
-  using std::sqrt;
-  const auto thr = series_threshold<S>();
-  if (t2 < thr * thr) {
+  if (use_series(t2))
     return L(1) / 6 -
            t2 * (L(1) / 120 - t2 * (L(1) / 5040 - t2 * (L(1) / 362880 - t2 / L(39916800))));
-  }
+  using std::sin;
+  using std::sqrt;
   const S t = sqrt(t2);
   return (t - sin(t)) / (t2 * t);
 }
 template <class S>
 SMG_HOST_DEVICE inline S coeff_d(const S& t2) {
   using L = Literal<S>;
+  if (use_series(t2))
+    return L(1) / 12 +
+           t2 * (L(1) / 720 + t2 * (L(1) / 30240 + t2 * (L(1) / 1209600 + t2 / L(47900160))));
   using std::cos;
   using std::sin;
   using std::sqrt;
-  const auto thr = series_threshold<S>();
-  if (t2 < thr * thr) {
-    return L(1) / 12 +
-           t2 * (L(1) / 720 + t2 * (L(1) / 30240 + t2 * (L(1) / 1209600 + t2 / L(47900160))));
-  }
   // cot(θ/2) form: finite at θ = π, singular only at θ = 2π.
   const S t = sqrt(t2);
   return L(1) / t2 - cos(t / 2) / (L(2) * t * sin(t / 2));
@@ -128,9 +128,8 @@ SMG_HOST_DEVICE inline Quaternion<typename Derived::Scalar> exp(
   using std::sin;
   using std::sqrt;
   const S t2 = phi.squaredNorm();
-  const auto thr = series_threshold<S>();
   S w, k;  // w = cos(θ/2), k = sin(θ/2)/θ
-  if (t2 < thr * thr) {
+  if (detail::use_series(t2)) {
     w = L(1) - t2 * (L(1) / 8 - t2 * (L(1) / 384 - t2 * (L(1) / 46080 - t2 / L(10321920))));
     k = L(1) / 2 - t2 * (L(1) / 48 - t2 * (L(1) / 3840 - t2 * (L(1) / 645120 - t2 / L(185794560))));
     if (J_out_phi) *J_out_phi = right_jacobian(phi);
@@ -187,8 +186,7 @@ SMG_HOST_DEVICE inline Vector3<S> log(const Quaternion<S>& q, Matrix3<S>* J_out_
     const Matrix3<S> H = hat(phi);
     const S t2 = theta * theta;
     S d;
-    const auto thr = series_threshold<S>();
-    if (t2 < thr * thr)
+    if (detail::use_series(t2))
       d = detail::coeff_d(t2);
     else
       d = L(1) / t2 - w / (L(2) * theta * n);

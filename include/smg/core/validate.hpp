@@ -224,4 +224,12 @@ Status validate_output(SequenceView<S, Dim> out, Index frames, Index nodes,
                              Dim == 1 ? Index(-1) : Index(Dim), "T", "N");
 }
 
+// The same for an optional output: an empty view (null data) means "not computed" and passes.
+template <class S, int Dim>
+Status validate_optional_output(SequenceView<S, Dim> out, Index frames, Index nodes,
+                                const std::string& name) {
+  if (out.data() == nullptr) return Status::ok();
+  return validate_output(out, frames, nodes, name);
+}
+
 }  // namespace smg

@@ -16,9 +16,14 @@
 
 #include <algorithm>
 
+#include "smg/core/quaternion.hpp"
 #include "smg/core/rotation_gradient.hpp"
+#include "smg/core/views.hpp"
 #include "smg/cuda/common.cuh"
-#include "smg/energy/carap.hpp"
+#include "smg/energy/carap_term.hpp"
+#include "smg/energy/common.hpp"
+#include "smg/energy/options.hpp"
+#include "smg/graph/neighbors.hpp"
 
 namespace smg::cuda {
 

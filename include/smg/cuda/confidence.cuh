@@ -8,7 +8,11 @@
 #include <cstdint>
 
 #include "smg/cuda/common.cuh"
-#include "smg/energy/confidence.hpp"
+#include "smg/core/views.hpp"
+#include "smg/energy/confidence_term.hpp"
+#include "smg/energy/options.hpp"
+#include "smg/energy/velocity.hpp"
+#include "smg/graph/neighbors.hpp"
 
 namespace smg::cuda {
 
@@ -29,8 +33,7 @@ template <class S, class I>
 __global__ void inverse_row_weight_kernel(NeighborsView<S, I> graph, S* inv_w) {
   const int i = frame_item(graph.nodes());
   if (i < 0) return;
-  const S W = smg::detail::row_weight(graph, i);
-  inv_w[i] = W > S(0) ? S(1) / W : S(0);
+  inv_w[i] = inverse_row_weight(graph, i);
 }
 
 template <class S, class I>

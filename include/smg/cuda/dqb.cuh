@@ -22,7 +22,6 @@
 #include <string>
 #include <vector>
 
-#include "smg/core/quaternion.hpp"
 #include "smg/core/rotation_gradient.hpp"
 #include "smg/skin/blend.hpp"
 #include "smg/skin/blend_point.hpp"
@@ -76,6 +75,51 @@ inline Status build_driver_incidence(const std::int32_t* drivers_device, Index p
 
 namespace detail {
 
+// A [rows][cols] table expected as [er][ec] (`shape` spells it for the message), with data
+// unless empty.
+inline Status table_shape(Index rows, Index cols, Index er, Index ec, const void* data,
+                          const std::string& name, const std::string& shape) {
+  if (rows != er || cols != ec) {
+    std::ostringstream s;
+    s << name << ": expected shape " << shape << ", got [" << rows << "][" << cols << "]";
+    return Status::error(s.str());
+  }
+  if (rows * cols > 0 && data == nullptr) return Status::error(name + ": null data pointer");
+  return Status::ok();
+}
+
+// The driver table [P][D] of the skinning kernels: P rows, 1 <= D <= kSkinMaxD, data unless
+// empty.
+inline Status check_driver_table(SkinDriversView drivers, Index P) {
+  const Index D = drivers.cols();
+  if (drivers.rows() != P || D < 1) {
+    std::ostringstream s;
+    s << "drivers: expected shape [P=" << P << "][D>=1], got [" << drivers.rows() << "][" << D
+      << "]";
+    return Status::error(s.str());
+  }
+  if (drivers.size() > 0 && drivers.data() == nullptr)
+    return Status::error("drivers: null data pointer");
+  if (D > kSkinMaxD) {
+    std::ostringstream s;
+    s << "drivers: D=" << D << " drivers per point exceeds the CUDA skinning kernels' maximum of "
+      << kSkinMaxD;
+    return Status::error(s.str());
+  }
+  return Status::ok();
+}
+
+// t_ref [P] (the reference frame of each point), data unless empty.
+inline Status check_t_ref(SkinIndexView t_ref, Index P) {
+  if (t_ref.rows() != P) {
+    std::ostringstream s;
+    s << "t_ref: expected " << P << " entries, got " << t_ref.rows();
+    return Status::error(s.str());
+  }
+  if (P > 0 && t_ref.data() == nullptr) return Status::error("t_ref: null data pointer");
+  return Status::ok();
+}
+
 // Shape checks of the skinning inputs (the contents live on the device and are not read).
 template <class S>
 Status check_skin_shapes(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
@@ -90,53 +134,23 @@ Status check_skin_shapes(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
                                           nodes.quaternions.dim(), T, N, 4, "T", "N");
       !s)
     return s;
-  auto table = [](Index rows, Index cols, Index er, Index ec, const void* data,
-                  const std::string& name, const char* shape) -> Status {
-    if (rows != er || (ec >= 0 && cols != ec)) {
-      std::ostringstream s;
-      s << name << ": expected shape " << shape << ", got [" << rows << "][" << cols << "]";
-      return Status::error(s.str());
-    }
-    if (rows * cols > 0 && data == nullptr) return Status::error(name + ": null data pointer");
-    return Status::ok();
-  };
-  if (points.drivers.rows() != P || D < 1) {
-    std::ostringstream s;
-    s << "drivers: expected shape [P=" << P << "][D>=1], got [" << points.drivers.rows() << "]["
-      << D << "]";
-    return Status::error(s.str());
-  }
-  if (points.drivers.size() > 0 && points.drivers.data() == nullptr)
-    return Status::error("drivers: null data pointer");
-  if (D > kSkinMaxD) {
-    std::ostringstream s;
-    s << "drivers: D=" << D << " drivers per point exceeds the CUDA skinning kernels' maximum of "
-      << kSkinMaxD;
-    return Status::error(s.str());
-  }
-  const std::string pd = "[P=" + std::to_string(P) + "][D=" + std::to_string(D) + "]";
-  if (Status s = table(points.weights.rows(), points.weights.cols(), P, D, points.weights.data(),
-                       "weights", pd.c_str());
+  if (Status s = check_driver_table(points.drivers, P); !s) return s;
+  const std::string ps = std::to_string(P);
+  if (Status s = table_shape(points.weights.rows(), points.weights.cols(), P, D,
+                             points.weights.data(), "weights",
+                             "[P=" + ps + "][D=" + std::to_string(D) + "]");
       !s)
     return s;
-  if (points.t_ref.rows() != P) {
-    std::ostringstream s;
-    s << "t_ref: expected " << P << " entries, got " << points.t_ref.rows();
-    return Status::error(s.str());
-  }
-  if (P > 0 && points.t_ref.data() == nullptr) return Status::error("t_ref: null data pointer");
-  const std::string p3 = "[P=" + std::to_string(P) + "][3]";
-  if (Status s = table(points.positions.rows(), points.positions.cols(), P, 3,
-                       points.positions.data(), "points", p3.c_str());
+  if (Status s = check_t_ref(points.t_ref, P); !s) return s;
+  if (Status s = table_shape(points.positions.rows(), points.positions.cols(), P, 3,
+                             points.positions.data(), "points", "[P=" + ps + "][3]");
       !s)
     return s;
-  if (points.quaternions.rows() != 0 || points.quaternions.data() != nullptr) {
-    const std::string p4 = "[P=" + std::to_string(P) + "][4]";
-    if (Status s = table(points.quaternions.rows(), points.quaternions.cols(), P, 4,
-                         points.quaternions.data(), "point_quats", p4.c_str());
+  if (points.quaternions.rows() != 0 || points.quaternions.data() != nullptr)
+    if (Status s = table_shape(points.quaternions.rows(), points.quaternions.cols(), P, 4,
+                               points.quaternions.data(), "point_quats", "[P=" + ps + "][4]");
         !s)
       return s;
-  }
   if (t_query.rows() > 0 && t_query.data() == nullptr)
     return Status::error("t_query: null data pointer");
   return Status::ok();
@@ -157,37 +171,7 @@ SMG_HOST_DEVICE inline void skin_forward_at(Index e, const SkinNodes<S>& nodes,
   const Quaternion<S> qp = smg::detail::skin_point_quaternion(points.quaternions, p);
   smg::detail::skin_load_query(nodes, points, p, Index(t_query(q, 0)), D, d);
   smg::detail::skin_blend_forward(method, d, D, x, qp, st);
-  if (out.positions.data()) {
-    S* o = out.positions.ptr(q, p);
-    for (int c = 0; c < 3; ++c) o[c] = st.position(c);
-  }
-  if (out.quaternions.data()) to_wxyz(st.rotation, out.quaternions.ptr(q, p));
-  if (out.J_drivers.data()) {
-    S* J = out.J_drivers.ptr(q, p);
-    for (Index k = D * 78; k < Dmax * 78; ++k) J[k] = S(0);
-  }
-  if (!out.J_drivers.data() && !out.J_point.data()) return;
-  smg::detail::skin_blend_jacobian_rows(
-      method, d, D, x, qp, st,
-      [&](int row, Index k, const SkinDriverGradient<S>& g) {
-        if (!out.J_drivers.data()) return;
-        S* J = out.J_drivers.ptr(q, p) + k * 78 + row * 13;
-        for (int c = 0; c < 3; ++c) {
-          J[c] = g.x_ref(c);
-          J[3 + c] = g.phi_ref(c);
-          J[6 + c] = g.x_t(c);
-          J[9 + c] = g.phi_t(c);
-        }
-        J[12] = g.weight;
-      },
-      [&](int row, const Vector3<S>& g_p, const Vector3<S>& g_phi_p) {
-        if (!out.J_point.data()) return;
-        S* J = out.J_point.ptr(q, p) + row * 6;
-        for (int c = 0; c < 3; ++c) {
-          J[c] = g_p(c);
-          J[3 + c] = g_phi_p(c);
-        }
-      });
+  smg::detail::skin_store_outputs(method, d, D, Dmax, x, qp, st, out, q, p);
 }
 
 template <class S, int DMax>
@@ -199,7 +183,7 @@ __global__ void skin_forward_kernel(SkinNodes<S> nodes, SkinPoints<S> points,
     skin_forward_at<S, DMax>(e, nodes, points, t_query, out, method);
 }
 
-constexpr Index kSkinEdgeStride = 9;  // per edge: ∂L/∂x_t (3), ∂L/∂x_ref (3), ∂L/∂φ_t (3) = −∂L/∂φ_ref
+using smg::detail::kSkinEdgeStride;  // per edge: ∂L/∂x_t (3), ∂L/∂x_ref (3), ∂L/∂φ_t (3)
 
 // Backward, point pass of query q (frame t), point p (< P).
 template <class S, int DMax>
@@ -210,39 +194,11 @@ SMG_HOST_DEVICE inline void skin_backward_point_at(
   const Index Dmax = points.width();
   SkinDriver<S> d[DMax];
   smg::detail::SkinBlendState<S> st;
-  const Index D = smg::detail::skin_load_ref(nodes, points, p, true, d);
-  smg::detail::skin_load_query(nodes, points, p, t, D, d);
-  const Vector3<S> x = points.positions.row(p);
-  const Quaternion<S> qp = smg::detail::skin_point_quaternion(points.quaternions, p);
-  smg::detail::skin_blend_forward(method, d, D, x, qp, st);
-  Vector3<S> gp = Vector3<S>::Zero(), gr = Vector3<S>::Zero();
-  if (grad_out.positions.data()) gp = grad_out.positions(q, p);
-  if (grad_out.rotations.data()) gr = grad_out.rotations(q, p);
-  if (grad_out.quaternions.data()) {
-    // (S17): raw 4-vector -> right tangent of the unit q' (Q3).
-    const Vector4<S> qo = to_wxyz(st.rotation);
-    add_tangent_gradient_from_quaternion(qo.data(), grad_out.quaternions.ptr(q, p), gr.data());
-  }
-  Vector3<S> g_p, g_phi_p;
-  smg::detail::skin_blend_backward(
-      method, d, D, x, qp, st, gp, gr,
-      [&](Index k, const SkinDriverGradient<S>& g) {
-        if (grads.weights.data()) grads.weights(p, k) += g.weight;
-        if (!edge_buf) return;
-        S* e = edge_buf + (p * Dmax + k) * kSkinEdgeStride;
-        for (int c = 0; c < 3; ++c) {
-          e[c] = g.x_t(c);
-          e[3 + c] = g.x_ref(c);
-          e[6 + c] = g.phi_t(c);
-        }
-      },
-      g_p, g_phi_p);
-  if (grads.points.data()) grads.points.row(p) += g_p;
-  if (grads.point_rotations.data()) grads.point_rotations.row(p) += g_phi_p;
-  if (grads.point_quaternions.data() && points.quaternions.rows() != 0)
-    // (S17): right tangent of q̂ = q/|q| -> raw q (Q5).
-    add_quaternion_gradient_from_tangent(points.quaternions.ptr(p), g_phi_p.data(),
-                                         grads.point_quaternions.ptr(p));
+  smg::detail::skin_backward_point(method, nodes, points, q, t, p, grad_out, grads, d, st,
+                                   [&](Index k) -> S* {
+                                     return edge_buf ? edge_buf + (p * Dmax + k) * kSkinEdgeStride
+                                                     : nullptr;
+                                   });
 }
 
 template <class S, int DMax>
@@ -323,16 +279,7 @@ Status skin_blend(const SkinNodes<S>& nodes, const SkinPoints<S>& points, SkinIn
                   cudaStream_t stream) {
   if (Status s = detail::check_skin_shapes(nodes, points, t_query); !s) return s;
   const Index Q = t_query.rows(), P = points.count(), D = points.width();
-  if (out.positions.data())
-    if (Status s = smg::detail::check_qp_view(out.positions, Q, P, 3, "out_positions"); !s) return s;
-  if (out.quaternions.data())
-    if (Status s = smg::detail::check_qp_view(out.quaternions, Q, P, 4, "out_quaternions"); !s)
-      return s;
-  if (out.J_drivers.data())
-    if (Status s = smg::detail::check_qp_view(out.J_drivers, Q, P, D * 78, "J_drivers"); !s)
-      return s;
-  if (out.J_point.data())
-    if (Status s = smg::detail::check_qp_view(out.J_point, Q, P, 36, "J_point"); !s) return s;
+  if (Status s = smg::detail::check_blend_outputs(out, Q, P, D); !s) return s;
   const Index n = Q * P;
   if (n == 0) return Status::ok();
   const unsigned grid = grid_for(n);
@@ -374,31 +321,7 @@ Status skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& point
   if (Status s = qp(grad_out.positions, 3, "grad_out_positions"); !s) return s;
   if (Status s = qp(grad_out.rotations, 3, "grad_out_rotations"); !s) return s;
   if (Status s = qp(grad_out.quaternions, 4, "grad_out_quaternions"); !s) return s;
-  if (grads.node_positions.data())
-    if (Status s = validate_output(grads.node_positions, T, N, "grad_node_positions"); !s) return s;
-  if (grads.node_rotations.data())
-    if (Status s = validate_output(grads.node_rotations, T, N, "grad_node_rotations"); !s) return s;
-  if (grads.node_quaternions.data())
-    if (Status s = validate_output(grads.node_quaternions, T, N, "grad_node_quaternions"); !s)
-      return s;
-  if (grads.points.data())
-    if (Status s = smg::detail::check_output_table<S, 3>(grads.points, P, 3, "grad_points"); !s)
-      return s;
-  if (grads.point_rotations.data())
-    if (Status s = smg::detail::check_output_table<S, 3>(grads.point_rotations, P, 3,
-                                                         "grad_point_rotations");
-        !s)
-      return s;
-  if (grads.point_quaternions.data())
-    if (Status s = smg::detail::check_output_table<S, 4>(grads.point_quaternions, P, 4,
-                                                         "grad_point_quaternions");
-        !s)
-      return s;
-  if (grads.weights.data())
-    if (Status s = smg::detail::check_output_table<S, Eigen::Dynamic>(grads.weights, P, D,
-                                                                      "grad_weights");
-        !s)
-      return s;
+  if (Status s = smg::detail::check_blend_gradients(grads, T, N, P, D); !s) return s;
   const bool to_nodes = grads.node_positions.data() || grads.node_rotations.data() ||
                         grads.node_quaternions.data();
   if (to_nodes && (incidence.nodes != N || incidence.k != D)) {

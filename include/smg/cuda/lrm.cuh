@@ -3,9 +3,10 @@
 //
 // Scheme (deterministic: no atomics, every sum in a fixed order):
 //   1. one thread per (t, i) gathers its K neighbours' positions, velocities (E1) and edge
-//      weights w̃ (E7) into local arrays and calls detail::lrm_neighborhood<S, S> — the very
-//      function the CPU kernel runs lane-wise; it writes L_{t,i} (Accumulator<S>) to a buffer,
-//      ω_i^t to `omega`, and the scaled per-edge ∂L/∂x_k, ∂L/∂u_k to scratch [T][N·K][3];
+//      weights w̃ (E7) into local arrays and calls detail::lrm_neighborhood<S, S>
+//      (smg/energy/lrm_term.hpp) — the very function the CPU kernel runs lane-wise; it writes
+//      L_{t,i} (Accumulator<S>) to a buffer, ω_i^t to `omega`, and the scaled per-edge ∂L/∂x_k,
+//      ∂L/∂u_k to scratch [T][N·K][3];
 //   2. one thread per (t, j) gathers the edges into node j (ReverseGraph, increasing i·K + k: the
 //      order in which the CPU adds them) into ∂L/∂x^t_j and ∂L/∂u^t_j [T][N][3];
 //   3. one thread per (s, j) adds ∂L/∂x^s_j and the velocity parts of the two frames of each
@@ -19,9 +20,10 @@
 #include <sstream>
 #include <string>
 
+#include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
 #include "smg/energy/common.hpp"
-#include "smg/energy/lrm.hpp"
+#include "smg/energy/lrm_term.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/velocity.hpp"
 #include "smg/graph/neighbors.hpp"
@@ -217,10 +219,8 @@ Status validate_lrm_cuda(PositionsView<const S> positions, FrameScalarsView<cons
     return Status::error(s.str());
   }
   if (Status s = validate_options(options); !s) return s;
-  if (grad_positions.data() != nullptr)
-    if (Status s = validate_output(grad_positions, T, N, "grad_positions"); !s) return s;
-  if (omega.data() != nullptr)
-    if (Status s = validate_output(omega, T, N, "omega"); !s) return s;
+  if (Status s = validate_optional_output(grad_positions, T, N, "grad_positions"); !s) return s;
+  if (Status s = validate_optional_output(omega, T, N, "omega"); !s) return s;
   if (reverse.nodes != N || reverse.k != graph.k() ||
       (reverse.entries.size() > 0 && reverse.offsets.get() == nullptr)) {
     std::ostringstream s;
@@ -266,10 +266,7 @@ Status lrm(smg::detail::NonDeducedT<PositionsView<const S>> positions,
     return Status::ok();
   }
   detail::LrmKernelArgs<S> args;
-  args.p.huber_delta = L(options.huber_delta);
-  args.p.mu_factor = lrm_mu_factor<S>();
-  args.p.detach_omega = options.detach_omega;
-  args.p.gradient = grad_positions.data() != nullptr;
+  args.p = smg::detail::lrm_params<S>(options, grad_positions.data() != nullptr);
   args.alpha = L(options.alpha);
   args.scale = L(options.weight);
   args.weight = options.weight;

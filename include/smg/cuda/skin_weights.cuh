@@ -43,17 +43,6 @@ __global__ void skinning_weights_kernel(PositionsView<const S> positions, SkinDr
                                        sg);
 }
 
-inline Status table_shape(Index rows, Index cols, Index er, Index ec, const void* data,
-                          const std::string& name, const std::string& shape) {
-  if (rows != er || cols != ec) {
-    std::ostringstream s;
-    s << name << ": expected shape " << shape << ", got [" << rows << "][" << cols << "]";
-    return Status::error(s.str());
-  }
-  if (rows * cols > 0 && data == nullptr) return Status::error(name + ": null data pointer");
-  return Status::ok();
-}
-
 }  // namespace detail
 
 // out[p] = (anchor[p], the valid neighbours of anchor[p] in graph order, −1 padding), D = K + 1
@@ -105,25 +94,8 @@ Status skinning_weights(smg::detail::NonDeducedT<PositionsView<const S>> positio
                                           -1, 3, "T", "N");
       !s)
     return s;
-  if (D < 1) {
-    std::ostringstream s;
-    s << "drivers: expected shape [P=" << P << "][D>=1], got [" << P << "][" << D << "]";
-    return Status::error(s.str());
-  }
-  if (drivers.size() > 0 && drivers.data() == nullptr)
-    return Status::error("drivers: null data pointer");
-  if (D > kSkinMaxD) {
-    std::ostringstream s;
-    s << "drivers: D=" << D << " drivers per point exceeds the CUDA skinning kernels' maximum of "
-      << kSkinMaxD;
-    return Status::error(s.str());
-  }
-  if (t_ref.rows() != P) {
-    std::ostringstream s;
-    s << "t_ref: expected " << P << " entries, got " << t_ref.rows();
-    return Status::error(s.str());
-  }
-  if (P > 0 && t_ref.data() == nullptr) return Status::error("t_ref: null data pointer");
+  if (Status s = detail::check_driver_table(drivers, P); !s) return s;
+  if (Status s = detail::check_t_ref(t_ref, P); !s) return s;
   const std::string ps = std::to_string(P), ns = std::to_string(N), ds = std::to_string(D);
   if (Status s = detail::table_shape(points.rows(), points.cols(), P, 3, points.data(), "points",
                                      "[P=" + ps + "][3]");

@@ -23,21 +23,17 @@
 #include "smg/core/config.hpp"
 
 #include <algorithm>
-#include <cmath>
-#include <condition_variable>
-#include <mutex>
-#include <type_traits>
 #include <vector>
 
-#include <Eigen/Core>
-
 #include "smg/core/parallel.hpp"
+#include "smg/core/quaternion.hpp"
 #include "smg/core/rotation_gradient.hpp"
 #include "smg/core/scalar.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
 #include "smg/energy/carap_term.hpp"
 #include "smg/energy/common.hpp"
+#include "smg/energy/lanes.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"
@@ -62,21 +58,12 @@ Status validate_carap(detail::NonDeducedT<PositionsView<const S>> positions,
   if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
   if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
   if (Status s = validate_options(options); !s) return s;
-  if (grad_positions.data() != nullptr)
-    if (Status s = validate_output(grad_positions, T, N, "grad_positions"); !s) return s;
+  if (Status s = validate_optional_output(grad_positions, T, N, "grad_positions"); !s) return s;
   if (grad_rotations.is_raw())
     if (Status s = validate_output(grad_rotations.raw(), T, N, "grad_rotations"); !s) return s;
-  if (grad_rotations.tangent().data() != nullptr)
-    if (Status s = validate_output(grad_rotations.tangent(), T, N, "grad_rotations"); !s) return s;
+  if (Status s = validate_optional_output(grad_rotations.tangent(), T, N, "grad_rotations"); !s)
+    return s;
   return Status::ok();
-}
-
-// Number of valid neighbour entries Σ_i |N(i)| of a graph.
-template <class S, class I>
-inline Index edge_count(const NeighborsView<S, I>& graph) {
-  Index n = 0;
-  for (Index i = 0; i < graph.nodes(); ++i) n += graph.degree(i);
-  return n;
 }
 
 // Number of terms of (E9): Σ_δ max(0, T − δ) · Σ_i |N(i)| (every listed gap counts, also one
@@ -90,47 +77,6 @@ inline Index carap_term_count(const NeighborsView<S, I>& graph, Index frames,
 }
 
 namespace detail {
-
-// Row-major 3x3 rotation of q / |q| from (w, x, y, z), without a square root.
-template <class S>
-SMG_HOST_DEVICE inline void rotation_from_wxyz(const S* q, S* R) {
-  using L = Literal<S>;
-  const S w = q[0], x = q[1], y = q[2], z = q[3];
-  const S s = L(2) / (w * w + x * x + y * y + z * z);
-  R[0] = L(1) - s * (y * y + z * z);
-  R[1] = s * (x * y - w * z);
-  R[2] = s * (x * z + w * y);
-  R[3] = s * (x * y + w * z);
-  R[4] = L(1) - s * (x * x + z * z);
-  R[5] = s * (y * z - w * x);
-  R[6] = s * (x * z - w * y);
-  R[7] = s * (y * z + w * x);
-  R[8] = L(1) - s * (x * x + y * y);
-}
-
-// out[k] = sqrt(in[k]); through Eigen's packet sqrt for float/double so that it vectorises
-// whatever -fmath-errno says (a plain loop over std::sqrt does not).
-template <class S>
-inline void sqrt_array(const S* in, S* out, Index n) {
-  if constexpr (std::is_floating_point_v<S>) {
-    Eigen::Map<Eigen::Array<S, Eigen::Dynamic, 1>>(out, n) =
-        Eigen::Map<const Eigen::Array<S, Eigen::Dynamic, 1>>(in, n).sqrt();
-  } else {
-    using std::sqrt;
-    for (Index k = 0; k < n; ++k) out[k] = sqrt(in[k]);
-  }
-}
-
-template <class S>
-inline S sum_array(const S* in, Index n) {
-  if constexpr (std::is_floating_point_v<S>) {
-    return n > 0 ? Eigen::Map<const Eigen::Array<S, Eigen::Dynamic, 1>>(in, n).sum() : S(0);
-  } else {
-    S s(0);
-    for (Index k = 0; k < n; ++k) s += in[k];
-    return s;
-  }
-}
 
 // The loops of the C-ARAP kernel, each over non-overlapping arrays (restrict: with more than
 // a few arrays GCC otherwise gives up on run-time alias checks and does not vectorise).
@@ -283,38 +229,6 @@ inline Index carap_block_frames(Index frames, Index max_gap) {
   const Index b = std::min<Index>(32, std::max<Index>(8, (frames + 5) / 6));
   return std::max<Index>(4, b - (b + max_gap) % 4);
 }
-
-// Hands out scratch slots to concurrently running chunks. A chunk takes a free slot, clears
-// what it reads, and gives it back: which slot a chunk gets never affects its result, so the
-// output stays bit-identical for any thread count while scratch memory scales with the number
-// of threads, not of blocks.
-// A caller's executor may run more chunks at once than there are slots: acquire() then waits
-// for a slot (a chunk holding one always finishes without waiting, so this cannot deadlock).
-class SlotPool {
- public:
-  explicit SlotPool(Index slots) {
-    for (Index s = slots; s-- > 0;) free_.push_back(s);
-  }
-  Index acquire() {
-    std::unique_lock<std::mutex> lock(mutex_);
-    available_.wait(lock, [this] { return !free_.empty(); });
-    const Index s = free_.back();
-    free_.pop_back();
-    return s;
-  }
-  void release(Index s) {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      free_.push_back(s);
-    }
-    available_.notify_one();
-  }
-
- private:
-  std::mutex mutex_;
-  std::condition_variable available_;
-  std::vector<Index> free_;
-};
 
 // One C-ARAP evaluation over the blocks of frames.
 template <class S, class I>

@@ -21,8 +21,10 @@
 #include <vector>
 
 #include "smg/core/parallel.hpp"
+#include "smg/core/quaternion.hpp"
 #include "smg/core/so3.hpp"
 #include "smg/energy/carap.hpp"
+#include "smg/energy/carap_term.hpp"
 
 namespace smg {
 

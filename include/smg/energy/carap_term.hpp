@@ -11,7 +11,6 @@
 
 #include <cmath>
 
-#include "smg/core/scalar.hpp"
 
 namespace smg {
 

@@ -1,15 +1,12 @@
 // smg/energy/common.hpp — small pieces shared by the energies: the accumulator type of energy
-// sums, the confidence-aware edge weight (E7), the per-Scalar regulariser factor of LRM and the
-// validation of their optional confidence input.
+// sums, the confidence-aware edge weight (E7) and the validation of their optional confidence
+// input.
 #pragma once
 
 #include "smg/core/config.hpp"
 
 #include <type_traits>
 
-#include <Eigen/Core>
-
-#include "smg/core/scalar.hpp"
 #include "smg/core/types.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
@@ -27,16 +24,6 @@ using Accumulator = std::conditional_t<std::is_same_v<S, float>, double, S>;
 template <class V, class L>
 SMG_FORCE_INLINE SMG_HOST_DEVICE V confidence_edge_weight(const V& w_ij, L alpha, const V& c_j) {
   return w_ij * (alpha + (L(1) - alpha) * c_j);
-}
-
-// μ / trace(A) of the LRM 3x3 solve (docs/design.md pinned: 1e-10 in double, 1e-5 in float): just
-// above the rounding level of the solve in each precision, so the regulariser decides a
-// degenerate direction instead of rounding noise, while biasing ordinary neighbourhoods by
-// less than 1e-6 (double).  (E13)
-template <class S>
-SMG_HOST_DEVICE inline Literal<S> lrm_mu_factor() {
-  using L = Literal<S>;
-  return Eigen::NumTraits<L>::epsilon() > L(1e-10) ? L(1e-5) : L(1e-10);
 }
 
 // Validation of the optional confidence input of C-ARAP and LRM: absent (null) is fine;

@@ -6,15 +6,20 @@
 // element loops forced inline, which GCC and Clang turn into SIMD instructions; the square
 // root goes through Eigen's packet sqrt, which vectorises whatever -fmath-errno says. Control
 // flow becomes masks (lane_greater / lane_select) so every lane runs the same instructions.
+// Also here: moving lanes to and from memory (lane_load / lane_store / lane_ref), and the
+// vectorised sqrt and sum over plain arrays that the C-ARAP kernel's loops use.
 #pragma once
 
 #include "smg/core/config.hpp"
 
 #include <cmath>
-#include <cstdint>
+#include <cstring>
 #include <type_traits>
 
 #include <Eigen/Core>
+
+#include "smg/core/scalar.hpp"
+#include "smg/core/types.hpp"
 
 #ifndef SMG_LANE_INLINE
 #define SMG_LANE_INLINE SMG_FORCE_INLINE
@@ -34,25 +39,12 @@ namespace smg::detail {
 #endif
 #endif
 
-namespace lanes_impl {
-template <class S>
-struct SameSizeInt;
-template <>
-struct SameSizeInt<float> {
-  using type = std::int32_t;
-};
-template <>
-struct SameSizeInt<double> {
-  using type = std::int64_t;
-};
-}  // namespace lanes_impl
-
 template <class S, int W>
 struct Lanes {
 #if SMG_HAVE_VECTOR_EXTENSIONS
   // A native SIMD value (GCC/Clang vector extension): operators are single instructions.
   typedef S Vec __attribute__((vector_size(W * sizeof(S))));
-  using Int = typename lanes_impl::SameSizeInt<S>::type;
+  using Int = typename FloatBits<S>::Signed;
   typedef Int IVec __attribute__((vector_size(W * sizeof(S))));
 #else
   struct Vec {
@@ -199,6 +191,61 @@ SMG_HOST_DEVICE SMG_LANE_INLINE V lane_sqrt(const V& a) {
   } else {
     using std::sqrt;
     return sqrt(a);
+  }
+}
+
+// Lane v (W scalars) from / to memory; W = 1 for scalar lanes.
+template <class V, class S>
+SMG_LANE_INLINE void lane_load(V& v, const S* p) {
+  if constexpr (LaneTraits<V>::is_lanes) {
+    std::memcpy(&v, p, sizeof(V));
+  } else {
+    v = *p;
+  }
+}
+template <class V, class S>
+SMG_LANE_INLINE void lane_store(const V& v, S* p) {
+  if constexpr (LaneTraits<V>::is_lanes) {
+    std::memcpy(p, &v, sizeof(V));
+  } else {
+    *p = v;
+  }
+}
+template <class V, class S>
+SMG_LANE_INLINE S& lane_ref(V& v, Index l) {
+  if constexpr (LaneTraits<V>::is_lanes) {
+    return v[static_cast<int>(l)];
+  } else {
+    (void)l;
+    return v;
+  }
+}
+
+// Plain arrays (the C-ARAP kernel's loops over [edge][frame]).
+
+// out[k] = sqrt(in[k]); through Eigen's packet sqrt for float/double so that it vectorises
+// whatever -fmath-errno says (a plain loop over std::sqrt does not).
+template <class S>
+inline void sqrt_array(const S* in, S* out, Index n) {
+  if constexpr (std::is_floating_point_v<S>) {
+    Eigen::Map<Eigen::Array<S, Eigen::Dynamic, 1>>(out, n) =
+        Eigen::Map<const Eigen::Array<S, Eigen::Dynamic, 1>>(in, n).sqrt();
+  } else {
+    using std::sqrt;
+    for (Index k = 0; k < n; ++k) out[k] = sqrt(in[k]);
+  }
+}
+
+// Σ_k in[k] through Eigen's packet sum for float/double (its fixed association order, so the
+// result does not depend on the caller), a plain loop for other scalars.
+template <class S>
+inline S sum_array(const S* in, Index n) {
+  if constexpr (std::is_floating_point_v<S>) {
+    return n > 0 ? Eigen::Map<const Eigen::Array<S, Eigen::Dynamic, 1>>(in, n).sum() : S(0);
+  } else {
+    S s(0);
+    for (Index k = 0; k < n; ++k) s += in[k];
+    return s;
   }
 }
 

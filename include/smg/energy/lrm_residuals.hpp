@@ -102,11 +102,7 @@ bool lrm_residual_block(PositionsView<const S> positions, FrameScalarsView<const
     const S c = confidence.data() ? confidence(t, j) : S(1);
     a[k] = confidence_edge_weight(graph.weights(i, k), alpha, c);
   }
-  detail::LrmParams<S> p;
-  p.huber_delta = L(options.huber_delta);
-  p.mu_factor = lrm_mu_factor<S>();
-  p.detach_omega = options.detach_omega;
-  p.gradient = false;
+  const detail::LrmParams<S> p = detail::lrm_params<S>(options, false);
   S om[3];
   const S e = detail::lrm_neighborhood<S, S>(n, xs, us, a, p, scratch, nullptr, nullptr, om);
   out.omega = Vector3<S>(om[0], om[1], om[2]);

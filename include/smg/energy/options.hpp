@@ -156,43 +156,43 @@ inline Status check_gaps(const char* what, const GapList& gaps) {
   }
   return Status::ok();
 }
+// The first failing Status of `checks` (all evaluated, in order), or ok.
+inline Status first_error(std::initializer_list<Status> checks) {
+  for (const Status& s : checks)
+    if (!s) return s;
+  return Status::ok();
+}
+// The checks C-ARAP and plain ARAP share (`what` names the options type in the messages):
+// λc, λl >= 0, the gap list, weight >= 0.
+template <class Options>
+inline Status check_rigidity_options(const char* what, const Options& o) {
+  return first_error({check_nonneg(what, "lambda_c", o.lambda_c),
+                      check_nonneg(what, "lambda_l", o.lambda_l), check_gaps(what, o.gaps),
+                      check_nonneg(what, "weight", o.weight)});
+}
 }  // namespace detail
 
 inline Status validate_options(const ConfidenceOptions& o) {
-  for (Status s : {detail::check_positive("ConfidenceOptions", "kappa_m", o.kappa_m),
-                   detail::check_positive("ConfidenceOptions", "kappa_r", o.kappa_r),
-                   detail::check_nonneg("ConfidenceOptions", "lambda_m", o.lambda_m),
-                   detail::check_nonneg("ConfidenceOptions", "lambda_r", o.lambda_r),
-                   detail::check_positive("ConfidenceOptions", "eps", o.eps)})
-    if (!s) return s;
-  return Status::ok();
+  return detail::first_error({detail::check_positive("ConfidenceOptions", "kappa_m", o.kappa_m),
+                              detail::check_positive("ConfidenceOptions", "kappa_r", o.kappa_r),
+                              detail::check_nonneg("ConfidenceOptions", "lambda_m", o.lambda_m),
+                              detail::check_nonneg("ConfidenceOptions", "lambda_r", o.lambda_r),
+                              detail::check_positive("ConfidenceOptions", "eps", o.eps)});
 }
 
 inline Status validate_options(const CarapOptions& o) {
-  for (Status s : {detail::check_alpha("CarapOptions", o.alpha),
-                   detail::check_nonneg("CarapOptions", "lambda_c", o.lambda_c),
-                   detail::check_nonneg("CarapOptions", "lambda_l", o.lambda_l),
-                   detail::check_gaps("CarapOptions", o.gaps),
-                   detail::check_nonneg("CarapOptions", "weight", o.weight)})
-    if (!s) return s;
-  return Status::ok();
+  if (Status s = detail::check_alpha("CarapOptions", o.alpha); !s) return s;
+  return detail::check_rigidity_options("CarapOptions", o);
 }
 
 inline Status validate_options(const ArapOptions& o) {
-  for (Status s : {detail::check_nonneg("ArapOptions", "lambda_c", o.lambda_c),
-                   detail::check_nonneg("ArapOptions", "lambda_l", o.lambda_l),
-                   detail::check_gaps("ArapOptions", o.gaps),
-                   detail::check_nonneg("ArapOptions", "weight", o.weight)})
-    if (!s) return s;
-  return Status::ok();
+  return detail::check_rigidity_options("ArapOptions", o);
 }
 
 inline Status validate_options(const LrmOptions& o) {
-  for (Status s : {detail::check_alpha("LrmOptions", o.alpha),
-                   detail::check_positive("LrmOptions", "huber_delta", o.huber_delta),
-                   detail::check_nonneg("LrmOptions", "weight", o.weight)})
-    if (!s) return s;
-  return Status::ok();
+  return detail::first_error({detail::check_alpha("LrmOptions", o.alpha),
+                              detail::check_positive("LrmOptions", "huber_delta", o.huber_delta),
+                              detail::check_nonneg("LrmOptions", "weight", o.weight)});
 }
 
 // Plain ARAP is C-ARAP with α = 1 and no confidences (the caller passes none).

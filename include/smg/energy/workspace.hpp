@@ -11,7 +11,6 @@
 #include <cstddef>
 #include <vector>
 
-#include "smg/core/types.hpp"
 
 namespace smg {
 

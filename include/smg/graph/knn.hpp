@@ -171,6 +171,30 @@ int automatic_segment_frames(const TrajectoryStore<S>& st) {
   return static_cast<int>(std::max(1.0, std::min(L, static_cast<double>(T))));
 }
 
+// What trajectory_knn and select_nodes search: the trajectories (TrajectoryStore) and one
+// SegmentTree per segment of segment_frames frames (requested, capped at T; automatic when 0).
+template <class S>
+struct TrajectoryIndex {
+  TrajectoryStore<S> store;
+  int segment_frames = 0;
+  std::vector<SegmentTree<S>> trees;
+
+  TrajectoryIndex(PositionsView<const S> x, VisibilityView<const std::uint8_t> v,
+                  int requested_frames, ParallelOptions parallel) {
+    store.build(x, v, parallel);
+    segment_frames = requested_frames > 0
+                         ? std::min<int>(requested_frames, static_cast<int>(x.frames()))
+                         : automatic_segment_frames(store);
+    trees = build_segment_trees(store, segment_frames, parallel);
+  }
+  // Bytes allocated by the store and the trees.
+  std::size_t bytes() const {
+    std::size_t b = store.bytes();
+    for (const auto& t : trees) b += t.bytes();
+    return b;
+  }
+};
+
 }  // namespace detail
 
 // Exact trajectory KNN (G4): rows sorted by (D_ij, j), -1/0 padded. Deterministic and
@@ -184,15 +208,12 @@ KnnStats trajectory_knn(detail::NonDeducedT<PositionsView<const S>> x,
   const Index N = x.nodes(), T = x.frames();
   stats.nodes = N;
   stats.frames = T;
-  detail::TrajectoryStore<S> st;
-  st.build(x, v, o.parallel);
-  const int L = o.segment_frames > 0 ? std::min<int>(o.segment_frames, static_cast<int>(T))
-                                     : detail::automatic_segment_frames(st);
-  const auto trees = detail::build_segment_trees(st, L, o.parallel);
-  stats.segment_frames = L;
-  stats.segments = static_cast<Index>(trees.size());
-  stats.scratch_bytes = st.bytes();
-  for (const auto& t : trees) stats.scratch_bytes += t.bytes();
+  const detail::TrajectoryIndex<S> index(x, v, o.segment_frames, o.parallel);
+  stats.scratch_bytes = index.bytes();
+  stats.segment_frames = index.segment_frames;
+  stats.segments = static_cast<Index>(index.trees.size());
+  const detail::TrajectoryStore<S>& st = index.store;
+  const auto& trees = index.trees;
 
   const int k = o.k;
   const int seeds = std::max(1, o.seed_segments);

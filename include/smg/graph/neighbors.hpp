@@ -44,6 +44,14 @@ struct NeighborsView {
   }
 };
 
+// Number of valid neighbour entries Σ_i |N(i)| of a graph (the edges i -> j it lists).
+template <class S, class I>
+inline Index edge_count(const NeighborsView<S, I>& graph) {
+  Index n = 0;
+  for (Index i = 0; i < graph.nodes(); ++i) n += graph.degree(i);
+  return n;
+}
+
 // Checks a neighbour table against N nodes: shapes, indices in [0, N) or -1, no self edges,
 // padding only at the end of a row (with weight 0), weights finite and >= 0.
 template <class S, class I>

@@ -100,16 +100,13 @@ NodeSelectionStats<S> select_nodes(detail::NonDeducedT<PositionsView<const S>> x
                                    const NodeSelectionOptions& o, TableView<std::int32_t, 1> selected,
                                    TableView<std::int32_t, 1> assignment, TableView<S, 1> error) {
   NodeSelectionStats<S> stats;
-  const Index N = x.nodes(), T = x.frames();
+  const Index N = x.nodes();
   stats.trajectories = N;
-  detail::TrajectoryStore<S> st;
-  st.build(x, v, o.parallel);
-  const int L = o.segment_frames > 0 ? std::min<int>(o.segment_frames, static_cast<int>(T))
-                                     : detail::automatic_segment_frames(st);
-  const auto trees = detail::build_segment_trees(st, L, o.parallel);
-  stats.segment_frames = L;
-  stats.scratch_bytes = st.bytes();
-  for (const auto& t : trees) stats.scratch_bytes += t.bytes();
+  const detail::TrajectoryIndex<S> index(x, v, o.segment_frames, o.parallel);
+  stats.scratch_bytes = index.bytes();
+  stats.segment_frames = index.segment_frames;
+  const detail::TrajectoryStore<S>& st = index.store;
+  const auto& trees = index.trees;
 
   const int need = std::max(1, o.min_visible);
   std::vector<std::int32_t> pref;

@@ -179,11 +179,12 @@ struct SegmentTree {
     if (n > 0) fill_bounds(0, 0, n);
   }
 
-  // Calls visit(id) for every item whose box lies within squared distance bound2() of q.
-  // bound2 is re-read before every test, so a caller may shrink it while visiting.
-  template <class Bound, class Visit>
-  void range_query(const Box<S>& q, Bound&& bound2, Visit&& visit) const {
-    if (ids.empty()) return;
+  // Depth-first over the nodes whose box lies within squared distance bound2() of q (re-read
+  // before every test), right child pushed first; calls leaf(b, e) on each leaf's tree positions
+  // [b, e) and stops, returning false, as soon as it returns false.
+  template <class Bound, class Leaf>
+  bool walk(const Box<S>& q, Bound&& bound2, Leaf&& leaf) const {
+    if (ids.empty()) return true;
     struct Entry { Index k, b, e; };
     std::array<Entry, 128> stack;
     int top = 0;
@@ -192,32 +193,7 @@ struct SegmentTree {
       const Entry en = stack[static_cast<std::size_t>(--top)];
       if (box_distance2(bounds[static_cast<std::size_t>(en.k)], q) > bound2()) continue;
       if (en.e - en.b <= kLeaf) {
-        for (Index p = en.b; p < en.e; ++p)
-          if (box_distance2(items[static_cast<std::size_t>(p)], q) <= bound2())
-            visit(ids[static_cast<std::size_t>(p)]);
-        continue;
-      }
-      const Index mid = en.b + (en.e - en.b) / 2;
-      stack[static_cast<std::size_t>(top++)] = {2 * en.k + 2, mid, en.e};
-      stack[static_cast<std::size_t>(top++)] = {2 * en.k + 1, en.b, mid};
-    }
-  }
-
-  // Appends to `out` the tree positions of the items within squared distance bound2 of q.
-  // Stops early and returns false once more than `cap` items were collected.
-  bool collect(const Box<S>& q, S bound2, std::size_t cap, std::vector<std::int32_t>& out) const {
-    if (ids.empty()) return true;
-    struct Entry { Index k, b, e; };
-    std::array<Entry, 128> stack;
-    int top = 0;
-    stack[static_cast<std::size_t>(top++)] = {0, 0, size()};
-    while (top > 0) {
-      const Entry en = stack[static_cast<std::size_t>(--top)];
-      if (box_distance2(bounds[static_cast<std::size_t>(en.k)], q) > bound2) continue;
-      if (en.e - en.b <= kLeaf) {
-        for (Index p = en.b; p < en.e; ++p)
-          if (box_distance2(items[static_cast<std::size_t>(p)], q) <= bound2) out.push_back(static_cast<std::int32_t>(p));
-        if (out.size() > cap) return false;
+        if (!leaf(en.b, en.e)) return false;
         continue;
       }
       const Index mid = en.b + (en.e - en.b) / 2;
@@ -225,6 +201,28 @@ struct SegmentTree {
       stack[static_cast<std::size_t>(top++)] = {2 * en.k + 1, en.b, mid};
     }
     return true;
+  }
+
+  // Calls visit(id) for every item whose box lies within squared distance bound2() of q.
+  // bound2 is re-read before every test, so a caller may shrink it while visiting.
+  template <class Bound, class Visit>
+  void range_query(const Box<S>& q, Bound&& bound2, Visit&& visit) const {
+    walk(q, bound2, [&](Index b, Index e) {
+      for (Index p = b; p < e; ++p)
+        if (box_distance2(items[static_cast<std::size_t>(p)], q) <= bound2())
+          visit(ids[static_cast<std::size_t>(p)]);
+      return true;
+    });
+  }
+
+  // Appends to `out` the tree positions of the items within squared distance bound2 of q.
+  // Stops early and returns false once more than `cap` items were collected.
+  bool collect(const Box<S>& q, S bound2, std::size_t cap, std::vector<std::int32_t>& out) const {
+    return walk(q, [bound2]() { return bound2; }, [&](Index b, Index e) {
+      for (Index p = b; p < e; ++p)
+        if (box_distance2(items[static_cast<std::size_t>(p)], q) <= bound2) out.push_back(static_cast<std::int32_t>(p));
+      return out.size() <= cap;
+    });
   }
 
   // The (up to) `count` items nearest to q by box distance, excluding node `exclude`, as

@@ -29,7 +29,6 @@
 #include "smg/core/views.hpp"
 #include "smg/graph/descriptor.hpp"
 #include "smg/graph/knn.hpp"
-#include "smg/graph/neighbors.hpp"
 
 namespace smg {
 

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "smg/core/parallel.hpp"
+#include "smg/core/quaternion.hpp"
 #include "smg/core/rotation_gradient.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/skin/blend_point.hpp"
@@ -39,6 +40,11 @@ struct SkinBlendOutputs {
   SequenceView<S, Eigen::Dynamic> J_drivers;
   SequenceView<S, Eigen::Dynamic> J_point;  // [Q][P][36]: row-major 6x6 (SkinPointJacobian)
 };
+
+// Scalars of one driver column of SkinBlendOutputs::J_drivers (a row-major 6x13
+// SkinDriverJacobian) and of one point's J_point (a row-major 6x6 SkinPointJacobian).
+constexpr Index kSkinDriverJacobianSize = 6 * 13;
+constexpr Index kSkinPointJacobianSize = 6 * 6;
 
 namespace detail {
 template <class S>
@@ -65,6 +71,68 @@ inline Status check_qp_view(SequenceView<S, Dim> v, Index Q, Index P, Index dim,
   if (v.size() > 0 && v.data() == nullptr) return skin_error(name + ": null data pointer");
   return Status::ok();
 }
+
+// The shapes of skin_blend's non-empty outputs for Q query frames, P points and D driver
+// columns (the CPU validator and the CUDA launcher check the same).
+template <class S>
+inline Status check_blend_outputs(const SkinBlendOutputs<S>& out, Index Q, Index P, Index D) {
+  if (out.positions.data())
+    if (Status s = check_qp_view(out.positions, Q, P, 3, "out_positions"); !s) return s;
+  if (out.quaternions.data())
+    if (Status s = check_qp_view(out.quaternions, Q, P, 4, "out_quaternions"); !s) return s;
+  if (out.J_drivers.data())
+    if (Status s = check_qp_view(out.J_drivers, Q, P, D * kSkinDriverJacobianSize, "J_drivers"); !s)
+      return s;
+  if (out.J_point.data())
+    if (Status s = check_qp_view(out.J_point, Q, P, kSkinPointJacobianSize, "J_point"); !s)
+      return s;
+  return Status::ok();
+}
+
+// Writes element (q, p) of every requested output of `out` from the blend state st of point p
+// (reference position x, rotation qp) and its D drivers d: p', q', and the Jacobians (six rows
+// of vector-Jacobian products, skin_blend_jacobian_rows), driver columns D .. Dmax − 1 (padding)
+// zero. One function for the CPU loop (skin_blend) and the CUDA kernel (cuda/dqb.cuh).
+template <class S>
+SMG_HOST_DEVICE inline void skin_store_outputs(SkinMethod method, const SkinDriver<S>* d, Index D,
+                                               Index Dmax, const Vector3<S>& x,
+                                               const Quaternion<S>& qp,
+                                               const SkinBlendState<S>& st,
+                                               const SkinBlendOutputs<S>& out, Index q, Index p) {
+  if (out.positions.data()) {
+    S* o = out.positions.ptr(q, p);
+    for (int c = 0; c < 3; ++c) o[c] = st.position(c);
+  }
+  if (out.quaternions.data()) to_wxyz(st.rotation, out.quaternions.ptr(q, p));
+  if (out.J_drivers.data()) {
+    S* J = out.J_drivers.ptr(q, p);
+    for (Index k = D * kSkinDriverJacobianSize; k < Dmax * kSkinDriverJacobianSize; ++k) J[k] = S(0);
+  }
+  if (!out.J_drivers.data() && !out.J_point.data()) return;
+  skin_blend_jacobian_rows(
+      method, d, D, x, qp, st,
+      [&](int row, Index k, const SkinDriverGradient<S>& g) {
+        if (!out.J_drivers.data()) return;
+        // Row `row` of driver k's 6x13 block: columns x_ref, φ_ref, x_t, φ_t, weight.
+        S* J = out.J_drivers.ptr(q, p) + k * kSkinDriverJacobianSize + row * 13;
+        for (int c = 0; c < 3; ++c) {
+          J[c] = g.x_ref(c);
+          J[3 + c] = g.phi_ref(c);
+          J[6 + c] = g.x_t(c);
+          J[9 + c] = g.phi_t(c);
+        }
+        J[12] = g.weight;
+      },
+      [&](int row, const Vector3<S>& g_p, const Vector3<S>& g_phi_p) {
+        if (!out.J_point.data()) return;
+        // Row `row` of the point's 6x6 block: columns p, φ_p.
+        S* J = out.J_point.ptr(q, p) + row * 6;
+        for (int c = 0; c < 3; ++c) {
+          J[c] = g_p(c);
+          J[3 + c] = g_phi_p(c);
+        }
+      });
+}
 }  // namespace detail
 
 // Checks skin_blend's arguments: positions [T][N][3] finite; quaternions [T][N][4] finite,
@@ -76,16 +144,7 @@ template <class S>
 Status validate_skin_blend(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
                            SkinIndexView t_query, const SkinBlendOutputs<S>& out) {
   if (Status s = detail::check_skin_common(nodes, points, t_query); !s) return s;
-  const Index Q = t_query.rows(), P = points.count(), D = points.width();
-  if (out.positions.data())
-    if (Status s = detail::check_qp_view(out.positions, Q, P, 3, "out_positions"); !s) return s;
-  if (out.quaternions.data())
-    if (Status s = detail::check_qp_view(out.quaternions, Q, P, 4, "out_quaternions"); !s) return s;
-  if (out.J_drivers.data())
-    if (Status s = detail::check_qp_view(out.J_drivers, Q, P, D * 78, "J_drivers"); !s) return s;
-  if (out.J_point.data())
-    if (Status s = detail::check_qp_view(out.J_point, Q, P, 36, "J_point"); !s) return s;
-  return Status::ok();
+  return detail::check_blend_outputs(out, t_query.rows(), points.count(), points.width());
 }
 
 // Blends every point at every query frame (S6)-(S13) with options.method (DQB or LBS) and writes
@@ -119,34 +178,7 @@ void skin_blend(const SkinNodes<S>& nodes, const SkinPoints<S>& points, SkinInde
           for (Index q = 0; q < Q; ++q) {
             detail::skin_load_query(nodes, points, p, t_query(q, 0), D, d.data());
             detail::skin_blend_forward(method, d.data(), D, x, qp, st);
-            if (out.positions.data()) out.positions(q, p) = st.position;
-            if (out.quaternions.data()) to_wxyz(st.rotation, out.quaternions.ptr(q, p));
-            if (out.J_drivers.data()) {
-              S* J = out.J_drivers.ptr(q, p);
-              std::fill(J + D * 78, J + Dmax * 78, S(0));
-            }
-            if (!out.J_drivers.data() && !out.J_point.data()) continue;
-            detail::skin_blend_jacobian_rows(
-                method, d.data(), D, x, qp, st,
-                [&](int row, Index k, const SkinDriverGradient<S>& g) {
-                  if (!out.J_drivers.data()) return;
-                  S* J = out.J_drivers.ptr(q, p) + k * 78 + row * 13;
-                  for (int c = 0; c < 3; ++c) {
-                    J[c] = g.x_ref(c);
-                    J[3 + c] = g.phi_ref(c);
-                    J[6 + c] = g.x_t(c);
-                    J[9 + c] = g.phi_t(c);
-                  }
-                  J[12] = g.weight;
-                },
-                [&](int row, const Vector3<S>& g_p, const Vector3<S>& g_phi_p) {
-                  if (!out.J_point.data()) return;
-                  S* J = out.J_point.ptr(q, p) + row * 6;
-                  for (int c = 0; c < 3; ++c) {
-                    J[c] = g_p(c);
-                    J[3 + c] = g_phi_p(c);
-                  }
-                });
+            detail::skin_store_outputs(method, d.data(), D, Dmax, x, qp, st, out, q, p);
           }
         }
       },
@@ -177,6 +209,90 @@ struct SkinBlendGradients {
   TableView<S, Eigen::Dynamic> weights;   // [P][D], the weights as free inputs (see weights.hpp)
 };
 
+namespace detail {
+// The shapes of skin_blend_backward's non-empty gradient buffers for T frames, N nodes, P points
+// and D driver columns (the CPU validator and the CUDA launcher check the same).
+template <class S>
+inline Status check_blend_gradients(const SkinBlendGradients<S>& grads, Index T, Index N, Index P,
+                                    Index D) {
+  if (Status s = validate_optional_output(grads.node_positions, T, N, "grad_node_positions"); !s)
+    return s;
+  if (Status s = validate_optional_output(grads.node_rotations, T, N, "grad_node_rotations"); !s)
+    return s;
+  if (Status s = validate_optional_output(grads.node_quaternions, T, N, "grad_node_quaternions");
+      !s)
+    return s;
+  if (grads.points.data())
+    if (Status s = check_output_table<S, 3>(grads.points, P, 3, "grad_points"); !s) return s;
+  if (grads.point_rotations.data())
+    if (Status s = check_output_table<S, 3>(grads.point_rotations, P, 3, "grad_point_rotations");
+        !s)
+      return s;
+  if (grads.point_quaternions.data())
+    if (Status s = check_output_table<S, 4>(grads.point_quaternions, P, 4,
+                                            "grad_point_quaternions");
+        !s)
+      return s;
+  if (grads.weights.data())
+    if (Status s = check_output_table<S, Eigen::Dynamic>(grads.weights, P, D, "grad_weights"); !s)
+      return s;
+  return Status::ok();
+}
+}  // namespace detail
+
+namespace detail {
+// Scalars of one (point, driver) edge record of skin_blend_backward's point pass:
+// ∂L/∂x_t (3), ∂L/∂x_ref (3), ∂L/∂φ_t (3) (= −∂L/∂φ_ref).
+constexpr Index kSkinEdgeStride = 9;
+
+// The point pass of skin_blend_backward for point p at query q (frame t): loads its drivers
+// into d (scratch of points.width() entries), recomputes the blend into st, adds the point's
+// own gradients to grads (points, point_rotations, point_quaternions, weights) and writes the
+// edge record of driver k to edge(k) (kSkinEdgeStride scalars; null: not needed) for the node
+// pass. One function for the CPU loop and the CUDA kernel (cuda/dqb.cuh).
+template <class S, class Edge>
+SMG_HOST_DEVICE inline void skin_backward_point(SkinMethod method, const SkinNodes<S>& nodes,
+                                                const SkinPoints<S>& points, Index q, Index t,
+                                                Index p, const SkinBlendOutputGradients<S>& grad_out,
+                                                const SkinBlendGradients<S>& grads,
+                                                SkinDriver<S>* d, SkinBlendState<S>& st,
+                                                Edge&& edge) {
+  const Index D = skin_load_ref(nodes, points, p, true, d);
+  skin_load_query(nodes, points, p, t, D, d);
+  const Vector3<S> x = points.positions.row(p);
+  const Quaternion<S> qp = skin_point_quaternion(points.quaternions, p);
+  skin_blend_forward(method, d, D, x, qp, st);
+  Vector3<S> gp = Vector3<S>::Zero(), gr = Vector3<S>::Zero();
+  if (grad_out.positions.data()) gp = grad_out.positions(q, p);
+  if (grad_out.rotations.data()) gr = grad_out.rotations(q, p);
+  if (grad_out.quaternions.data()) {
+    // (S17): raw 4-vector -> right tangent of the unit q' (Q3).
+    const Vector4<S> qo = to_wxyz(st.rotation);
+    add_tangent_gradient_from_quaternion(qo.data(), grad_out.quaternions.ptr(q, p), gr.data());
+  }
+  Vector3<S> g_p, g_phi_p;
+  skin_blend_backward(
+      method, d, D, x, qp, st, gp, gr,
+      [&](Index k, const SkinDriverGradient<S>& g) {
+        if (grads.weights.data()) grads.weights(p, k) += g.weight;
+        S* e = edge(k);
+        if (!e) return;
+        for (int c = 0; c < 3; ++c) {
+          e[c] = g.x_t(c);
+          e[3 + c] = g.x_ref(c);
+          e[6 + c] = g.phi_t(c);
+        }
+      },
+      g_p, g_phi_p);
+  if (grads.points.data()) grads.points.row(p) += g_p;
+  if (grads.point_rotations.data()) grads.point_rotations.row(p) += g_phi_p;
+  if (grads.point_quaternions.data() && points.quaternions.rows() != 0)
+    // (S17): right tangent of q̂ = q/|q| -> raw q (Q5).
+    add_quaternion_gradient_from_tangent(points.quaternions.ptr(p), g_phi_p.data(),
+                                         grads.point_quaternions.ptr(p));
+}
+}  // namespace detail
+
 // Checks skin_blend_backward's arguments: those of skin_blend, each non-empty output gradient
 // [Q][P][3|4] finite, and each non-empty gradient buffer's shape.
 template <class S>
@@ -194,31 +310,7 @@ Status validate_skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<
   if (Status s = finite(grad_out.positions, 3, "grad_out_positions"); !s) return s;
   if (Status s = finite(grad_out.rotations, 3, "grad_out_rotations"); !s) return s;
   if (Status s = finite(grad_out.quaternions, 4, "grad_out_quaternions"); !s) return s;
-  if (grads.node_positions.data())
-    if (Status s = validate_output(grads.node_positions, T, N, "grad_node_positions"); !s) return s;
-  if (grads.node_rotations.data())
-    if (Status s = validate_output(grads.node_rotations, T, N, "grad_node_rotations"); !s) return s;
-  if (grads.node_quaternions.data())
-    if (Status s = validate_output(grads.node_quaternions, T, N, "grad_node_quaternions"); !s)
-      return s;
-  if (grads.points.data())
-    if (Status s = detail::check_output_table<S, 3>(grads.points, P, 3, "grad_points"); !s) return s;
-  if (grads.point_rotations.data())
-    if (Status s = detail::check_output_table<S, 3>(grads.point_rotations, P, 3,
-                                                    "grad_point_rotations");
-        !s)
-      return s;
-  if (grads.point_quaternions.data())
-    if (Status s = detail::check_output_table<S, 4>(grads.point_quaternions, P, 4,
-                                                    "grad_point_quaternions");
-        !s)
-      return s;
-  if (grads.weights.data())
-    if (Status s = detail::check_output_table<S, Eigen::Dynamic>(grads.weights, P, points.width(),
-                                                                 "grad_weights");
-        !s)
-      return s;
-  return Status::ok();
+  return detail::check_blend_gradients(grads, T, N, P, points.width());
 }
 
 // Backward of skin_blend (the vector-Jacobian product): adds to `grads` the gradient of a loss
@@ -252,7 +344,7 @@ void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
   const SkinMethod method = options.method;
   const bool to_nodes = grads.node_positions.data() || grads.node_rotations.data() ||
                         grads.node_quaternions.data();
-  constexpr Index kStride = 9;  // per edge: dL/dx_t (3), dL/dx_ref (3), dL/dφ_t (3) = −dL/dφ_ref
+  constexpr Index kStride = detail::kSkinEdgeStride;
   if (to_nodes) {
     ws.incidence.update(points.drivers, N);
     ws.edge_buffer.resize(ws.incidence.edges.size() * kStride);
@@ -266,42 +358,12 @@ void skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
         [&](Index begin, Index end) {
           std::vector<SkinDriver<S>> d(static_cast<std::size_t>(Dmax));
           detail::SkinBlendState<S> st;
-          for (Index p = begin; p < end; ++p) {
-            const Index D = detail::skin_load_ref(nodes, points, p, true, d.data());
-            detail::skin_load_query(nodes, points, p, t, D, d.data());
-            const Vector3<S> x = points.positions.row(p);
-            const Quaternion<S> qp = detail::skin_point_quaternion(points.quaternions, p);
-            detail::skin_blend_forward(method, d.data(), D, x, qp, st);
-            Vector3<S> gp = Vector3<S>::Zero(), gr = Vector3<S>::Zero();
-            if (grad_out.positions.data()) gp = grad_out.positions(q, p);
-            if (grad_out.rotations.data()) gr = grad_out.rotations(q, p);
-            if (grad_out.quaternions.data()) {
-              // (S17): raw 4-vector -> right tangent of the unit q' (Q3).
-              const Vector4<S> qo = to_wxyz(st.rotation);
-              add_tangent_gradient_from_quaternion(qo.data(), grad_out.quaternions.ptr(q, p),
-                                                   gr.data());
-            }
-            Vector3<S> g_p, g_phi_p;
-            detail::skin_blend_backward(
-                method, d.data(), D, x, qp, st, gp, gr,
-                [&](Index k, const SkinDriverGradient<S>& g) {
-                  if (grads.weights.data()) grads.weights(p, k) += g.weight;
-                  if (!to_nodes) return;
-                  S* e = buf + inc.slot[static_cast<std::size_t>(p * Dmax + k)] * kStride;
-                  for (int c = 0; c < 3; ++c) {
-                    e[c] = g.x_t(c);
-                    e[3 + c] = g.x_ref(c);
-                    e[6 + c] = g.phi_t(c);
-                  }
-                },
-                g_p, g_phi_p);
-            if (grads.points.data()) grads.points.row(p) += g_p;
-            if (grads.point_rotations.data()) grads.point_rotations.row(p) += g_phi_p;
-            if (grads.point_quaternions.data() && points.quaternions.rows() != 0)
-              // (S17): right tangent of q̂ = q/|q| -> raw q (Q5).
-              add_quaternion_gradient_from_tangent(points.quaternions.ptr(p), g_phi_p.data(),
-                                                   grads.point_quaternions.ptr(p));
-          }
+          for (Index p = begin; p < end; ++p)
+            detail::skin_backward_point(
+                method, nodes, points, q, t, p, grad_out, grads, d.data(), st, [&](Index k) {
+                  return to_nodes ? buf + inc.slot[static_cast<std::size_t>(p * Dmax + k)] * kStride
+                                  : nullptr;
+                });
         },
         options.parallel);
     if (!to_nodes) continue;

@@ -23,7 +23,6 @@
 
 #include <cmath>
 
-#include "smg/core/quaternion.hpp"
 #include "smg/core/scalar.hpp"
 #include "smg/core/types.hpp"
 

@@ -18,7 +18,6 @@
 
 #include "smg/core/scalar.hpp"
 #include "smg/core/types.hpp"
-#include "smg/skin/blend_point.hpp"
 
 namespace smg {
 

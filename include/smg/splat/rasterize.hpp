@@ -22,7 +22,9 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 
+#include "smg/core/scalar.hpp"
 #include "smg/core/types.hpp"
 #include "smg/splat/settings.hpp"
 #include "smg/splat/workspace.hpp"
@@ -54,20 +56,12 @@ constexpr int grad_stride(Index channels) {
 // ternary; a loop with such a branch is not vectorised. So every per-pixel choice below is
 // a bitwise select between values computed unconditionally, and exp's clamp works on bits.
 template <class S>
-struct Bits;
-template <>
-struct Bits<float> {
-  using U = std::uint32_t;
-};
-template <>
-struct Bits<double> {
-  using U = std::uint64_t;
-};
+using Bits = typename smg::detail::FloatBits<S>::Unsigned;  // S's bits as an unsigned integer
 
 // c ? a : b, bitwise.
 template <class S>
 inline S select(bool c, S a, S b) {
-  using U = typename Bits<S>::U;
+  using U = Bits<S>;
   U ua, ub;
   std::memcpy(&ua, &a, sizeof(S));
   std::memcpy(&ub, &b, sizeof(S));
@@ -80,8 +74,8 @@ inline S select(bool c, S a, S b) {
 
 // x with |x| limited to lim_bits (the bit pattern of a positive limit), sign kept.
 template <class S>
-inline S clamp_magnitude(S x, typename Bits<S>::U lim_bits) {
-  using U = typename Bits<S>::U;
+inline S clamp_magnitude(S x, Bits<S> lim_bits) {
+  using U = Bits<S>;
   constexpr U sign_bit = U(1) << (8 * sizeof(S) - 1);
   U u;
   std::memcpy(&u, &x, sizeof(S));
@@ -89,6 +83,23 @@ inline S clamp_magnitude(S x, typename Bits<S>::U lim_bits) {
   u = (u & sign_bit) | (mag < lim_bits ? mag : lim_bits);
   std::memcpy(&x, &u, sizeof(S));
   return x;
+}
+
+// 2^n from tn = n + magic, n an integer rounded by the 1.5·2^p trick (p the mantissa bits): the
+// low bits of tn − magic are n, so the exponent field n + bias is (tn − magic) + bias in integer
+// arithmetic, shifted into place. Precondition: n + bias in [1, 2·bias].
+template <class S>
+SMG_FORCE_INLINE S exp2_rounded(S tn, S magic) {
+  using U = Bits<S>;
+  constexpr int mantissa = std::numeric_limits<S>::digits - 1;        // 23 or 52
+  constexpr U bias = U(std::numeric_limits<S>::max_exponent - 1);     // 127 or 1023
+  U tb, mb;
+  std::memcpy(&tb, &tn, sizeof(S));
+  std::memcpy(&mb, &magic, sizeof(S));
+  const U bits = (tb - mb + bias) << mantissa;
+  S scale;
+  std::memcpy(&scale, &bits, sizeof(S));
+  return scale;
 }
 
 // exp(-x) for the alpha of (R10), vectorisable (a libm call is not): |x| clamped to 87
@@ -111,13 +122,7 @@ inline float exp_neg(float x) {
   p = p * r + 1.6666665459e-1f;
   p = p * r + 5.0000001201e-1f;
   const float er = p * z + r + 1.0f;
-  std::uint32_t tb, mb;
-  std::memcpy(&tb, &tn, 4);
-  std::memcpy(&mb, &magic, 4);
-  const std::uint32_t bits = (tb - mb + 127u) << 23;  // n + 127 in [1, 253]
-  float scale;
-  std::memcpy(&scale, &bits, 4);
-  return er * scale;
+  return er * exp2_rounded(tn, magic);  // n + 127 in [1, 253]
 }
 inline double exp_neg(double x) {
   x = clamp_magnitude(x, 0x4085e00000000000ull);  // 700.0
@@ -140,13 +145,7 @@ inline double exp_neg(double x) {
   p = p * r + 0.5;
   p = p * r + 1.0;
   p = p * r + 1.0;
-  std::uint64_t tb, mb;
-  std::memcpy(&tb, &tn, 8);
-  std::memcpy(&mb, &magic, 8);
-  const std::uint64_t bits = (tb - mb + 1023u) << 52;  // n + 1023 in [13, 2033]
-  double scale;
-  std::memcpy(&scale, &bits, 8);
-  return p * scale;
+  return p * exp2_rounded(tn, magic);  // n + 1023 in [13, 2033]
 }
 
 // sigma of (R9) with the per-row terms c dy², b dy hoisted; forward and backward call this one
@@ -203,6 +202,15 @@ inline void lane_groups(const S* rec, S dy, int x0, int* g0, int* g1) {
   const int l1 = hi <= S(0) ? 0 : (hi >= S(W) ? W : static_cast<int>(hi));
   *g0 = l0 / kGroup;
   *g1 = (l1 + kGroup - 1) / kGroup;
+}
+
+// Row r of a Gaussian's footprint in the tile at (x0, y0): returns dy = mean_y − (y0 + r + 0.5),
+// the vertical offset of the row's pixel centres in (R9), and the lane groups [g0, g1) it covers.
+template <class S, int W>
+SMG_FORCE_INLINE S footprint_row(const S* rec, S my, int y0, int r, int x0, int* g0, int* g1) {
+  const S dy = my - (S(y0 + r) + S(0.5));
+  lane_groups<S, W>(rec, dy, x0, g0, g1);
+  return dy;
 }
 
 // Scratch of one tile (per parallel chunk), in S values.
@@ -293,6 +301,7 @@ void forward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index 
       for (int p = 0; p < WW; ++p) any = any || T[p] > S(0);
       if (!any) break;
     }
+    const S irel = S(i - begin);
     if (i + kPrefetchAhead < end)
       prefetch(ws.proj.data() + Index(ws.tile_gauss[i + kPrefetchAhead]) * stride);
     const S* rec = ws.proj.data() + Index(ws.tile_gauss[i]) * stride;
@@ -301,11 +310,9 @@ void forward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index 
     const S* col = rec + kRecordFields;
     int r0, r1;
     row_range(my, rec[kExtY], y0, wy, &r0, &r1);
-    const S irel = S(i - begin);
     for (int r = r0; r <= r1; ++r) {
-      const S dy = my - (S(y0 + r) + S(0.5));
       int g0, g1;
-      lane_groups<S, W>(rec, dy, x0, &g0, &g1);
+      const S dy = footprint_row<S, W>(rec, my, y0, r, x0, &g0, &g1);
       const S cdy2 = c * dy * dy, bdy = b * dy;
       const int row = r * W;
       for (int gq = g0; gq < g1; ++gq) {
@@ -500,6 +507,7 @@ void backward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index
   const int nfields = kGradFields + nc;
 
   for (std::int64_t i = begin; i <= max_last; ++i) {
+    const S irel = S(i - begin);
     if (i + kPrefetchAhead <= max_last)
       prefetch(ws.proj.data() + Index(ws.tile_gauss[i + kPrefetchAhead]) * stride);
     const S* rec = ws.proj.data() + Index(ws.tile_gauss[i]) * stride;
@@ -509,11 +517,9 @@ void backward_tile(const TileContext<S, C, W>& cx, RenderWorkspace<S>& ws, Index
     for (int k = 0; k < nfields * kGroup; ++k) lg[k] = S(0);
     int r0, r1;
     row_range(my, rec[kExtY], y0, wy, &r0, &r1);
-    const S irel = S(i - begin);
     for (int r = r0; r <= r1; ++r) {
-      const S dy = my - (S(y0 + r) + S(0.5));
       int g0, g1;
-      lane_groups<S, W>(rec, dy, x0, &g0, &g1);
+      const S dy = footprint_row<S, W>(rec, my, y0, r, x0, &g0, &g1);
       if (g0 >= g1) continue;
       const S cdy2 = c * dy * dy, bdy = b * dy;
       const int row = r * W;

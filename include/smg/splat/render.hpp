@@ -145,9 +145,11 @@ void project_all(const GaussianParams<S>& params, const Camera<S>& cam,
       par);
 }
 
-template <int C, int W, class S>
-void rasterize_forward_all(const SplatSettings<S>& set, RenderWorkspace<S>& ws,
-                           const RenderImages<S>& out, ParallelOptions par) {
+// Runs tile(cx, t, scratch) for every tile t of the image, in parallel chunks of tiles whose
+// size depends only on the tile count (deterministic), each chunk with its own scratch.
+template <int C, int W, class S, class Tile>
+void for_each_tile(const SplatSettings<S>& set, RenderWorkspace<S>& ws, ParallelOptions par,
+                   Tile&& tile) {
   const Index tiles = Index(ws.tiles_x) * ws.tiles_y;
   const Index grain = tile_grain(tiles);
   const Index per_chunk = tile_scratch_size<W>(ws.channels);
@@ -159,33 +161,28 @@ void rasterize_forward_all(const SplatSettings<S>& set, RenderWorkspace<S>& ws,
       tiles,
       [&](Index chunk, Index begin, Index end) {
         S* scratch = ws.scratch.data() + chunk * per_chunk;
-        for (Index t = begin; t < end; ++t)
-          forward_tile<S, C, W>(cx, ws, t, scratch, out.image.data(), out.alpha.data(),
-                                out.depth.data());
+        for (Index t = begin; t < end; ++t) tile(cx, t, scratch);
       },
       p);
 }
 
 template <int C, int W, class S>
+void rasterize_forward_all(const SplatSettings<S>& set, RenderWorkspace<S>& ws,
+                           const RenderImages<S>& out, ParallelOptions par) {
+  for_each_tile<C, W>(set, ws, par, [&](const TileContext<S, C, W>& cx, Index t, S* scratch) {
+    forward_tile<S, C, W>(cx, ws, t, scratch, out.image.data(), out.alpha.data(),
+                          out.depth.data());
+  });
+}
+
+template <int C, int W, class S>
 void rasterize_backward_all(const SplatSettings<S>& set, RenderWorkspace<S>& ws,
                             const RenderImageGrads<S>& gin, ParallelOptions par) {
-  const Index tiles = Index(ws.tiles_x) * ws.tiles_y;
-  const Index grain = tile_grain(tiles);
-  const Index per_chunk = tile_scratch_size<W>(ws.channels);
-  ws.scratch.resize(static_cast<std::size_t>(parallel_chunk_count(tiles, grain) * per_chunk));
   ws.isect_grad.resize(static_cast<std::size_t>(ws.n_isect * grad_stride<C>(ws.channels)));
-  const TileContext<S, C, W> cx{&ws, ws.channels, set.alpha_max, set.background};
-  ParallelOptions p = par;
-  p.grain = grain;
-  parallel_for_chunks(
-      tiles,
-      [&](Index chunk, Index begin, Index end) {
-        S* scratch = ws.scratch.data() + chunk * per_chunk;
-        for (Index t = begin; t < end; ++t)
-          backward_tile<S, C, W>(cx, ws, t, scratch, gin.image.data(), gin.alpha.data(),
-                                 gin.depth.data());
-      },
-      p);
+  for_each_tile<C, W>(set, ws, par, [&](const TileContext<S, C, W>& cx, Index t, S* scratch) {
+    backward_tile<S, C, W>(cx, ws, t, scratch, gin.image.data(), gin.alpha.data(),
+                           gin.depth.data());
+  });
 }
 
 }  // inline namespace SMG_ISA_NAMESPACE
