@@ -18,10 +18,22 @@ cppcheck --quiet --error-exitcode=1 --std=c++17 --language=c++ --inline-suppr \
   include examples
 
 echo "== clang-tidy"
-# One clang-tidy per translation unit, nproc at a time; each file's findings are printed as one
-# block (captured, so parallel runs do not interleave).
+# One clang-tidy per translation unit of the build, nproc at a time; each file's findings are
+# printed as one block (captured, so parallel runs do not interleave). The translation units are
+# those of compile_commands.json: every example source, and one unity file per test folder
+# (SMG_UNITY_TESTS, tests/CMakeLists.txt) that includes each of the folder's test files, so every
+# test file is checked in the same compiler run the build makes; --header-filter adds tests/ so
+# that findings in those included files are reported like findings in a main file.
 # examples/torch (the PyTorch extension) is left out: it is not configured here (torch optional).
-find tests examples -name '*.cpp' -not -path 'tests/consumer/*' -not -path 'examples/torch/*' | sort |
-  xargs -P "$(nproc)" -I{} bash -c '
-    out=$(clang-tidy -p "$1" --quiet --extra-arg=-std=c++17 "$2" 2>/dev/null) && exit 0
-    printf "%s\nclang-tidy: findings in %s\n" "$out" "$2"; exit 1' _ "$build" {}
+/usr/bin/env python3 - "$build/compile_commands.json" > "$build/lint_files.txt" <<'PY'
+import json, os, sys
+for f in sorted({os.path.normpath(e["file"]) for e in json.load(open(sys.argv[1]))}):
+    if "/tests/consumer/" not in f and "/examples/torch/" not in f:
+        print(f)
+PY
+[ -s "$build/lint_files.txt" ] || { echo "lint: no translation units in $build/compile_commands.json" >&2; exit 1; }
+echo "clang-tidy: $(wc -l < "$build/lint_files.txt") translation units"
+xargs -P "$(nproc)" -I{} bash -c '
+    out=$(clang-tidy -p "$1" --quiet --extra-arg=-std=c++17 \
+          --header-filter=".*/(include/smg|examples|tests)/.*" "$2" 2>/dev/null) && exit 0
+    printf "%s\nclang-tidy: findings in %s\n" "$out" "$2"; exit 1' _ "$build" {} < "$build/lint_files.txt"

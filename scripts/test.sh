@@ -25,8 +25,11 @@ scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb
 jobs=$(nproc)
 if [ "$mode" = asan ]; then
   build=${SMG_BUILD_DIR:-build/asan}
-  cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSMG_WERROR=ON -DSMG_SANITIZE=ON \
-        -DSMG_BUILD_BENCH=OFF -DSMG_BUILD_TORCH=OFF -DSMG_BUILD_CUDA=OFF
+  # -O1 -g1: the sanitizers need some optimisation to run the tests at speed, but -O2 -g made this
+  # build 2.4x slower to compile (216 against 89 CPU-seconds for tests/energy/test_autodiff.cpp);
+  # -g1 keeps the file:line of every frame in a sanitizer report.
+  cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
+        -DSMG_WERROR=ON -DSMG_SANITIZE=ON -DSMG_BUILD_BENCH=OFF -DSMG_BUILD_TORCH=OFF -DSMG_BUILD_CUDA=OFF
   export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1}
   export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 else
