@@ -14,7 +14,7 @@ using smg::test::relative_error;
 TEST_CASE("DQB backward: raw node-quaternion gradient agrees with central differences") {
   SMG_TEST_RNG(rng, 303);
   const Index T = 3, N = 6, K = 3, P = 5, Q = 2;
-  smg::test::Scene s = smg::test::random_scene(rng, T, N, K, P);
+  smg::test::SkinScene s = smg::test::random_scene(rng, T, N, K, P);
   const Index D = K + 1;
   std::vector<std::int32_t> drivers(P * D), tq = {0, 2};
   smg::NeighborsView<double> g(s.graph_idx.data(), s.graph_w.data(), N, K);

@@ -76,7 +76,7 @@ std::string shell_quote(const std::string& s) {
 
 #ifdef SMG_CLI_PATH
 using Run = smg::test::ProgramRun;
-Run run_cli(const std::string& args, const std::string& env = "") {
+Run run_cli_env(const std::string& args, const std::string& env = "") {
   smg::test::RunOptions o;
   o.env = env;
   o.timeout_s = 20;  // a regression that blocks (a FIFO input) fails the case instead of hanging ctest
@@ -384,7 +384,7 @@ TEST_CASE("smg_cli robustness: malformed inputs give one error line, exit code 2
     cs.setup(c);
     const auto before = snapshot(c.root);
     const bool writes = cs.sub != "check";
-    const Run r = run_cli(cs.sub + " " + shell_quote(c.case_dir.string()) + (writes ? " " + shell_quote(c.out.string()) : "") +
+    const Run r = run_cli_env(cs.sub + " " + shell_quote(c.case_dir.string()) + (writes ? " " + shell_quote(c.out.string()) : "") +
                               " " + cs.args,
                           cs.env);
     CAPTURE(r.err);
@@ -434,7 +434,7 @@ TEST_CASE("smg_cli outputs: planted symlinks at staging names are never followed
                         ".features.npy.partial", ".smg_stage.XXXXXX", ".smg_stage.000000"})
     fs::create_symlink(root / "victim", out / f);
   write_bytes(out / "graph_indices.npy", "old");
-  Run r = run_cli("graph " + shell_quote(case_dir.string()) + " " + shell_quote(out.string()) + " --k 4");
+  Run r = run_cli_env("graph " + shell_quote(case_dir.string()) + " " + shell_quote(out.string()) + " --k 4");
   CAPTURE(r.err);
   REQUIRE(r.code == 0);
   CHECK(slurp(root / "victim") == "victim file\n");
@@ -451,7 +451,7 @@ TEST_CASE("smg_cli outputs: planted symlinks at staging names are never followed
   }
   // A new OUT with new parents appears complete; nothing else is left in its parent.
   const fs::path nested = root / "a" / "b" / "out";
-  r = run_cli("graph " + shell_quote(case_dir.string()) + " " + shell_quote(nested.string()) + " --k 4");
+  r = run_cli_env("graph " + shell_quote(case_dir.string()) + " " + shell_quote(nested.string()) + " --k 4");
   REQUIRE(r.code == 0);
   CHECK(fs::exists(nested / "graph_indices.npy"));
   std::vector<std::string> in_parent;
@@ -459,7 +459,7 @@ TEST_CASE("smg_cli outputs: planted symlinks at staging names are never followed
   CHECK(in_parent == std::vector<std::string>{"out"});
   // Replacing existing outputs keeps user files and leaves no backup behind.
   write_bytes(nested / "notes.txt", "mine");
-  r = run_cli("graph " + shell_quote(case_dir.string()) + " " + shell_quote(nested.string()) + " --k 4");
+  r = run_cli_env("graph " + shell_quote(case_dir.string()) + " " + shell_quote(nested.string()) + " --k 4");
   REQUIRE(r.code == 0);
   CHECK(slurp(nested / "notes.txt") == "mine");
   int entries = 0;
@@ -469,7 +469,7 @@ TEST_CASE("smg_cli outputs: planted symlinks at staging names are never followed
   }
   CHECK(entries == 5);
   // OUT given with a trailing slash.
-  r = run_cli("graph " + shell_quote(case_dir.string()) + " " + shell_quote((root / "t" / "out").string() + "/") + " --k 4");
+  r = run_cli_env("graph " + shell_quote(case_dir.string()) + " " + shell_quote((root / "t" / "out").string() + "/") + " --k 4");
   CHECK(r.code == 0);
   CHECK(fs::exists(root / "t" / "out" / "graph_indices.npy"));
   fs::remove_all(root);

@@ -28,7 +28,7 @@ fs::path temp_dir(const std::string& name) {
 }
 using smg::test::write_bytes;
 std::string read_bytes(const fs::path& p) { return smg::test::slurp(p); }
-std::string error_of(const std::string& path) {
+std::string npy_error_of(const std::string& path) {
   return smg::test::error_message<npy::Error>([&] { npy::read(path); });
 }
 // A v1.0 file exactly as numpy.save writes it (header padded with spaces to 64 bytes, '\n').
@@ -112,37 +112,37 @@ TEST_CASE("npy errors: corrupt, truncated and unsupported files name the file an
   const std::string data16(16, '\0');
   auto path = [&](const char* n) { return (dir / n).string(); };
 
-  CHECK(error_of(path("missing.npy")) == path("missing.npy") + ": cannot open");
+  CHECK(npy_error_of(path("missing.npy")) == path("missing.npy") + ": cannot open");
   write_bytes(dir / "magic.npy", "PK\x03\x04 this is a zip");
-  CHECK(error_of(path("magic.npy")) == path("magic.npy") + ": not an .npy file (bad magic)");
+  CHECK(npy_error_of(path("magic.npy")) == path("magic.npy") + ": not an .npy file (bad magic)");
   write_bytes(dir / "short.npy", "\x93NUM");
-  CHECK(error_of(path("short.npy")) == path("short.npy") + ": truncated (no npy preamble)");
+  CHECK(npy_error_of(path("short.npy")) == path("short.npy") + ": truncated (no npy preamble)");
   const std::string full = numpy_file(ok_dict, data16);
   write_bytes(dir / "trunc_header.npy", full.substr(0, 40));
-  CHECK(error_of(path("trunc_header.npy")) == path("trunc_header.npy") + ": truncated header");
+  CHECK(npy_error_of(path("trunc_header.npy")) == path("trunc_header.npy") + ": truncated header");
   write_bytes(dir / "trunc_data.npy", full.substr(0, full.size() - 3));
-  CHECK(error_of(path("trunc_data.npy")) ==
+  CHECK(npy_error_of(path("trunc_data.npy")) ==
         path("trunc_data.npy") + ": truncated data (13 of 16 bytes for shape [2])");
   write_bytes(dir / "long.npy", full + "xx");
-  CHECK(error_of(path("long.npy")) ==
+  CHECK(npy_error_of(path("long.npy")) ==
         path("long.npy") + ": corrupt file (2 bytes after the data of shape [2])");
   write_bytes(dir / "fortran.npy",
               numpy_file("{'descr': '<f8', 'fortran_order': True, 'shape': (2,), }", data16));
-  CHECK(error_of(path("fortran.npy")) ==
+  CHECK(npy_error_of(path("fortran.npy")) ==
         path("fortran.npy") + ": Fortran-order arrays are not supported (save C-order)");
   write_bytes(dir / "big.npy", numpy_file("{'descr': '>f8', 'fortran_order': False, 'shape': (2,), }", data16));
-  CHECK(error_of(path("big.npy")) ==
+  CHECK(npy_error_of(path("big.npy")) ==
         path("big.npy") + ": big-endian dtype >f8 is not supported (use little-endian)");
   write_bytes(dir / "complex.npy", numpy_file("{'descr': '<c8', 'fortran_order': False, 'shape': (2,), }", data16));
-  CHECK(error_of(path("complex.npy")).find("unsupported dtype <c8") != std::string::npos);
+  CHECK(npy_error_of(path("complex.npy")).find("unsupported dtype <c8") != std::string::npos);
   write_bytes(dir / "noshape.npy", numpy_file("{'descr': '<f8', 'fortran_order': False, }", data16));
-  CHECK(error_of(path("noshape.npy")) == path("noshape.npy") + ": corrupt header (no 'shape')");
+  CHECK(npy_error_of(path("noshape.npy")) == path("noshape.npy") + ": corrupt header (no 'shape')");
   write_bytes(dir / "badshape.npy", numpy_file("{'descr': '<f8', 'fortran_order': False, 'shape': (2, x), }", data16));
-  CHECK(error_of(path("badshape.npy")).find("corrupt header (shape") != std::string::npos);
+  CHECK(npy_error_of(path("badshape.npy")).find("corrupt header (shape") != std::string::npos);
   write_bytes(dir / "badbool.npy", numpy_file("{'descr': '|b1', 'fortran_order': False, 'shape': (2,), }", "\x01\x07"));
-  CHECK(error_of(path("badbool.npy")) == path("badbool.npy") + ": corrupt bool data (byte value 7)");
+  CHECK(npy_error_of(path("badbool.npy")) == path("badbool.npy") + ": corrupt bool data (byte value 7)");
   write_bytes(dir / "v9.npy", std::string("\x93NUMPY\x09\x00", 8) + std::string(60, ' '));
-  CHECK(error_of(path("v9.npy")) == path("v9.npy") + ": unsupported npy version 9");
+  CHECK(npy_error_of(path("v9.npy")) == path("v9.npy") + ": unsupported npy version 9");
   fs::remove_all(dir);
 }
 

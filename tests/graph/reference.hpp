@@ -40,7 +40,7 @@ Trajectories<S> scene_trajectories(Index nodes, Index frames, std::uint64_t seed
   so.nodes = nodes;
   so.frames = frames;
   so.seed = seed;
-  Scene<S> sc = make_scene<S>(so);
+  GraphScene<S> sc = make_scene<S>(so);
   Trajectories<S> tr;
   tr.T = sc.T;
   tr.N = sc.N;

@@ -29,7 +29,7 @@ struct SceneOptions {
 };
 
 template <class S>
-struct Scene {
+struct GraphScene {
   Index T = 0, N = 0, C = 0;
   std::vector<S> positions;            // [T][N][3]
   std::vector<std::uint8_t> visibility;  // [T][N]
@@ -39,8 +39,8 @@ struct Scene {
 };
 
 template <class S>
-Scene<S> make_scene(const SceneOptions& o) {
-  Scene<S> sc;
+GraphScene<S> make_scene(const SceneOptions& o) {
+  GraphScene<S> sc;
   sc.T = o.frames;
   sc.N = o.nodes;
   sc.C = o.channels;

@@ -27,7 +27,7 @@ Run run_cli(const std::string& args) { return smg::test::run_program(SMG_CLI_PAT
 
 struct Case {
   fs::path dir;
-  smg::test::Scene<double> scene;
+  smg::test::GraphScene<double> scene;
 };
 
 // A small scene of moving objects; the feature file written is chosen by `features`:

@@ -134,7 +134,7 @@ Eigen::VectorXd fd_flat(std::vector<double>& x, const std::function<double()>& L
   return Eigen::Map<const Eigen::VectorXd>(g.data(), static_cast<Eigen::Index>(g.size()));
 }
 
-Eigen::VectorXd as_vector(const std::vector<double>& v) {
+Eigen::VectorXd rg_as_vector(const std::vector<double>& v) {
   return Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size()));
 }
 
@@ -195,7 +195,7 @@ TEST_CASE("ModelRenderer<double>: backward matches finite differences (Gaussians
       const std::string group = gr.name;
       CAPTURE(group);
       const Eigen::VectorXd fd = fd_flat(*gr.x, L);
-      const Eigen::VectorXd an = as_vector(*gr.g);
+      const Eigen::VectorXd an = rg_as_vector(*gr.g);
       // Static and dynamic rows separately, so that one cannot hide the other.
       const Eigen::Index split = static_cast<Eigen::Index>(kStatic) * gr.width;
       const Eigen::VectorXd fd_s = fd.head(split), fd_d = fd.tail(fd.size() - split);
@@ -213,7 +213,7 @@ TEST_CASE("ModelRenderer<double>: backward matches finite differences (Gaussians
       const auto set = [&](const Eigen::Quaterniond& q) { smg::to_wxyz(q, n.rotations.data() + 4 * s); };
       for (int k = 0; k < 3; ++k) fd_q(3 * s + k) = smg::test::central_difference_tangent(q0, k, set, L);
     }
-    const Eigen::VectorXd an_x = as_vector(grads.node_positions), an_q = as_vector(grads.node_rotations);
+    const Eigen::VectorXd an_x = rg_as_vector(grads.node_positions), an_q = rg_as_vector(grads.node_rotations);
     // Per frame: the rendered frame (2) and both reference frames (0, 1) must carry gradient.
     for (int t = 0; t < kT; ++t) {
       CAPTURE(t);
@@ -311,7 +311,7 @@ TEST_CASE("ModelRenderer<float> agrees with ModelRenderer<double> (image, depth,
   const auto rel = [](const std::vector<float>& a, const std::vector<double>& b) {
     Eigen::VectorXd x(static_cast<Eigen::Index>(a.size()));
     for (std::size_t k = 0; k < a.size(); ++k) x(static_cast<Eigen::Index>(k)) = a[k];
-    return smg::test::relative_error(x, as_vector(b));
+    return smg::test::relative_error(x, rg_as_vector(b));
   };
   CHECK(rel(image_f, image) < 1e-5);
   CHECK(rel(depth_f, depth) < 1e-5);

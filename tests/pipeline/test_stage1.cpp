@@ -43,7 +43,7 @@ trainer::Nodes initial_nodes(const QuickStage0& q, bool semantic_graph, const sm
   return nodes;
 }
 
-const trainer::Progress& silent() {
+const trainer::Progress& stage1_silent() {
   static const trainer::Progress p(nullptr, true);
   return p;
 }
@@ -59,7 +59,7 @@ TEST_CASE("stage 1 (full variant, quick scene): node EPE below the lifted EPE") 
   REQUIRE(nodes.count > 10);
   const trainer::TrackMetrics lifted = trainer::track_metrics(q.data.scene, nodes);
   trainer::NodeObjective objective(c.variant, c.node_loss, par);
-  const trainer::Stage1Result r = trainer::fit_nodes(nodes, objective, c.stage1, silent());
+  const trainer::Stage1Result r = trainer::fit_nodes(nodes, objective, c.stage1, stage1_silent());
   const trainer::TrackMetrics fitted = trainer::track_metrics(q.data.scene, nodes);
   CAPTURE(nodes.count);
   CAPTURE(lifted.all.epe);
@@ -101,7 +101,7 @@ TEST_CASE("stage 1 (base variant): observed samples stay at their lifted value")
   trainer::Stage1Options s1 = c.stage1;
   s1.iterations = 100;
   trainer::NodeObjective objective(c.variant, c.node_loss, par);
-  const trainer::Stage1Result r = trainer::fit_nodes(nodes, objective, s1, silent());
+  const trainer::Stage1Result r = trainer::fit_nodes(nodes, objective, s1, stage1_silent());
   CHECK(r.final.rigidity == 0.0);
   CHECK(r.final.lrm == 0.0);
   double worst = 0;
@@ -130,7 +130,7 @@ TEST_CASE("stage 0 + stage 1 are bit-identical for 1, 2 and 7 threads") {
     const smg::ParallelOptions par{threads, 0};
     trainer::Nodes nodes = initial_nodes(q, c.variant.semantic_graph, par);
     trainer::NodeObjective objective(c.variant, c.node_loss, par);
-    trainer::fit_nodes(nodes, objective, s1, silent());
+    trainer::fit_nodes(nodes, objective, s1, stage1_silent());
     positions.push_back(nodes.positions);
     rotations.push_back(nodes.rotations);
     graphs.push_back(nodes.graph.indices);

@@ -113,14 +113,14 @@ inline Eigen::MatrixXd fd_point_jacobian(SkinMethod m, const Drivers& d, const V
 // A small random scene for the batched functions: T frames, N nodes (random poses, quaternions
 // deliberately not unit, to exercise normalisation on entry), a random graph with K neighbours
 // (some rows short), P points anchored near random nodes.
-struct Scene {
+struct SkinScene {
   Index T = 0, N = 0, K = 0, P = 0;
   std::vector<double> positions, quats, graph_w, points, point_quats, sigma;
   std::vector<std::int32_t> graph_idx, anchor, t_ref;
 };
 
-inline Scene random_scene(Rng& rng, Index T, Index N, Index K, Index P) {
-  Scene s;
+inline SkinScene random_scene(Rng& rng, Index T, Index N, Index K, Index P) {
+  SkinScene s;
   s.T = T;
   s.N = N;
   s.K = K;

@@ -13,15 +13,15 @@
 #include "support/prelude.hpp"
 
 using smg::SkinMethod;
-using smg::test::Scene;
+using smg::test::SkinScene;
 
 namespace {
 
 constexpr SkinMethod kMethods[] = {SkinMethod::dqb, SkinMethod::lbs};
 
-// Everything derived from a Scene: drivers, weights, views.
+// Everything derived from a SkinScene: drivers, weights, views.
 struct Setup {
-  Scene s;
+  SkinScene s;
   Index D = 0, Q = 0;
   std::vector<std::int32_t> drivers, t_query;
   std::vector<double> weights;

@@ -11,7 +11,7 @@ using smg::SkinMethod;
 using smg::test::Drivers;
 
 namespace {
-constexpr SkinMethod kMethods[] = {SkinMethod::dqb, SkinMethod::lbs};
+constexpr SkinMethod kPointMethods[] = {SkinMethod::dqb, SkinMethod::lbs};
 
 void blend(SkinMethod m, const Drivers& d, const Vector3<double>& p, const Quaternion<double>& qp,
            Vector3<double>* po, Quaternion<double>* qo) {
@@ -55,7 +55,7 @@ TEST_CASE("all drivers with the same motion give exactly that motion") {
     }
     const Vector3<double> p = rng.vec3(3);
     const Quaternion<double> qp = rng.quaternion();
-    for (SkinMethod m : kMethods) {
+    for (SkinMethod m : kPointMethods) {
       const std::string method_name = smg::to_string(m);
       CAPTURE(method_name);
       Vector3<double> po;
@@ -78,7 +78,7 @@ TEST_CASE("a weight of 1 (others 0) gives that driver's motion") {
     const Quaternion<double> r = x.q_t * x.q_ref.conjugate();
     const Vector3<double> p = rng.vec3(3);
     const Quaternion<double> qp = rng.quaternion();
-    for (SkinMethod m : kMethods) {
+    for (SkinMethod m : kPointMethods) {
       Vector3<double> po;
       Quaternion<double> qo;
       blend(m, d, p, qp, &po, &qo);
@@ -95,7 +95,7 @@ TEST_CASE("negating any input quaternion changes nothing") {
     const Drivers d = smg::test::random_drivers(rng, D);
     const Vector3<double> p = rng.vec3(3);
     const Quaternion<double> qp = rng.quaternion();
-    for (SkinMethod m : kMethods) {
+    for (SkinMethod m : kPointMethods) {
       Vector3<double> p0;
       Quaternion<double> q0;
       smg::SkinDriverJacobian<double> J0[8], J1[8];
@@ -134,7 +134,7 @@ TEST_CASE("Jacobians of DQB and LBS against central differences") {
     const Drivers d = smg::test::random_drivers(rng, D);
     const Vector3<double> p = rng.vec3(3);
     const Quaternion<double> qp = rng.quaternion();
-    for (SkinMethod m : kMethods) {
+    for (SkinMethod m : kPointMethods) {
       const std::string method_name = smg::to_string(m);
       CAPTURE(method_name);
       smg::SkinDriverJacobian<double> J[6];
@@ -173,7 +173,7 @@ TEST_CASE("Jacobians against AutoDiffScalar") {
     const Vector3<double> p = rng.vec3(3);
     const Quaternion<double> qp = rng.quaternion();
     const Index n = D * 13 + 6;
-    for (SkinMethod m : kMethods) {
+    for (SkinMethod m : kPointMethods) {
       const std::string method_name = smg::to_string(m);
       CAPTURE(method_name);
       // Every input as base ⊕ AD variable (rotations: q ⊗ Exp(φ) at φ = 0).
@@ -219,7 +219,7 @@ TEST_CASE("the vector-Jacobian product equals Jᵀ g") {
     const Quaternion<double> qp = rng.quaternion();
     Eigen::Matrix<double, 6, 1> g;
     g << gp, gr;
-    for (SkinMethod m : kMethods) {
+    for (SkinMethod m : kPointMethods) {
       smg::SkinDriverJacobian<double> J[8];
       smg::SkinPointJacobian<double> Jp;
       smg::skin_point(m, d.data(), D, p, qp, nullptr, nullptr, J, &Jp);
@@ -254,7 +254,7 @@ TEST_CASE("float against double: values and Jacobians") {
     }
     const Vector3<double> p = rng.vec3(3);
     const Quaternion<double> qp = rng.quaternion();
-    for (SkinMethod m : kMethods) {
+    for (SkinMethod m : kPointMethods) {
       Vector3<double> pd;
       Quaternion<double> qd;
       smg::SkinDriverJacobian<double> Jd[8];

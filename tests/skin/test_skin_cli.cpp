@@ -23,7 +23,7 @@ using Run = smg::test::ProgramRun;
 Run run_cli(const std::string& args) { return smg::test::run_program(SMG_CLI_PATH, args, "smg_test_skin_cli_io"); }
 
 struct CliCase {
-  smg::test::Scene s;
+  smg::test::SkinScene s;
   std::vector<std::int32_t> t_query;
   fs::path dir;
 };

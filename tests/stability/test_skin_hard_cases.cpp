@@ -122,7 +122,7 @@ TEST_CASE("the blend's real part never vanishes: |b_r| >= max weight (sign align
 
 TEST_CASE("a node without neighbours drives its points alone; zero-weight drivers add nothing") {
   SMG_TEST_RNG(rng, 533);
-  smg::test::Scene s = smg::test::random_scene(rng, 2, 6, 3, 12);
+  smg::test::SkinScene s = smg::test::random_scene(rng, 2, 6, 3, 12);
   for (auto& v : s.graph_idx) v = -1;  // every node isolated
   for (auto& v : s.graph_w) v = 0;
   const Index D = 4;
@@ -201,7 +201,7 @@ TEST_CASE("huge and tiny coordinates: relative accuracy and translation covarian
 
 TEST_CASE("far points: weights underflow without NaN; the blend stays defined") {
   SMG_TEST_RNG(rng, 535);
-  smg::test::Scene s = smg::test::random_scene(rng, 2, 8, 3, 20);
+  smg::test::SkinScene s = smg::test::random_scene(rng, 2, 8, 3, 20);
   for (auto& x : s.points) x += 1e4;  // thousands of sigmas away from every node
   const Index D = 4;
   std::vector<std::int32_t> drivers(s.P * D);
@@ -237,21 +237,21 @@ TEST_CASE("far points: weights underflow without NaN; the blend stays defined") 
 
 TEST_CASE("NaN and Inf inputs are rejected by validation, naming the argument") {
   SMG_TEST_RNG(rng, 536);
-  smg::test::Scene s = smg::test::random_scene(rng, 2, 5, 2, 4);
+  smg::test::SkinScene s = smg::test::random_scene(rng, 2, 5, 2, 4);
   const Index D = 3;
   std::vector<std::int32_t> drivers(s.P * D);
   smg::skin_drivers(smg::NeighborsView<double>(s.graph_idx.data(), s.graph_w.data(), s.N, s.K),
                     {s.anchor.data(), s.P}, {drivers.data(), s.P, D});
   std::vector<double> w(s.P * D);
   const double inf = std::numeric_limits<double>::infinity();
-  auto weights_msg = [&](const smg::test::Scene& v) {
+  auto weights_msg = [&](const smg::test::SkinScene& v) {
     return smg::validate_skinning_weights<double>(
                {v.positions.data(), v.T, v.N}, {drivers.data(), v.P, D}, {v.t_ref.data(), v.P},
                {v.points.data(), v.P}, {v.sigma.data(), v.N}, {w.data(), v.P, D})
         .message();
   };
   CHECK(weights_msg(s).empty());
-  smg::test::Scene v = s;
+  smg::test::SkinScene v = s;
   v.sigma[1] = inf;
   CHECK(weights_msg(v) == "sigma: element [1] is Inf");
   v = s;

@@ -22,7 +22,7 @@ namespace {
 double logit(double o) { return std::log(o / (1 - o)); }
 
 template <class S>
-bool all_finite(const std::vector<S>& v) {
+bool splat_all_finite(const std::vector<S>& v) {
   for (const S& x : v)
     if (!std::isfinite(x)) return false;
   return true;
@@ -47,11 +47,11 @@ Cull render_one(const Camera<S>& cam, const Vector3<double>& mean, const Vector3
   const auto r = test::render<3>(s, cam, set, ws);
   const auto w = test::random_weights(rng, cam.height, cam.width, 3);
   const auto g = test::backward<3>(s, cam, set, ws, w);
-  CHECK(all_finite(r.image));
-  CHECK(all_finite(r.alpha));
-  CHECK(all_finite(r.depth));
-  CHECK(all_finite(g.flat()));
-  CHECK(all_finite(g.quats_tangent));
+  CHECK(splat_all_finite(r.image));
+  CHECK(splat_all_finite(r.alpha));
+  CHECK(splat_all_finite(r.depth));
+  CHECK(splat_all_finite(g.flat()));
+  CHECK(splat_all_finite(g.quats_tangent));
   const Cull c = static_cast<Cull>(ws.cull[0]);
   if (c != Cull::none) {
     CHECK(ws.radii[0] == S(0));

@@ -16,7 +16,7 @@ using trainer::Image;
 namespace fs = std::filesystem;
 
 namespace {
-fs::path temp_dir() {
+fs::path image_temp_dir() {
   const fs::path d = fs::temp_directory_path() / "smg_test_trainer_image_io";
   fs::create_directories(d);
   return d;
@@ -36,7 +36,7 @@ TEST_CASE("write_png round-trips 8-bit values for 1, 3 and 4 channels; values ar
     Image im = gradient(37, 23, c);
     im.at(0, 0, 0) = 1.7f;   // clamped to 255
     im.at(1, 0, 0) = -0.3f;  // clamped to 0
-    const std::string path = (temp_dir() / ("g" + std::to_string(c) + ".png")).string();
+    const std::string path = (image_temp_dir() / ("g" + std::to_string(c) + ".png")).string();
     trainer::write_png(path, im);
     int w = 0, h = 0, n = 0;
     unsigned char* data = stbi_load(path.c_str(), &w, &h, &n, 0);
@@ -59,12 +59,12 @@ TEST_CASE("write_png round-trips 8-bit values for 1, 3 and 4 channels; values ar
 }
 
 TEST_CASE("write_png: a path that cannot be written throws, naming it") {
-  const fs::path file = temp_dir() / "plain_file";
+  const fs::path file = image_temp_dir() / "plain_file";
   std::ofstream(file) << "x";
   const std::string bad = (file / "sub.png").string();
   CHECK_THROWS_WITH_AS(trainer::write_png(bad, gradient(4, 4, 3)), ("cannot write PNG '" + bad + "'").c_str(),
                        std::runtime_error);
-  CHECK_THROWS_AS(trainer::write_png((temp_dir() / "e.png").string(), Image()), std::runtime_error);
+  CHECK_THROWS_AS(trainer::write_png((image_temp_dir() / "e.png").string(), Image()), std::runtime_error);
 }
 
 TEST_CASE("hstack, vstack, grid, upscale: sizes and placement") {
