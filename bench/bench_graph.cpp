@@ -56,9 +56,9 @@ struct Key {
 };
 
 // One scene in double, kept while consecutive benchmarks use it.
-const smg::test::Scene<double>& scene(const Key& key) {
+const smg::test::GraphScene<double>& scene(const Key& key) {
   static Key cached;
-  static std::unique_ptr<smg::test::Scene<double>> sc;
+  static std::unique_ptr<smg::test::GraphScene<double>> sc;
   if (!sc || !(cached == key)) {
     sc.reset();
     smg::test::SceneOptions o;
@@ -68,7 +68,7 @@ const smg::test::Scene<double>& scene(const Key& key) {
     o.speed = key.speed;
     o.objects = 8;
     o.seed = 2024;
-    sc = std::make_unique<smg::test::Scene<double>>(smg::test::make_scene<double>(o));
+    sc = std::make_unique<smg::test::GraphScene<double>>(smg::test::make_scene<double>(o));
     cached = key;
   }
   return *sc;
