@@ -520,9 +520,10 @@ int main(int argc, char** argv) {
     std::cout << line << std::endl;
     return 0;
   } catch (const trainer::DataError& e) {
-    // A scene refused by stage 0 (--data): a data problem like those found while reading.
+    // A scene refused by stage 0 (--data): a data problem like those found while reading. (The
+    // exporter's write errors stay failures of the run.)
     std::cerr << "smg_trainer: error: " << cli::escape_line(e.what()) << "\n";
-    return 2;
+    return have_data ? 2 : 1;
   } catch (const cli::UsageError& e) {
     std::cerr << "smg_trainer: error: " << cli::escape_line(e.what()) << "\n";
     return 2;

@@ -1,6 +1,6 @@
 // Files numpy itself wrote (issue 23): np.savez_compressed / np.savez archives and Fortran-order
 // .npy files, read by trainer::files::parse_npz (zlib's inflate) and npy::read / npy::parse.
-// The checked-in fixtures (tests/data/numpy, made by make_fixtures.py there) are formulas of the
+// The checked-in fixtures (tests/data/numpy, made by make_fixtures.py there: 128 KiB in all) are formulas of the
 // C-order flat index k, recomputed here independently of any reader; the test-time archives
 // (make_random.py, where /usr/bin/python3 has numpy) are compared with numpy's own tobytes().
 #include <doctest/doctest.h>
@@ -125,10 +125,11 @@ TEST_CASE("numpy files: np.savez_compressed members (float, bool, int, empty, sc
 
   const auto arrays = trainer::files::parse_npz(z, "compressed.npz");
   CHECK(arrays.size() == numpy_archive_table().size() + 1);
-  for (const auto& [name, f] : numpy_archive_table()) {
+  for (const auto& entry : numpy_archive_table()) {
+    const std::string& name = entry.first;  // (a structured binding cannot be CAPTUREd in C++17)
     CAPTURE(name);
     REQUIRE(arrays.count(name) == 1);
-    CHECK(numpy_mismatches(arrays.at(name), f) == 0);
+    CHECK(numpy_mismatches(arrays.at(name), entry.second) == 0);
   }
   // A Fortran-order member (np.asfortranarray) comes back in C order.
   CHECK(numpy_mismatches(arrays.at("fortran"), numpy_fortran_table().at("fortran_f32_3d")) == 0);
@@ -146,8 +147,24 @@ TEST_CASE("numpy files: np.savez (stored members, one in Fortran order)") {
   CHECK(numpy_mismatches(arrays.at("fortran"), numpy_fortran_table().at("fortran_i32_3d")) == 0);
 }
 
+TEST_CASE("numpy files: np.savez_compressed into a pipe (flag bit 3, sizes in data descriptors)") {
+  const std::vector<unsigned char> z = numpy_fixture_bytes("streamed.npz");
+  const std::size_t e = numpy_central_entry(z, "visible.npy");
+  CHECK(numpy_le(z, e + 8, 2) == 8);  // bit 3: CRC-32 and sizes follow the data
+  const std::size_t local = numpy_le(z, e + 42, 4);
+  CHECK(numpy_le(z, local + 14, 4) == 0);  // CRC-32 0 in the local header
+  const auto arrays = trainer::files::parse_npz(z, "streamed.npz");
+  CHECK(arrays.size() == 3);
+  for (const char* name : {"f64", "visible", "i64"}) {
+    CAPTURE(name);
+    CHECK(numpy_mismatches(arrays.at(name), numpy_archive_table().at(name)) == 0);
+  }
+}
+
 TEST_CASE("numpy files: Fortran-order .npy of every dtype, ranks 2 to 4, read in C order (file and memory)") {
-  for (const auto& [name, f] : numpy_fortran_table()) {
+  for (const auto& entry : numpy_fortran_table()) {
+    const std::string& name = entry.first;
+    const NumpyFixture& f = entry.second;
     CAPTURE(name);
     const std::string path = kNumpyDir + "/" + name + ".npy";
     CHECK(smg::test::slurp(path).find("'fortran_order': True") != std::string::npos);

@@ -9,6 +9,9 @@ independently of any reader. Keep the two in step: a change here needs the same 
 
 - compressed.npz  np.savez_compressed (deflate members, numpy's ZIP64 local extra field)
 - stored.npz      np.savez (stored members)
+- streamed.npz    np.savez_compressed into a stream that cannot seek (a pipe): Python's zipfile
+                  then sets flag bit 3 and writes each member's sizes and CRC-32 in a data
+                  descriptor after its data (zero in the local header)
 - fortran_*.npy   np.save of np.asfortranarray(...) ('fortran_order': True), every dtype the
                   readers accept, ranks 2 to 4
 """
@@ -50,6 +53,22 @@ FORTRAN = {
 }
 
 
+class Unseekable:
+    """A write-only stream without tell/seek, like a pipe."""
+
+    def __init__(self, f):
+        self.f = f
+
+    def write(self, b):
+        return self.f.write(b)
+
+    def flush(self):
+        self.f.flush()
+
+    def read(self, n=-1):  # numpy takes an object with read() for a file, not a path
+        raise OSError("write-only stream")
+
+
 def make(table, name):
     f, dtype, shape = table[name]
     return np.asarray(f(base(shape)), dtype=dtype)
@@ -63,6 +82,8 @@ def main():
     np.savez_compressed(os.path.join(out, "compressed.npz"), **arrays)
     np.savez(os.path.join(out, "stored.npz"), f64=arrays["f64"], b1=arrays["b1"], i32=arrays["i32"],
              fortran=np.asfortranarray(make(FORTRAN, "fortran_i32_3d")))
+    with open(os.path.join(out, "streamed.npz"), "wb") as f:
+        np.savez_compressed(Unseekable(f), f64=arrays["f64"], visible=arrays["visible"], i64=arrays["i64"])
     for k in FORTRAN:
         a = np.asfortranarray(make(FORTRAN, k))
         assert a.flags.f_contiguous and not a.flags.c_contiguous
