@@ -30,6 +30,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -239,10 +240,20 @@ double peak_memory_mib() {
 int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double seconds_read,
              const trainer::TrackQueries* queries, const std::vector<float>* truth, const fs::path& out,
              bool quiet) {
-  const trainer::Progress progress(stderr, quiet);
-  progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", scene " +
-                             cli::escape_line(data.source) + ", output " + cli::escape_line(out.string()));
-  trainer::TrainerResult stage0 = trainer::run_stage0(cfg, std::move(data), progress);
+  // Stage 0's progress lines are held back (a temporary file) until the scene is accepted, so that
+  // a refused scene prints its one error line and nothing else.
+  const std::unique_ptr<std::FILE, int (*)(std::FILE*)> held(quiet ? nullptr : std::tmpfile(), &std::fclose);
+  const trainer::Progress early(held.get(), quiet);
+  early.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", scene " +
+                          cli::escape_line(data.source) + ", output " + cli::escape_line(out.string()));
+  trainer::TrainerResult stage0 = trainer::run_stage0(cfg, std::move(data), early);
+  if (held) {
+    std::rewind(held.get());
+    std::array<char, 4096> buf{};
+    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), held.get())) > 0;) std::fwrite(buf.data(), 1, n, stderr);
+    std::fflush(stderr);
+  }
+  const trainer::Progress progress(stderr, quiet, early.start());
   // Once the scene is accepted: the one note of a scene without feature maps (even with --quiet).
   if (stage0.data.priors.feature_dim == 0)
     std::cerr << "smg_trainer: note: no feature files (priors/features/<frame>.npy): the graph is geometric"

@@ -88,13 +88,14 @@ TEST_CASE("smg_trainer --data: numpy's compressed tracks.npz, Fortran-order dept
   CHECK(metrics.find("\"gate_removed_edges\":0") != std::string::npos);
   CHECK(fs::exists(out / "renders/1_00000.png"));
 
-  // Refused scenes: exit 2, one line naming the file or the cause, no OUT folder.
+  // Refused scenes: exit 2, one line naming the file or the cause (without --quiet: stage 0's
+  // progress lines are held back until the scene is accepted), no OUT folder.
   const fs::path bad_out = fs::temp_directory_path() / "smg_test_pipeline_numpy_bad_out";
   const auto refused = [&](const std::string& what, const std::string& message) {
     CAPTURE(what);
     fs::remove_all(bad_out);
-    const smg::test::ProgramRun b = numpy_scene_trainer_run("--data " + scene.string() +
-                                                            " --quick --threads 2 --quiet --out " + bad_out.string());
+    const smg::test::ProgramRun b =
+        numpy_scene_trainer_run("--data " + scene.string() + " --quick --threads 2 --out " + bad_out.string());
     CAPTURE(b.err);
     CHECK(b.code == 2);
     CHECK(smg::test::count_lines(b.err) == 1);
