@@ -45,7 +45,7 @@ struct Rng {
 }  // namespace smg::test
 
 // Declares `Rng name(seed)` and CAPTUREs its seed (doctest) for the rest of the scope.
-// `name` is a declarator, which cannot be parenthesised like an expression.
+// `name` is a declarator, which cannot be parenthesised like an expression; its second use is.
 #define SMG_TEST_RNG(name, seed_value) \
   ::smg::test::Rng name(seed_value);   /* NOLINT(bugprone-macro-parentheses) */ \
-  CAPTURE(name.seed)
+  CAPTURE((name).seed)
