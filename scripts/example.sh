@@ -4,7 +4,8 @@
 # flags: the default run (the full SMG variant, seed 0, 32 frames at 160x120; about 1 minute on
 # 2 cores), pictures and metrics.json in trainer_out/. `scripts/example.sh --quick` is the small
 # run CI uses; `--help` lists the flags. Only the library's own dependencies and Debian's
-# libstb-dev (PNG output) are needed: cmake make g++ libeigen3-dev libstb-dev.
+# libstb-dev (PNG output) and zlib1g-dev (.npz reading) are needed: cmake make g++
+# libeigen3-dev libstb-dev zlib1g-dev.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/build_trainer.sh

@@ -21,7 +21,7 @@ for arg in "$@"; do
     *) echo "usage: scripts/test.sh [--sanitize]" >&2; exit 2 ;;
   esac
 done
-scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev
+scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev zlib1g-dev
 jobs=$(nproc)
 if [ "$mode" = asan ]; then
   build=${SMG_BUILD_DIR:-build/asan}

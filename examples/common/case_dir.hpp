@@ -97,7 +97,7 @@ class CaseDir {
   }
   double max_bytes() const { return max_bytes_; }
 
-  // T = float or double: a float32/float64 array, all finite.
+  // T = float or double: a float32/float64 array (float16 is refused), all finite.
   // T = int32_t or int64_t: an int32/int64 array.
   // T = uint8_t: a uint8/bool array of 0s and 1s.
   template <class T>
@@ -138,7 +138,9 @@ class CaseDir {
   static void check_dtype(npy::DType d, const std::string& path) {
     const char* want = nullptr;
     if constexpr (std::is_floating_point_v<T>) {
-      if (!npy::is_float(d)) want = "float32 or float64";
+      // float16 is refused: docs/interop.md promises float32/float64, and half precision would
+      // silently lose the digits the library's checks are meant to compare.
+      if (!npy::is_float(d) || d == npy::DType::f16) want = "float32 or float64";
     } else if constexpr (std::is_same_v<T, std::uint8_t>) {
       if (!npy::is_boolish(d)) want = "bool or uint8";
     } else {

@@ -3,8 +3,10 @@
 // Part of the examples, not the library: smg itself works on views over caller memory; this is
 // how smg_cli and the example programs get such memory from NumPy files.
 // Supported: little-endian float16 (read only, converted to float)/float32/float64/int32/int64/
-// uint8/bool, C order. Everything else (big-endian, Fortran order, object arrays, truncated or
-// over-long files, bad headers) is an npy::Error whose message names the file and the problem.
+// uint8/bool, in C or Fortran order (a Fortran-order file is transposed to C order when read, as
+// numpy.load does transparently; arrays are always written in C order). Everything else
+// (big-endian, object arrays, truncated or over-long files, bad headers) is an npy::Error whose
+// message names the file and the problem.
 // parse() reads an .npy image already in memory (a member of an .npz archive); to_bytes() makes
 // one.
 #pragma once
@@ -239,15 +241,43 @@ inline std::vector<std::int64_t> parse_shape(const std::string& v, const std::st
   }
   return shape;
 }
-// dtype and shape from the header dict text (C order required). Throws Error("<path>: ...").
-inline void parse_header_dict(const std::string& header, const std::string& path, Array& a) {
+// dtype and shape from the header dict text; returns whether the data is in Fortran order.
+// Throws Error("<path>: ...").
+inline bool parse_header_dict(const std::string& header, const std::string& path, Array& a) {
   if (header.find('{') == std::string::npos || header.find('}') == std::string::npos)
     throw Error(path + ": corrupt header (no dict)");
   a.dtype = parse_descr(dict_value(header, "descr", path), path);
   const std::string fo = dict_value(header, "fortran_order", path);
-  if (fo == "True") throw Error(path + ": Fortran-order arrays are not supported (save C-order)");
-  if (fo != "False") throw Error(path + ": corrupt header (fortran_order " + fo + ")");
+  if (fo != "True" && fo != "False") throw Error(path + ": corrupt header (fortran_order " + fo + ")");
   a.shape = parse_shape(dict_value(header, "shape", path), path);
+  return fo == "True";
+}
+// Reorders a.bytes from Fortran order (first index fastest) to C order (last index fastest),
+// element by element (dtype_size bytes), for any rank; ranks 0 and 1 are the same in both.
+inline void fortran_to_c(Array& a) {
+  const std::size_t rank = a.shape.size();
+  if (rank < 2 || a.bytes.empty()) return;
+  const std::size_t e = dtype_size(a.dtype);
+  // Fortran strides (in elements) of each index.
+  std::vector<std::size_t> stride(rank, 1);
+  for (std::size_t k = 1; k < rank; ++k) stride[k] = stride[k - 1] * static_cast<std::size_t>(a.shape[k - 1]);
+  std::vector<unsigned char> c(a.bytes.size());
+  std::vector<std::size_t> index(rank, 0);
+  const std::size_t count = a.bytes.size() / e;
+  std::size_t from = 0;  // Fortran offset of `index`
+  for (std::size_t to = 0; to < count; ++to) {
+    std::memcpy(c.data() + to * e, a.bytes.data() + from * e, e);
+    // Next C-order index: the last index runs fastest.
+    for (std::size_t k = rank; k-- > 0;) {
+      if (++index[k] < static_cast<std::size_t>(a.shape[k])) {
+        from += stride[k];
+        break;
+      }
+      from -= stride[k] * (index[k] - 1);
+      index[k] = 0;
+    }
+  }
+  a.bytes.swap(c);
 }
 inline void check_bool_bytes(const Array& a, const std::string& path) {
   if (a.dtype == DType::b1)
@@ -296,7 +326,7 @@ inline Array read(const std::string& path, std::uint64_t max_bytes = 0) {
   std::string header(header_len, '\0');
   if (!f.read(header.data(), header_len)) throw Error(path + ": truncated header");
   Array a;
-  detail::parse_header_dict(header, path, a);
+  const bool fortran = detail::parse_header_dict(header, path, a);
 
   const std::int64_t count = detail::checked_count(a.shape, dtype_size(a.dtype), path);
   const std::uint64_t nbytes = static_cast<std::uint64_t>(count) * dtype_size(a.dtype);
@@ -314,6 +344,7 @@ inline Array read(const std::string& path, std::uint64_t max_bytes = 0) {
   if (nbytes > 0 && !f.read(reinterpret_cast<char*>(a.bytes.data()), static_cast<std::streamsize>(nbytes)))
     throw Error(path + ": read error");
   detail::check_bool_bytes(a, path);
+  if (fortran) detail::fortran_to_c(a);
   return a;
 }
 
@@ -338,7 +369,7 @@ inline Array parse(const unsigned char* data, std::size_t size, const std::strin
   if (preamble + header_len > size) throw Error(what + ": truncated header");
   const std::string header(reinterpret_cast<const char*>(data) + preamble, static_cast<std::size_t>(header_len));
   Array a;
-  detail::parse_header_dict(header, what, a);
+  const bool fortran = detail::parse_header_dict(header, what, a);
   const std::int64_t count = detail::checked_count(a.shape, dtype_size(a.dtype), what);
   const std::uint64_t nbytes = static_cast<std::uint64_t>(count) * dtype_size(a.dtype);
   const std::uint64_t available = size - (preamble + header_len);
@@ -351,6 +382,7 @@ inline Array parse(const unsigned char* data, std::size_t size, const std::strin
   const unsigned char* begin = data + preamble + header_len;
   a.bytes.assign(begin, begin + nbytes);
   detail::check_bool_bytes(a, what);
+  if (fortran) detail::fortran_to_c(a);
   return a;
 }
 

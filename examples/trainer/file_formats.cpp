@@ -1,9 +1,9 @@
 // examples/trainer/file_formats.cpp — whole files, PNG decoding, .npz archives.
 //
 // The one translation unit of the trainer library that compiles stb_image (Debian's
-// libstb-dev), static, for PNG decoding and for its raw-deflate decoder
-// (stbi_zlib_decode_noheader_buffer), which reads the compressed members of an .npz archive
-// without another dependency. ZIP structures: PKWARE APPNOTE.TXT sections 4.3 and 4.5.
+// libstb-dev), static, for PNG decoding only. The compressed members of an .npz archive are
+// inflated by zlib (Debian's zlib1g-dev), the reference implementation of DEFLATE that numpy's
+// own writer (Python's zipfile) uses. ZIP structures: PKWARE APPNOTE.TXT sections 4.3 and 4.5.
 #include "trainer/file_formats.hpp"
 
 #if !__has_include(<stb/stb_image.h>)
@@ -15,7 +15,9 @@
 #define STBI_ONLY_PNG
 #include <stb/stb_image.h>
 
-#include <array>
+#include <zlib.h>
+
+#include <algorithm>
 #include <climits>
 #include <cstring>
 #include <filesystem>
@@ -57,18 +59,15 @@ Png8 decode_png(const std::vector<unsigned char>& bytes, const std::string& labe
 }
 
 std::uint32_t crc32(const unsigned char* data, std::size_t n, std::uint32_t crc) {
-  static const std::array<std::uint32_t, 256> table = [] {
-    std::array<std::uint32_t, 256> t{};
-    for (std::uint32_t i = 0; i < 256; ++i) {
-      std::uint32_t c = i;
-      for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      t[i] = c;
-    }
-    return t;
-  }();
-  crc = ~crc;
-  for (std::size_t i = 0; i < n; ++i) crc = table[(crc ^ data[i]) & 0xFFu] ^ (crc >> 8);
-  return ~crc;
+  // zlib's crc32 takes an unsigned int count: feed it in chunks.
+  uLong c = crc;
+  while (n > 0) {
+    const uInt chunk = static_cast<uInt>(std::min<std::size_t>(n, UINT_MAX));
+    c = ::crc32(c, data, chunk);
+    data += chunk;
+    n -= chunk;
+  }
+  return static_cast<std::uint32_t>(c);
 }
 
 namespace {
@@ -94,6 +93,56 @@ class Reader {
   const std::vector<unsigned char>& b_;
   const std::string& label_;
 };
+
+// The raw DEFLATE stream (RFC 1951, no zlib header: windowBits -15) of member `name`, `csize`
+// bytes at `in`, inflated by zlib into exactly `usize` bytes. The stream must end (Z_STREAM_END)
+// within the compressed bytes and give exactly the recorded size; bytes after its end are
+// ignored, as Python's zipfile does. Every failure names the member.
+std::vector<unsigned char> inflate_member(const Reader& r, const std::string& name, const unsigned char* in,
+                                          std::uint64_t csize, std::uint64_t usize) {
+  // One spare output byte tells "more data than recorded" from "exactly the recorded size".
+  std::vector<unsigned char> out(static_cast<std::size_t>(usize) + 1);
+  z_stream zs{};
+  if (inflateInit2(&zs, -15) != Z_OK) r.fail("cannot start zlib's inflate for member '" + name + "'");
+  std::uint64_t in_left = csize, out_left = out.size();
+  zs.next_in = const_cast<Bytef*>(in);  // zlib's API is not const; it never writes the input
+  zs.next_out = out.data();
+  std::string problem;
+  for (;;) {
+    // zlib counts in unsigned int: hand it the buffers in chunks.
+    if (zs.avail_in == 0 && in_left > 0) {
+      zs.avail_in = static_cast<uInt>(std::min<std::uint64_t>(in_left, UINT_MAX));
+      in_left -= zs.avail_in;
+    }
+    if (zs.avail_out == 0 && out_left > 0) {
+      zs.avail_out = static_cast<uInt>(std::min<std::uint64_t>(out_left, UINT_MAX));
+      out_left -= zs.avail_out;
+    }
+    const int ret = inflate(&zs, Z_NO_FLUSH);
+    if (ret == Z_STREAM_END) break;
+    if (ret == Z_OK) continue;  // progress; go on
+    if (ret == Z_BUF_ERROR && zs.avail_out == 0 && out_left == 0)
+      problem = "decompresses to more than the recorded " + std::to_string(usize) + " bytes";
+    else if (ret == Z_BUF_ERROR && zs.avail_in == 0 && in_left == 0)
+      problem = "deflate data ends early (truncated member)";
+    else if (ret == Z_DATA_ERROR)
+      problem = std::string("corrupt deflate data (zlib: ") + (zs.msg ? zs.msg : "invalid stream") + ")";
+    else if (ret == Z_MEM_ERROR)
+      problem = "out of memory while inflating";
+    else
+      problem = "zlib's inflate failed (code " + std::to_string(ret) + ")";
+    break;
+  }
+  const std::uint64_t produced = zs.total_out;
+  inflateEnd(&zs);
+  if (problem.empty() && produced != usize)
+    problem = produced > usize ? "decompresses to more than the recorded " + std::to_string(usize) + " bytes"
+                               : "decompresses to " + std::to_string(produced) + " bytes, the archive records " +
+                                     std::to_string(usize);
+  if (!problem.empty()) r.fail("member '" + name + "': " + problem);
+  out.pop_back();
+  return out;
+}
 
 constexpr std::uint32_t kLocalSig = 0x04034b50, kCentralSig = 0x02014b50, kEndSig = 0x06054b50;
 constexpr std::uint32_t kZip64EndSig = 0x06064b50, kZip64LocatorSig = 0x07064b50;
@@ -173,19 +222,12 @@ std::map<std::string, npy::Array> parse_npz(const std::vector<unsigned char>& by
       if (csize != usize) r.fail("corrupt archive (stored member '" + name + "' with different sizes)");
       data.assign(r.at(data_at), r.at(data_at) + csize);
     } else {
-      if (csize > static_cast<std::uint64_t>(INT_MAX) || usize > static_cast<std::uint64_t>(INT_MAX))
-        r.fail("member '" + name + "' is too large to decompress (2 GiB)");
       // DEFLATE expands at most ~1032:1, so a larger recorded size is a corrupt field; checking it
       // first keeps a flipped size byte from allocating gigabytes before the decoder fails.
       if (usize > 1032 * csize + 1024)
         r.fail("corrupt archive (member '" + name + "' records " + std::to_string(usize) + " bytes from " +
                std::to_string(csize) + " compressed)");
-      data.resize(static_cast<std::size_t>(usize));
-      // stb's decoder into a buffer of exactly the recorded size (it fails if the data is longer).
-      const int n = stbi_zlib_decode_noheader_buffer(reinterpret_cast<char*>(data.data()), static_cast<int>(usize),
-                                                     reinterpret_cast<const char*>(r.at(data_at)), static_cast<int>(csize));
-      if (n < 0 || static_cast<std::uint64_t>(n) != usize)
-        r.fail("corrupt deflate data in member '" + name + "'");
+      data = inflate_member(r, name, r.at(data_at), csize, usize);
     }
     if (crc32(data.data(), data.size()) != crc) r.fail("CRC-32 mismatch in member '" + name + "' (corrupt archive)");
     out.emplace(key, npy::parse(data.data(), data.size(), what));

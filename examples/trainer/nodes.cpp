@@ -83,15 +83,19 @@ Nodes make_nodes(const LiftedTracks& l, const NodeOptions& o, bool semantic, smg
       for (int c = 0; c < C; ++c) samples[d * C + c] = l.feature_samples[s * C + c];
     }
   }
-  // Descriptors (G7)-(G8).
+  // Descriptors (G7)-(G8); none without feature channels (a scene without feature files), whose
+  // graph can then only be geometric.
   n.descriptors.assign(sz(N) * C, 0.0);
-  smg::DescriptorOptions dopt;
-  dopt.rho = o.descriptor_rho;
-  dopt.parallel = parallel;
-  smg::FeatureSamplesView<const double> sv(samples.data(), T, N, C);
-  smg::FeaturesView<double> dv(n.descriptors.data(), N, C);
-  check(smg::validate_semantic_descriptors<double>(sv, n.visibility_view(), dopt, dv), "semantic_descriptors");
-  smg::semantic_descriptors<double>(sv, n.visibility_view(), dopt, dv);
+  if (C == 0 && semantic) throw std::invalid_argument("make_nodes: a semantic graph needs feature samples (C = 0)");
+  if (C > 0) {
+    smg::DescriptorOptions dopt;
+    dopt.rho = o.descriptor_rho;
+    dopt.parallel = parallel;
+    smg::FeatureSamplesView<const double> sv(samples.data(), T, N, C);
+    smg::FeaturesView<double> dv(n.descriptors.data(), N, C);
+    check(smg::validate_semantic_descriptors<double>(sv, n.visibility_view(), dopt, dv), "semantic_descriptors");
+    smg::semantic_descriptors<double>(sv, n.visibility_view(), dopt, dv);
+  }
   build_graph(n, o, semantic, parallel);
   return n;
 }

@@ -89,10 +89,15 @@ TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Pro
     resolve_frames(config, r.data.scene.frames(), r.data.priors.has_mask);
     // Lifting depends on no length of the configuration, so this lifting is stage 0's too.
     r.lifted = lift_tracks(r.data.scene, r.data.priors, config.lift);
+    // Too little usable data is a problem of the scene's files (exit 2 in smg_trainer), named by
+    // the files that decide it.
     const double extent = lifted_extent(r.lifted);
     if (!(extent > 0))
-      throw std::runtime_error("too few lifted object tracks to measure the scene's extent (fewer than 16 samples "
-                               "of tracks starting in the dynamic masks have depth)");
+      throw DataError("priors/tracks.npz, priors/masks, depth/2x: too few lifted object tracks to measure the "
+                      "scene's extent (fewer than 16 visible samples with depth > 0 of tracks whose query pixel "
+                      "is in a dynamic mask)");
+    // Without feature files there are no descriptors: the graph is geometric (train.cpp says so).
+    if (r.data.priors.feature_dim == 0) config.variant.semantic_graph = false;
     r.data.scene.extent = extent;
     r.length_factor = extent / kReferenceExtent;
     scale_lengths(config, r.length_factor);
@@ -103,8 +108,17 @@ TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Pro
   }
   const Scene& scene = r.data.scene;
   // Stage 0: lifting, nodes, graph, rotations.
-  if (r.data.has_truth) r.lifted = lift_tracks(scene, r.data.priors, config.lift);
-  r.nodes = make_nodes(r.lifted, config.nodes, config.variant.semantic_graph, par);
+  if (r.data.has_truth) {
+    r.lifted = lift_tracks(scene, r.data.priors, config.lift);
+    r.nodes = make_nodes(r.lifted, config.nodes, config.variant.semantic_graph, par);
+  } else {
+    try {
+      r.nodes = make_nodes(r.lifted, config.nodes, config.variant.semantic_graph, par);
+    } catch (const std::runtime_error& e) {
+      // No node (no track visible in enough frames) is the scene's problem, not the program's.
+      throw DataError("priors/tracks.npz: " + std::string(e.what()));
+    }
+  }
   init_rotations(r.nodes);
   r.seconds_stage0 = seconds_since(t0);
   {
@@ -191,6 +205,14 @@ TrainerResult run_trainer(const TrainerConfig& config, Dataset data, const Progr
   const auto start = std::chrono::steady_clock::now();
   TrainerResult r = run_stage0(config, std::move(data), progress);
   return run_stages(std::move(r), start, progress);
+}
+
+TrainerResult run_trainer(TrainerResult stage0, const Progress& progress) {
+  // seconds_total counts from the start of stage 0, as in the one-call forms.
+  const auto start = std::chrono::steady_clock::now() -
+                     std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                         std::chrono::duration<double>(stage0.seconds_stage0));
+  return run_stages(std::move(stage0), start, progress);
 }
 
 }  // namespace trainer

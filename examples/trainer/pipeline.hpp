@@ -79,7 +79,9 @@ struct TrainerResult {
 TrainerResult run_stage0(const TrainerConfig& config, const Progress& progress);
 // The same on a given dataset (a scene from disk: dataset_from_dycheck). For a dataset without
 // truth the scene extent is measured on the lifted object tracks (lifted_extent) and the
-// configuration's lengths are scaled by extent / kReferenceExtent.
+// configuration's lengths are scaled by extent / kReferenceExtent; too few lifted object tracks,
+// or none selected as a node, throws DataError (the scene's files are the problem); without
+// feature maps (priors.feature_dim 0) the graph is geometric (config.variant.semantic_graph off).
 TrainerResult run_stage0(const TrainerConfig& config, Dataset data, const Progress& progress);
 
 // Runs everything. Throws std::invalid_argument on a bad configuration (the dataset's
@@ -88,5 +90,9 @@ TrainerResult run_trainer(const TrainerConfig& config, const Progress& progress)
 // The same on a given dataset; a dataset without truth is evaluated on its validation frames
 // (evaluate_frames) instead of the procedural test views.
 TrainerResult run_trainer(const TrainerConfig& config, Dataset data, const Progress& progress);
+// Stages 1 and 2 and the evaluation on the result of run_stage0 (its config and data): what
+// run_trainer does after stage 0, for a caller that checks stage 0 first (smg_trainer --data
+// creates OUT only once the scene has passed stage 0).
+TrainerResult run_trainer(TrainerResult stage0, const Progress& progress);
 
 }  // namespace trainer

@@ -20,8 +20,12 @@ class Progress {
  public:
   explicit Progress(std::FILE* stream = stderr, bool quiet = false)
       : stream_(stream), quiet_(quiet), start_(std::chrono::steady_clock::now()) {}
+  // Counting from `start` (another Progress's start(): one clock across two streams).
+  Progress(std::FILE* stream, bool quiet, std::chrono::steady_clock::time_point start)
+      : stream_(stream), quiet_(quiet), start_(start) {}
 
   double elapsed() const { return seconds_since(start_); }
+  std::chrono::steady_clock::time_point start() const { return start_; }
   void line(const std::string& stage, const std::string& text) const {
     if (quiet_ || !stream_) return;
     std::fprintf(stream_, "[%7.1fs] %-7s %s\n", elapsed(), stage.c_str(), text.c_str());

@@ -11,8 +11,11 @@
 // --data SCENE trains on a scene on disk in the Dycheck iPhone layout plus priors (docs/data.md):
 // OUT/renders/<frame>.png for every validation frame, OUT/metrics.json with Dycheck's mPSNR and
 // mSSIM, and with --track-queries Q.json OUT/tracks3d.npy [M][T][3]. A missing or inconsistent
-// file: exit 2 with one line naming it, before any training. --export-dycheck DIR writes the
-// procedural scene in that layout (plus queries.json and queries_tracks3d.npy, the true tracks).
+// file, or a scene too poor to train (too few lifted object tracks): exit 2 with one line naming
+// the file or the cause, control characters escaped, before any training; OUT is created only
+// once the scene has passed stage 0. Without feature files the graph is geometric (one stderr
+// note). --export-dycheck DIR writes the procedural scene in that layout (plus queries.json and
+// queries_tracks3d.npy, the true tracks).
 //
 // --export-case DIR stops after stage 0 (lifting, node selection, graph, initial rotations) and
 // writes stage 1's problem as .npy files and case.json into DIR instead of training
@@ -27,6 +30,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -231,14 +235,33 @@ double peak_memory_mib() {
   return static_cast<double>(u.ru_maxrss) / 1024.0;  // Linux: KiB
 }
 
-// --data: trains on a scene from disk and writes renders, tracks3d.npy and metrics.json.
+// --data: trains on a scene from disk and writes renders, tracks3d.npy and metrics.json. OUT is
+// created after stage 0, which can still refuse the scene (DataError).
 int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double seconds_read,
              const trainer::TrackQueries* queries, const std::vector<float>* truth, const fs::path& out,
              bool quiet) {
-  const trainer::Progress progress(stderr, quiet);
-  progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", scene " + data.source +
-                             ", output " + out.string());
-  const trainer::TrainerResult r = trainer::run_trainer(cfg, std::move(data), progress);
+  // Stage 0's progress lines are held back (a temporary file) until the scene is accepted, so that
+  // a refused scene prints its one error line and nothing else.
+  const std::unique_ptr<std::FILE, int (*)(std::FILE*)> held(quiet ? nullptr : std::tmpfile(), &std::fclose);
+  const trainer::Progress early(held.get(), quiet);
+  early.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", scene " +
+                          cli::escape_line(data.source) + ", output " + cli::escape_line(out.string()));
+  trainer::TrainerResult stage0 = trainer::run_stage0(cfg, std::move(data), early);
+  if (held) {
+    std::rewind(held.get());
+    std::array<char, 4096> buf{};
+    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), held.get())) > 0;) std::fwrite(buf.data(), 1, n, stderr);
+    std::fflush(stderr);
+  }
+  const trainer::Progress progress(stderr, quiet, early.start());
+  // Once the scene is accepted: the one note of a scene without feature maps (even with --quiet).
+  if (stage0.data.priors.feature_dim == 0)
+    std::cerr << "smg_trainer: note: no feature files (priors/features/<frame>.npy): the graph is geometric"
+              << (cfg.variant.semantic_graph ? ", without the semantic gate of variant " + trainer::to_string(cfg.variant.variant)
+                                             : std::string())
+              << "\n";
+  cli::ensure_writable_dir(out);
+  const trainer::TrainerResult r = trainer::run_trainer(std::move(stage0), progress);
   const auto t0 = std::chrono::steady_clock::now();
   fs::create_directories(out / "renders");
   for (std::size_t v = 0; v < r.eval_renders.size(); ++v)
@@ -252,6 +275,7 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double se
       .add("height", r.data.scene.height())
       .add("threads", cfg.threads > 0 ? cfg.threads : smg::num_threads());
   add_carap_settings(j, cfg.node_loss);
+  j.add("semantic_graph", r.config.variant.semantic_graph);
   const trainer::DataEvaluation& e = r.data_evaluation;
   j.add("val_frames", static_cast<long long>(e.frames.size()))
       .add("mpsnr", e.mean.mpsnr)
@@ -392,6 +416,13 @@ int main(int argc, char** argv) {
       export_dir = args.get("export-case");
       if (export_dir.empty()) throw cli::UsageError("--export-case needs a folder");
       cli::ensure_writable_dir(export_dir);
+    } else if (args.given("data")) {
+      // Created only once the scene is validated (run_data); a file in its place is refused now.
+      out = args.get("out");
+      std::error_code ec;
+      if (out.empty()) throw cli::UsageError("--out needs a folder");
+      if (fs::exists(out, ec) && !fs::is_directory(out, ec))
+        throw cli::UsageError("output folder '" + out.string() + "' is not a folder");
     } else {
       out = args.get("out");
       cli::ensure_writable_dir(out);
@@ -424,7 +455,7 @@ int main(int argc, char** argv) {
       seconds_read = trainer::seconds_since(t0);
     }
   } catch (const std::exception& e) {
-    std::cerr << "smg_trainer: error: " << e.what() << "\n";
+    std::cerr << "smg_trainer: error: " << cli::escape_line(e.what()) << "\n";
     return 2;
   }
 
@@ -499,8 +530,16 @@ int main(int argc, char** argv) {
     }
     std::cout << line << std::endl;
     return 0;
+  } catch (const trainer::DataError& e) {
+    // A scene refused by stage 0 (--data): a data problem like those found while reading. (The
+    // exporter's write errors stay failures of the run.)
+    std::cerr << "smg_trainer: error: " << cli::escape_line(e.what()) << "\n";
+    return have_data ? 2 : 1;
+  } catch (const cli::UsageError& e) {
+    std::cerr << "smg_trainer: error: " << cli::escape_line(e.what()) << "\n";
+    return 2;
   } catch (const std::exception& e) {
-    std::cerr << "smg_trainer: error: " << e.what() << "\n";
+    std::cerr << "smg_trainer: error: " << cli::escape_line(e.what()) << "\n";
     return 1;
   }
 }

@@ -202,8 +202,10 @@ std::vector<Case> robustness_cases() {
       {"big-endian dtype", "check", "", [](Ctx& c) {
          put(c, "positions.npy", raw_npy("{'descr': '>f8', 'fortran_order': False, 'shape': (3, 20, 3), }", f8(180))); },
        file_("positions.npy")},
-      {"Fortran order", "graph", "", [](Ctx& c) {
-         put(c, "positions.npy", raw_npy("{'descr': '<f8', 'fortran_order': True, 'shape': (3, 20, 3), }", f8(180))); },
+      // Fortran order itself is read (transposed, tests/examples/test_npy.cpp); its data is checked
+      // like C order's.
+      {"Fortran order, truncated data", "graph", "", [](Ctx& c) {
+         put(c, "positions.npy", raw_npy("{'descr': '<f8', 'fortran_order': True, 'shape': (3, 20, 3), }", f8(179))); },
        file_("positions.npy")},
       {"unsupported dtype complex128", "energies", "", [](Ctx& c) {
          put(c, "positions.npy", raw_npy("{'descr': '<c16', 'fortran_order': False, 'shape': (3, 20, 3), }", f8(360))); },
@@ -213,6 +215,9 @@ std::vector<Case> robustness_cases() {
       {"header without a dict", "dqb", "", [](Ctx& c) { put(c, "sigma.npy", raw_npy("no dict here", f8(6))); },
        file_("sigma.npy")},
       // --- dtypes, ranks, sizes, values ---
+      {"positions as float16 (float32 or float64 expected)", "check", "", [](Ctx& c) {
+         put(c, "positions.npy", raw_npy("{'descr': '<f2', 'fortran_order': False, 'shape': (3, 20, 3), }",
+                                         std::string(360, '\x3c'))); }, file_("positions.npy")},
       {"positions as int32", "graph", "", [](Ctx& c) {
          npy::write(c.file("positions.npy"), std::vector<std::int32_t>(kT * kN * 3, 1), {kT, kN, 3}); }, file_("positions.npy")},
       {"positions of rank 2", "energies", "", [](Ctx& c) {

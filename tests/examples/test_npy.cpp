@@ -126,10 +126,19 @@ TEST_CASE("npy errors: corrupt, truncated and unsupported files name the file an
   write_bytes(dir / "long.npy", full + "xx");
   CHECK(npy_error_of(path("long.npy")) ==
         path("long.npy") + ": corrupt file (2 bytes after the data of shape [2])");
+  // Fortran order is read (transposed to C order; a 1-D array is the same in both), with the
+  // same size checks as C order.
   write_bytes(dir / "fortran.npy",
               numpy_file("{'descr': '<f8', 'fortran_order': True, 'shape': (2,), }", data16));
-  CHECK(npy_error_of(path("fortran.npy")) ==
-        path("fortran.npy") + ": Fortran-order arrays are not supported (save C-order)");
+  CHECK(npy_error_of(path("fortran.npy")) == "");
+  CHECK(npy::read(path("fortran.npy")).bytes == std::vector<unsigned char>(data16.begin(), data16.end()));
+  write_bytes(dir / "fortran_short.npy",
+              numpy_file("{'descr': '<f8', 'fortran_order': True, 'shape': (2, 1), }", data16.substr(0, 12)));
+  CHECK(npy_error_of(path("fortran_short.npy")) ==
+        path("fortran_short.npy") + ": truncated data (12 of 16 bytes for shape [2, 1])");
+  write_bytes(dir / "fortran_bad.npy",
+              numpy_file("{'descr': '<f8', 'fortran_order': Maybe, 'shape': (2,), }", data16));
+  CHECK(npy_error_of(path("fortran_bad.npy")) == path("fortran_bad.npy") + ": corrupt header (fortran_order Maybe)");
   write_bytes(dir / "big.npy", numpy_file("{'descr': '>f8', 'fortran_order': False, 'shape': (2,), }", data16));
   CHECK(npy_error_of(path("big.npy")) ==
         path("big.npy") + ": big-endian dtype >f8 is not supported (use little-endian)");
@@ -222,9 +231,15 @@ TEST_CASE("npy: float16 is read and converted to float exactly; parse() reads an
   const std::string longer = file + "x";
   CHECK_THROWS_WITH_AS(npy::parse(reinterpret_cast<const unsigned char*>(longer.data()), longer.size(), "m"),
                        "m: corrupt file (1 bytes after the data of shape [7])", npy::Error);
-  const std::string f = numpy_file("{'descr': '<f4', 'fortran_order': True, 'shape': (1, 1), }", std::string(4, '\0'));
-  CHECK_THROWS_WITH_AS(npy::parse(reinterpret_cast<const unsigned char*>(f.data()), f.size(), "f.npy"),
-                       "f.npy: Fortran-order arrays are not supported (save C-order)", npy::Error);
+  // Fortran order [2, 3] int32: the file holds column after column; read() gives rows.
+  const std::int32_t cols[6] = {0, 3, 1, 4, 2, 5};
+  const std::string f = numpy_file("{'descr': '<i4', 'fortran_order': True, 'shape': (2, 3), }",
+                                   std::string(reinterpret_cast<const char*>(cols), sizeof cols));
+  const npy::Array fa = npy::parse(reinterpret_cast<const unsigned char*>(f.data()), f.size(), "f.npy");
+  CHECK(fa.shape == std::vector<std::int64_t>{2, 3});
+  CHECK(fa.as<std::int32_t>() == std::vector<std::int32_t>{0, 1, 2, 3, 4, 5});
+  CHECK_THROWS_WITH_AS(npy::parse(reinterpret_cast<const unsigned char*>(f.data()), f.size() - 1, "f.npy"),
+                       "f.npy: truncated data (23 of 24 bytes for shape [2, 3])", npy::Error);
   CHECK_THROWS_WITH_AS(npy::parse(data, 5, "s.npy"), "s.npy: truncated (no npy preamble)", npy::Error);
   // to_bytes writes what read() reads.
   const float vals[3] = {1.5f, -2.0f, 3.25f};

@@ -284,6 +284,7 @@ TEST_CASE("smg_trainer --export-dycheck and --data: renders, tracks3d.npy, metri
     CHECK(smg::test::count_lines(b.err) == 1);
     CHECK(b.err.find(c.message) != std::string::npos);
     CHECK_FALSE(fs::exists(bad_out / "metrics.json"));
+    CHECK_FALSE(fs::exists(bad_out));  // nothing is created for a refused scene or bad flags
   }
   fs::remove_all(scene);
   fs::remove_all(out);

@@ -374,8 +374,15 @@ TEST_CASE("dycheck: broken images, depth, covisible and splits name their file")
       {"depth_2d", npy_written("depth/2x/0_00000.npy", std::vector<float>(depth.begin(), depth.begin() + 48), {6, 8}), "no error"},
       {"depth_int", npy_written("depth/2x/0_00000.npy", std::vector<std::int32_t>(48, 1), {6, 8, 1}),
        "depth/2x/0_00000.npy: dtype int32, expected float32"},
-      {"depth_fortran", replaced("depth/2x/0_00002.npy", "False,", "True, "),
-       "depth/2x/0_00002.npy: Fortran-order arrays are not supported (save C-order)"},
+      // Fortran order is read (and transposed; the values then differ, but the file is valid).
+      {"depth_fortran", replaced("depth/2x/0_00002.npy", "False,", "True, "), "no error"},
+      {"depth_fortran_short",
+       [](Dir d) {
+         replace_in(d / "depth/2x/0_00002.npy", "False,", "True, ");
+         const std::string b = slurp(d / "depth/2x/0_00002.npy");
+         write_bytes(d / "depth/2x/0_00002.npy", b.substr(0, b.size() - 4));
+       },
+       "depth/2x/0_00002.npy: truncated data (188 of 192 bytes for shape [6, 8, 1])"},
       {"covisible_missing", removed("covisible/2x/val/2_00003.png"), "covisible/2x/val/2_00003.png: file is missing"},
       {"covisible_grey", png_written("covisible/2x/val/2_00003.png", grey),
        "covisible/2x/val/2_00003.png: value 128 at pixel (0, 0) is neither 0 nor 255"},
@@ -392,6 +399,21 @@ TEST_CASE("dycheck: broken images, depth, covisible and splits name their file")
        "splits/train.json: frame_names[0] is '0_0000', expected '0_00000' for camera_ids[0] = 0, time_ids[0] = 0"},
       {"split_missing", removed("splits/train.json"), "splits/train.json: file is missing"},
   });
+  {
+    // A depth file in Fortran order, as numpy writes np.asfortranarray(depth): the same depth.
+    const fs::path d = fresh("depth_fortran_order");
+    const std::string rel = "depth/2x/0_00002.npy";
+    const std::string c_file = slurp(d / rel);
+    const std::size_t head = c_file.size() - 48 * 4;
+    std::string f_file = c_file.substr(0, head);
+    const auto flag = f_file.find("False,");
+    REQUIRE(flag != std::string::npos);
+    f_file.replace(flag, 6, "True, ");
+    for (std::size_t x = 0; x < 8; ++x)  // Fortran order of [6, 8, 1]: y runs fastest
+      for (std::size_t y = 0; y < 6; ++y) f_file += c_file.substr(head + (y * 8 + x) * 4, 4);
+    write_bytes(d / rel, f_file);
+    CHECK(trainer::read_dycheck(d.string()).depth == synthetic().depth);
+  }
   {
     // RGBA: alpha is ignored.
     const fs::path d = fresh("rgba");
