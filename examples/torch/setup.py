@@ -8,6 +8,7 @@ The CMake route (README "From PyTorch") builds the same module into <build>/pyth
 """
 import glob
 import os
+import sys
 
 from setuptools import setup
 import torch
@@ -26,16 +27,24 @@ include_dirs = [os.path.join(ROOT, "include"), HERE,
 # debug assertions (SMG_ASSERT: bounds checks on every view access) stay off in the extension.
 with_cuda = (torch.version.cuda is not None and CUDA_HOME is not None
              and os.environ.get("SMG_TORCH_NO_CUDA", "0") != "1")
+# OpenMP for the C++ sources, as torch compiles ATen: smg's loops run through at::parallel_for,
+# a header template whose `#pragma omp parallel` is compiled into this module, and without
+# OpenMP it runs serially whatever torch.set_num_threads says (smg_torch_ext.cpp stops the build
+# then). The compiler's OpenMP runtime must be the one torch loads (Debian: g++'s libgomp).
+openmp = ["/openmp"] if sys.platform == "win32" else ["-fopenmp"]
+openmp_link = [] if sys.platform == "win32" else ["-fopenmp"]
 if with_cuda:
     ext = CUDAExtension(
         "smg_torch._C", sources + [os.path.join(HERE, "smg_torch_cuda.cu")],
         include_dirs=include_dirs, define_macros=macros + [("SMG_TORCH_CUDA", None)],
-        extra_compile_args={"cxx": ["-O3", "-std=c++17", "-DNDEBUG"],
+        extra_compile_args={"cxx": ["-O3", "-std=c++17", "-DNDEBUG"] + openmp,
                             "nvcc": ["-O3", "-std=c++17", "-DNDEBUG", "--expt-relaxed-constexpr",
-                                     "-diag-suppress=20012"]})
+                                     "-diag-suppress=20012"]},
+        extra_link_args=openmp_link)
 else:
     ext = CppExtension("smg_torch._C", sources, include_dirs=include_dirs, define_macros=macros,
-                       extra_compile_args=["-O3", "-std=c++17", "-DNDEBUG"])
+                       extra_compile_args=["-O3", "-std=c++17", "-DNDEBUG"] + openmp,
+                       extra_link_args=openmp_link)
 
 setup(
     name="smg_torch",

@@ -2,7 +2,8 @@
 // CPU translation units (.cpp) and the CUDA one (smg_torch_cuda.cu): the argument checks
 // (smg_torch_checks.hpp), the option builders (smg_torch_options.hpp), the checked inputs that
 // an operator hands to its CPU or CUDA implementation, the dtype / index-type dispatch, and the
-// executor on torch's intra-op pool.
+// thread count of torch's intra-op pool (the executor over that pool is smg_torch_ext.cpp's: it
+// must be compiled with OpenMP, which the CUDA translation unit is not).
 //
 // Device dispatch: each operator is one Python name (smg_torch._C.carap, ...). Its .cpp checks
 // the arguments on the reference tensor's device, builds the options and allocates the outputs,
@@ -35,13 +36,6 @@
 namespace smg_torch {
 
 using OptTensor = std::optional<at::Tensor>;
-
-// smg's chunks on torch's intra-op threads (docs/conventions.md "The caller's executor").
-inline void torch_run(void*, smg::Index count, int, void (*job)(void*, smg::Index), void* ctx) {
-  at::parallel_for(0, count, 1, [&](int64_t b, int64_t e) {
-    for (int64_t c = b; c < e; ++c) job(ctx, c);
-  });
-}
 
 // Per call: as many threads as torch uses now (torch.set_num_threads).
 inline smg::ParallelOptions parallel_options() {
