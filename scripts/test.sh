@@ -4,7 +4,7 @@
 #
 #   scripts/test.sh              Release build in build/release, run all tests
 #   scripts/test.sh --sanitize   AddressSanitizer + UndefinedBehaviorSanitizer build in
-#                                build/asan (tests and examples only), run all tests
+#                                build/asan (tests and examples only; Clang), run all tests
 #
 # The Release mode also compiles the CUDA tests (tests/cuda) where nvcc exists: test_cuda runs the
 # GPU kernels against the CPU on a machine with a CUDA device and prints one "skipped" line
@@ -28,7 +28,17 @@ if [ "$mode" = asan ]; then
   # -O1 -g1: the sanitizers need some optimisation to run the tests at speed, but -O2 -g made this
   # build 2.4x slower to compile (216 against 89 CPU-seconds for tests/energy/test_autodiff.cpp);
   # -g1 keeps the file:line of every frame in a sanitizer report.
-  cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
+  # Clang compiles this build: the Release build is GCC's, so the sanitizer build makes Clang the
+  # second compiler whose -Werror the code passes, and Clang instruments for ASan+UBSan in about a
+  # quarter less CPU time than GCC (tests/energy's unity file: 127 against 192 CPU-seconds).
+  # Without Clang (and not root to install it) it falls back to GCC, saying so.
+  cxx=()
+  if scripts/deps.sh clang libclang-rt-dev && command -v clang++ >/dev/null; then
+    cxx=(-DCMAKE_CXX_COMPILER=clang++)
+  else
+    echo "smg: clang++ not available: the sanitizer build uses the default C++ compiler"
+  fi
+  cmake -S . -B "$build" "${cxx[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
         -DSMG_WERROR=ON -DSMG_SANITIZE=ON -DSMG_BUILD_BENCH=OFF -DSMG_BUILD_TORCH=OFF -DSMG_BUILD_CUDA=OFF
   export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1}
   export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}

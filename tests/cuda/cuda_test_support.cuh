@@ -127,4 +127,10 @@ bool check_bitwise(const std::vector<T>& a, const std::vector<T>& b, const std::
   return same;
 }
 
+// A double array converted to S (the scalar a case runs in).
+template <class S>
+std::vector<S> cast(const std::vector<double>& v) {
+  return std::vector<S>(v.begin(), v.end());
+}
+
 }  // namespace smg::test::cuda

@@ -14,6 +14,7 @@
 #include <cuda_runtime.h>
 
 #include "cuda/core_cases.hpp"
+#include "cuda/cuda_test_support.cuh"  // SMG_TEST_CUDA
 
 namespace {
 
@@ -27,13 +28,6 @@ __global__ void eval_cases(int n, const int* kinds, const S* in, S* out) {
     smg_cuda_test::eval_case<S>(kinds[k], in + static_cast<size_t>(k) * kIn,
                                 out + static_cast<size_t>(k) * kOut);
 }
-
-#define SMG_TEST_CUDA(call)                                                           \
-  do {                                                                                \
-    const cudaError_t smg_test_e = (call);                                            \
-    REQUIRE_MESSAGE(smg_test_e == cudaSuccess, #call " failed: ", cudaGetErrorName(smg_test_e), \
-                    " (", cudaGetErrorString(smg_test_e), ")");                       \
-  } while (0)
 
 // Device memory freed on every exit path (a failed REQUIRE throws).
 template <class T>

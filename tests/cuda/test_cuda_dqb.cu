@@ -78,10 +78,6 @@ DqbCase random_case(const std::string& name, Index T, Index N, Index P, Index D,
   return c;
 }
 
-template <class S>
-std::vector<S> cast(const std::vector<double>& v) {
-  return std::vector<S>(v.begin(), v.end());
-}
 
 // The arrays of one run, in S.
 template <class S>

@@ -71,10 +71,6 @@ LrmCase random_case(const std::string& name, Index T, Index N, Index K, Index mi
   return c;
 }
 
-template <class S>
-std::vector<S> cast(const std::vector<double>& v) {
-  return std::vector<S>(v.begin(), v.end());
-}
 template <class I>
 std::vector<I> cast_idx(const std::vector<std::int64_t>& v) {
   return std::vector<I>(v.begin(), v.end());

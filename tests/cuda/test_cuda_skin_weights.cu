@@ -73,10 +73,6 @@ WeightsCase random_case(const std::string& name, Index T, Index N, Index K, Inde
   return c;
 }
 
-template <class S>
-std::vector<S> cast(const std::vector<double>& v) {
-  return std::vector<S>(v.begin(), v.end());
-}
 
 template <class S, class I>
 void run_case(const WeightsCase& c) {
