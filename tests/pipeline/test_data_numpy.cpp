@@ -87,6 +87,23 @@ TEST_CASE("smg_trainer --data: numpy's compressed tracks.npz, Fortran-order dept
   CHECK(metrics.find("\"semantic_graph\":false") != std::string::npos);
   CHECK(metrics.find("\"gate_removed_edges\":0") != std::string::npos);
   CHECK(fs::exists(out / "renders/1_00000.png"));
+  {
+    // The accepted scene's path is echoed by the progress lines (no --quiet): a control
+    // character in it (an ANSI escape) reaches the terminal escaped.
+    const fs::path odd = fs::temp_directory_path() / "smg_test_pipeline_numpy_\x1b(B_scene";
+    const fs::path odd_out = fs::temp_directory_path() / "smg_test_pipeline_numpy_odd_out";
+    fs::remove_all(odd);
+    fs::remove_all(odd_out);
+    fs::rename(scene, odd);
+    const smg::test::ProgramRun p = numpy_scene_trainer_run(
+        "--data '" + odd.string() + "' --quick --stage1-iters 2 --stage2-iters 1 --threads 2 --out " + odd_out.string());
+    fs::rename(odd, scene);
+    fs::remove_all(odd_out);
+    CAPTURE(p.err);
+    CHECK(p.code == 0);
+    CHECK((p.out + p.err).find("_\\x1b(B_scene") != std::string::npos);
+    CHECK((p.out + p.err).find('\x1b') == std::string::npos);
+  }
 
   // Refused scenes: exit 2, one line naming the file or the cause (without --quiet: stage 0's
   // progress lines are held back until the scene is accepted), no OUT folder.
