@@ -32,7 +32,7 @@ echo "== clang-tidy"
 # One clang-tidy per translation unit of the build, nproc at a time; each file's findings are
 # printed as one block (captured, so parallel runs do not interleave). The translation units are
 # those of compile_commands.json: every example source, and one unity file per test folder
-# (SMG_UNITY_TESTS, tests/CMakeLists.txt) that includes each of the folder's test files, so every
+# (SMG_UNITY_BUILD, tests/CMakeLists.txt) that includes each of the folder's test files, so every
 # test file is checked in the same compiler run the build makes; --header-filter adds tests/ so
 # that findings in those included files are reported like findings in a main file.
 # examples/torch (the PyTorch extension) is left out: it is not configured here (torch optional).

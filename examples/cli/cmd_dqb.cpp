@@ -19,15 +19,6 @@ namespace cli {
 
 namespace {
 
-template <class S>
-std::vector<S> cast(const std::vector<double>& v) {
-  return std::vector<S>(v.begin(), v.end());
-}
-
-void ok(const smg::Status& s) {
-  if (!s) throw RunError(s.message());
-}
-
 // Library view names -> the case's files.
 NameMap skin_names(const CaseDir& c) {
   NameMap n;

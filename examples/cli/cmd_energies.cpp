@@ -115,10 +115,6 @@ Params read_params(const Args& a) {
   return p;
 }
 
-void ok(const smg::Status& s) {
-  if (!s) throw RunError(s.message());
-}
-
 template <class S>
 void compute(const Invocation& inv, const Params& prm, const Tensor<double>& x_d,
              const std::vector<double>& q_d, const std::vector<std::uint8_t>& vis,

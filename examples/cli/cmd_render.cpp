@@ -172,13 +172,13 @@ void render_case(const Invocation& inv, JsonLine& summary) {
   sp::RenderWorkspace<S> ws;
   double t_fwd = 0, t_bwd = 0;
   const sp::RenderImageGrads<S>* gptr = backward ? &gin : nullptr;
-  switch (C) {
-    case 1: run_splat<1>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd, names, fallback); break;
-    case 3: run_splat<3>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd, names, fallback); break;
-    case 4: run_splat<4>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd, names, fallback); break;
-    default:
-      run_splat<Eigen::Dynamic>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd, names, fallback);
-  }
+  // RGB gets the renderer's fixed-channel kernels; any other count the run-time-C kernels. More
+  // fixed counts (1, 4) would each add two instantiations of the whole renderer to smg_cli, the
+  // costliest file of the build, for a bridge program whose speed is not its point.
+  if (C == 3)
+    run_splat<3>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd, names, fallback);
+  else
+    run_splat<Eigen::Dynamic>(params, cam, set, ws, images, gptr, gout, inv.threads, &t_fwd, &t_bwd, names, fallback);
 
   // Finite inputs must give finite results (docs/interop.md "Overflow").
   const std::string cause = c.file("means.npy") + ": values too large: the render overflows (non-finite ";

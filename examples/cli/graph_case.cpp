@@ -92,11 +92,6 @@ NameMap data_names(const CaseDir& c) {
 }
 
 template <class S>
-std::vector<S> cast(const std::vector<double>& v) {
-  return std::vector<S>(v.begin(), v.end());
-}
-
-template <class S>
 CaseGraph build_typed(const Invocation& inv, const Tensor<double>& positions, Config cfg) {
   const CaseDir& c = inv.case_dir;
   const std::int64_t T = positions.dim(0), N = positions.dim(1);

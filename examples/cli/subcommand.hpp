@@ -65,6 +65,18 @@ inline void check_mapped(const smg::Status& s, const NameMap& names, const std::
   throw RunError(m);
 }
 
+// Throws RunError(s.message()) for a failed library Status whose message already names the
+// case's file or flag (the check_mapped route is for messages naming library fields).
+inline void ok(const smg::Status& s) {
+  if (!s) throw RunError(s.message());
+}
+
+// The doubles parsed from a flag, as the case's scalar type S (float under --float).
+template <class S>
+std::vector<S> cast(const std::vector<double>& v) {
+  return std::vector<S>(v.begin(), v.end());
+}
+
 // Default of --max-memory-gb (docs/interop.md "Limits").
 inline constexpr double kDefaultMaxMemoryGb = 8;
 

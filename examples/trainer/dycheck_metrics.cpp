@@ -16,7 +16,7 @@ namespace {
 
 constexpr int kSize = 11;  // compute_ssim: filter_size = 11
 constexpr int kHalf = kSize / 2;
-constexpr double kSigma = 1.5;  // filter_sigma
+constexpr double kFilterSigma = 1.5;  // filter_sigma
 constexpr double kK1 = 0.01, kK2 = 0.03, kMaxVal = 1.0;
 constexpr int kQuantities = 5;  // x, y, x^2, y^2, x*y
 
@@ -58,7 +58,7 @@ std::array<double, kSize> gaussian_filter() {
   std::array<double, kSize> f{};
   double sum = 0;
   for (int i = 0; i < kSize; ++i) {
-    const double t = (i - kHalf) / kSigma;
+    const double t = (i - kHalf) / kFilterSigma;
     sum += f[static_cast<std::size_t>(i)] = std::exp(-0.5 * t * t);
   }
   for (double& v : f) v /= sum;
