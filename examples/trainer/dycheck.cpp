@@ -510,6 +510,15 @@ Camera read_nerfies_camera(const std::string& root, const std::string& rel, int 
 std::vector<DycheckFrame> read_split_file(const std::string& root, const std::string& rel) {
   return read_split(SceneReader(root), rel);
 }
+std::vector<DycheckFrame> read_train_split(const std::string& root) {
+  std::vector<DycheckFrame> train = read_split(SceneReader(root), "splits/train.json");
+  if (train.empty()) fail("splits/train.json", "no training frames");
+  std::stable_sort(train.begin(), train.end(), [](const DycheckFrame& a, const DycheckFrame& b) { return a.time < b.time; });
+  for (std::size_t t = 1; t < train.size(); ++t)
+    if (train[t].time == train[t - 1].time)
+      fail("splits/train.json", "time id " + std::to_string(train[t].time) + " appears more than once");
+  return train;
+}
 Image read_rgb_png(const std::string& root, const std::string& rel, const Camera& cam, const std::string& camera_rel,
                    const char* scale) {
   return read_rgb(SceneReader(root), rel, cam, camera_rel, scale);
@@ -539,12 +548,7 @@ DycheckScene read_dycheck(const std::string& dir, const DycheckReadOptions& opti
   }
 
   // Splits; training frames sorted by time id, each time id once.
-  s.train = read_split(in, "splits/train.json");
-  if (s.train.empty()) fail("splits/train.json", "no training frames");
-  std::stable_sort(s.train.begin(), s.train.end(), [](const DycheckFrame& a, const DycheckFrame& b) { return a.time < b.time; });
-  for (std::size_t t = 1; t < s.train.size(); ++t)
-    if (s.train[t].time == s.train[t - 1].time)
-      fail("splits/train.json", "time id " + std::to_string(s.train[t].time) + " appears more than once");
+  s.train = layout_io::read_train_split(dir);
   const std::size_t T = s.train.size();
 
   // Training cameras (one image size), images, depth.

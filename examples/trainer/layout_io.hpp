@@ -36,6 +36,8 @@ std::vector<float> float_values(const npy::Array& a, const std::string& rel);
 Camera read_nerfies_camera(const std::string& root, const std::string& rel, int factor);
 // splits/<name>.json: frame_names, time_ids, camera_ids (file order).
 std::vector<DycheckFrame> read_split_file(const std::string& root, const std::string& rel);
+// splits/train.json sorted by time id: at least one frame, every time id once.
+std::vector<DycheckFrame> read_train_split(const std::string& root);
 // 8-bit RGB(A) PNG of the camera's size as [H][W][3] values / 255; `scale` words the message.
 Image read_rgb_png(const std::string& root, const std::string& rel, const Camera& cam, const std::string& camera_rel,
                    const char* scale);

@@ -153,12 +153,7 @@ Camera som_read_camera(const std::string& root, const std::string& frame) {
 DycheckScene read_som(const std::string& dir, const DycheckReadOptions& options) {
   DycheckScene s;
   s.root = dir;
-  s.train = layout_io::read_split_file(dir, "splits/train.json");
-  if (s.train.empty()) fail_at("splits/train.json", "no training frames");
-  std::stable_sort(s.train.begin(), s.train.end(), [](const DycheckFrame& a, const DycheckFrame& b) { return a.time < b.time; });
-  for (std::size_t t = 1; t < s.train.size(); ++t)
-    if (s.train[t].time == s.train[t - 1].time)
-      fail_at("splits/train.json", "time id " + std::to_string(s.train[t].time) + " appears more than once");
+  s.train = layout_io::read_train_split(dir);
   const std::size_t T = s.train.size();
   for (std::size_t t = 0; t < T; ++t) {
     s.train_cameras.push_back(som_read_camera(dir, s.train[t].name));
