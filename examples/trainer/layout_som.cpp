@@ -90,16 +90,22 @@ void som_read_tracks(const std::string& root, DycheckScene& s, const DycheckRead
   const std::size_t T = s.train.size();
   const std::string dir = std::string(kSomPre) + "2d_tracks/1x/";
   auto rel_of = [&](std::size_t q, std::size_t t) { return dir + s.train[q].name + "_" + s.train[t].name + ".npy"; };
-  // Per query frame: N_q from the query's own file.
-  std::vector<std::int64_t> count(T), first(T);
+  // Per query frame: N_q rows (the query's own file), of which keep[q] are kept (rows
+  // k * N_q / keep[q]: options.max_tracks spread over the frames, the first frames taking the
+  // remainder).
+  std::vector<std::int64_t> rows(T), keep(T), first(T);
   std::int64_t Q = 0;
+  const std::int64_t cap = options.max_tracks;
   for (std::size_t q = 0; q < T; ++q) {
     const std::string rel = rel_of(q, q);
     const npy::Array a = layout_io::read_npy(root, rel);
     if (a.shape.size() != 2 || a.shape[1] != 4) fail_at(rel, "shape " + npy::shape_string(a.shape) + ", expected [N, 4]");
+    rows[q] = a.shape[0];
+    const std::int64_t Ti = static_cast<std::int64_t>(T), qi = static_cast<std::int64_t>(q);
+    const std::int64_t share = cap / Ti + (qi < cap % Ti ? 1 : 0);
+    keep[q] = cap > 0 ? std::min(rows[q], share) : rows[q];
     first[q] = Q;
-    count[q] = a.shape[0];
-    Q += a.shape[0];
+    Q += keep[q];
     if (Q > std::numeric_limits<int>::max() / 4) fail_at(rel, "too many tracks");
   }
   DycheckTracks& tr = s.tracks;
@@ -110,23 +116,24 @@ void som_read_tracks(const std::string& root, DycheckScene& s, const DycheckRead
   tr.query_t.assign(static_cast<std::size_t>(Q), 0);
   const double m = options.track_margin_px;
   for (std::size_t q = 0; q < T; ++q) {
-    for (std::int64_t k = 0; k < count[q]; ++k) tr.query_t[static_cast<std::size_t>(first[q] + k)] = static_cast<std::int32_t>(q);
+    for (std::int64_t k = 0; k < keep[q]; ++k) tr.query_t[static_cast<std::size_t>(first[q] + k)] = static_cast<std::int32_t>(q);
     for (std::size_t t = 0; t < T; ++t) {
       const std::string rel = rel_of(q, t);
       const npy::Array a = layout_io::read_npy(root, rel);
-      if (a.shape != std::vector<std::int64_t>{count[q], 4})
-        fail_at(rel, "shape " + npy::shape_string(a.shape) + ", expected [" + std::to_string(count[q]) + ", 4] (the rows of " +
+      if (a.shape != std::vector<std::int64_t>{rows[q], 4})
+        fail_at(rel, "shape " + npy::shape_string(a.shape) + ", expected [" + std::to_string(rows[q]) + ", 4] (the rows of " +
                          rel_of(q, q) + ")");
       const std::vector<float> v = layout_io::float_values(a, rel);
-      for (std::int64_t k = 0; k < count[q]; ++k) {
-        const float* row = v.data() + 4 * k;
-        for (int c = 0; c < 4; ++c)
-          if (!std::isfinite(row[c])) fail_at(rel, "row " + std::to_string(k) + " column " + std::to_string(c) + " is not finite");
+      for (std::size_t i = 0; i < v.size(); ++i)  // every row, kept or not
+        if (!std::isfinite(v[i])) fail_at(rel, "row " + std::to_string(i / 4) + " column " + std::to_string(i % 4) + " is not finite");
+      for (std::int64_t k = 0; k < keep[q]; ++k) {
+        const std::int64_t src_row = k * rows[q] / keep[q];
+        const float* row = v.data() + 4 * src_row;
         // + 0.5: SoM's integer pixel centres to the trainer's (file comment).
         const double x = static_cast<double>(row[0]) + 0.5, y = static_cast<double>(row[1]) + 0.5;
         const bool vis = som_visible(row[2], row[3]);
         if (vis && (x < -m || y < -m || x > s.width + m || y > s.height + m))
-          fail_at(rel, "row " + std::to_string(k) + " is visible at (" + std::to_string(row[0]) + ", " + std::to_string(row[1]) +
+          fail_at(rel, "row " + std::to_string(src_row) + " is visible at (" + std::to_string(row[0]) + ", " + std::to_string(row[1]) +
                            "), more than " + std::to_string(static_cast<int>(m)) + " px outside the image");
         const std::size_t dst = t * static_cast<std::size_t>(Q) + static_cast<std::size_t>(first[q] + k);
         tr.uv[2 * dst] = static_cast<float>(x);

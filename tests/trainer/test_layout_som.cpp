@@ -87,6 +87,21 @@ TEST_CASE("read_som: the numpy-written Shape-of-Motion fixture, every conversion
   CHECK(s.feature_dim == 0);  // no priors/features: a geometric graph
 }
 
+TEST_CASE("read_som: at most max_tracks tracks, spread over the query frames and their rows") {
+  trainer::DycheckReadOptions options;
+  options.max_tracks = 7;  // 3 + 2 + 2 of 18 per frame: rows 0, 6, 12 | 0, 9 | 0, 9
+  const trainer::DycheckScene s = trainer::read_som(kSomFixture.string(), options);
+  const trainer::DycheckTracks& tr = s.tracks;
+  REQUIRE(tr.count == 7);
+  CHECK(tr.query_t == std::vector<std::int32_t>{0, 0, 0, 1, 1, 2, 2});
+  auto uv = [&](int t, int q, int c) { return tr.uv[(static_cast<std::size_t>(t) * 7 + static_cast<std::size_t>(q)) * 2 + static_cast<std::size_t>(c)]; };
+  CHECK(uv(0, 3, 0) == doctest::Approx(4.5));  // frame 1's row 0, (5, 4), one column back at t = 0
+  CHECK(uv(2, 1, 0) == doctest::Approx(8.5));  // frame 0's row 6, (6, 5), two columns on at t = 2
+  CHECK(uv(2, 1, 1) == doctest::Approx(5.5));
+  CHECK(uv(1, 6, 0) == doctest::Approx(6.5));  // frame 2's row 9, (7, 6), one column back at t = 1
+  CHECK(uv(1, 6, 1) == doctest::Approx(6.5));
+}
+
 TEST_CASE("read_som: one broken file at a time names that file") {
   const std::string pre = "flow3d_preprocessed/";
   SUBCASE("a track file with 3 columns") {
