@@ -15,6 +15,7 @@
 // - Numbers in the JSON files may be written as NaN/Infinity (Python's json does that); they are
 //   parsed and then reported by name ("focal_length is NaN").
 #include "trainer/dycheck.hpp"
+#include "trainer/layout_io.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -127,9 +128,9 @@ std::vector<double> finite_array(const json::Value& v, const std::string& key, l
   return a;
 }
 
-// A camera JSON (1x) converted to trainer::Camera at 2x.
-Camera read_camera(const SceneReader& in, const std::string& frame) {
-  const std::string rel = "camera/" + frame + ".json";
+// A Nerfies camera JSON (1x) converted to trainer::Camera at `factor` (1 or 2; see the file
+// comment for 2x). The principal point is taken as stored (Dycheck's pixel-centre convention).
+Camera read_camera(const SceneReader& in, const std::string& rel, int factor) {
   const json::Value v = in.json(rel);
   if (!v.is_object()) fail(rel, "expected a JSON object");
 
@@ -179,18 +180,20 @@ Camera read_camera(const SceneReader& in, const std::string& frame) {
   if (size[0] < 2 || size[1] < 2 || size[0] > (1 << 20) || size[1] > (1 << 20))
     fail(rel, "image_size [" + std::to_string(size[0]) + ", " + std::to_string(size[1]) + "] is out of range");
 
-  // 2x: Python's round(size * 0.5), halves to even (Dycheck's rescale_image_domain).
-  auto half = [](std::int64_t n) {
+  // 2x: Python's round(size * 0.5), halves to even (Dycheck's rescale_image_domain); 1x: as stored.
+  auto half = [factor](std::int64_t n) {
+    if (factor == 1) return static_cast<int>(n);
     const std::int64_t q = n / 2;
     return static_cast<int>((n % 2 == 1 && q % 2 == 1) ? q + 1 : q);
   };
+  const double f = factor;
   Camera cam;
   cam.width = half(size[0]);
   cam.height = half(size[1]);
-  cam.fx = focal / 2;
-  cam.fy = focal * aspect / 2;
-  cam.cx = pp[0] / 2;
-  cam.cy = pp[1] / 2;
+  cam.fx = focal / f;
+  cam.fy = focal * aspect / f;
+  cam.cx = pp[0] / f;
+  cam.cy = pp[1] / f;
   const Eigen::Vector3d position(p[0], p[1], p[2]);
   cam.world_to_camera.setIdentity();
   cam.world_to_camera.topLeftCorner<3, 3>() = R;
@@ -252,14 +255,16 @@ std::vector<std::uint8_t> read_binary_png(const SceneReader& in, const std::stri
   return out;
 }
 
-// 8-bit RGB(A) as an Image [H][W][3] with values / 255 (alpha ignored).
-Image read_rgb(const SceneReader& in, const std::string& rel, const Camera& cam, const std::string& camera_rel) {
+// 8-bit RGB(A) as an Image [H][W][3] with values / 255 (alpha ignored). `scale` ("1x", "2x")
+// only words the size message.
+Image read_rgb(const SceneReader& in, const std::string& rel, const Camera& cam, const std::string& camera_rel,
+               const char* scale = "2x") {
   const files::Png8 png = in.png(rel);
   if (png.channels != 3 && png.channels != 4)
     fail(rel, "expected an RGB or RGBA image, found " + std::to_string(png.channels) + " channel(s)");
   if (png.width != cam.width || png.height != cam.height)
     fail(rel, "image is " + size_str(png.width, png.height) + ", " + camera_rel + " gives " +
-                  size_str(cam.width, cam.height) + " at 2x");
+                  size_str(cam.width, cam.height) + " at " + scale);
   Image im(png.width, png.height, 3);
   const std::size_t n = static_cast<std::size_t>(png.width) * static_cast<std::size_t>(png.height);
   for (std::size_t i = 0; i < n; ++i)
@@ -441,8 +446,9 @@ std::string quoted(const std::string& s) {
   return out + "\"";
 }
 
-// The camera JSON at 1x for a 2x camera (the inverse of read_camera).
-std::string camera_json(const Camera& cam) {
+// The camera JSON at 1x for a camera at `factor` (1 or 2; the inverse of read_camera).
+std::string camera_json(const Camera& cam, int factor = 2) {
+  const double f = factor;
   const Eigen::Matrix3d R = cam.rotation();
   const Eigen::Vector3d p = cam.center();
   std::ostringstream s;
@@ -451,13 +457,13 @@ std::string camera_json(const Camera& cam) {
     const double row[3] = {R(r, 0), R(r, 1), R(r, 2)};
     s << (r ? ", " : "") << num_array(row, 3);
   }
-  const double pp[2] = {2 * cam.cx, 2 * cam.cy};
+  const double pp[2] = {f * cam.cx, f * cam.cy};
   const double zeros[3] = {0, 0, 0};
-  s << "],\n  \"position\": " << num_array(p.data(), 3) << ",\n  \"focal_length\": " << num(2 * cam.fx)
+  s << "],\n  \"position\": " << num_array(p.data(), 3) << ",\n  \"focal_length\": " << num(f * cam.fx)
     << ",\n  \"principal_point\": " << num_array(pp, 2) << ",\n  \"skew\": 0.0,\n  \"pixel_aspect_ratio\": "
     << num(cam.fy / cam.fx) << ",\n  \"radial_distortion\": " << num_array(zeros, 3)
-    << ",\n  \"tangential_distortion\": " << num_array(zeros, 2) << ",\n  \"image_size\": [" << 2 * cam.width << ", "
-    << 2 * cam.height << "]\n}\n";
+    << ",\n  \"tangential_distortion\": " << num_array(zeros, 2) << ",\n  \"image_size\": [" << factor * cam.width << ", "
+    << factor * cam.height << "]\n}\n";
   return s.str();
 }
 
@@ -484,6 +490,54 @@ void need(bool ok, const std::string& rel, const std::string& what) {
 
 }  // namespace
 
+// ---- shared with the other layouts (layout_io.hpp) -------------------------------------------
+
+namespace layout_io {
+
+void fail_at(const std::string& rel, const std::string& problem) { fail(rel, problem); }
+bool has_file(const std::string& root, const std::string& rel) { return SceneReader(root).exists(rel); }
+json::Value read_json(const std::string& root, const std::string& rel) { return SceneReader(root).json(rel); }
+npy::Array read_npy(const std::string& root, const std::string& rel) { return SceneReader(root).npy_file(rel); }
+files::Png8 read_png(const std::string& root, const std::string& rel) { return SceneReader(root).png(rel); }
+std::map<std::string, npy::Array> read_npz(const std::string& root, const std::string& rel) {
+  const std::vector<unsigned char> b = SceneReader(root).bytes(rel);
+  return labelled([&] { return files::parse_npz(b, rel); });
+}
+std::vector<float> float_values(const npy::Array& a, const std::string& rel) { return finite_floats(a, rel); }
+Camera read_nerfies_camera(const std::string& root, const std::string& rel, int factor) {
+  return read_camera(SceneReader(root), rel, factor);
+}
+std::vector<DycheckFrame> read_split_file(const std::string& root, const std::string& rel) {
+  return read_split(SceneReader(root), rel);
+}
+std::vector<DycheckFrame> read_train_split(const std::string& root) {
+  std::vector<DycheckFrame> train = read_split(SceneReader(root), "splits/train.json");
+  if (train.empty()) fail("splits/train.json", "no training frames");
+  std::stable_sort(train.begin(), train.end(), [](const DycheckFrame& a, const DycheckFrame& b) { return a.time < b.time; });
+  for (std::size_t t = 1; t < train.size(); ++t)
+    if (train[t].time == train[t - 1].time)
+      fail("splits/train.json", "time id " + std::to_string(train[t].time) + " appears more than once");
+  return train;
+}
+Image read_rgb_png(const std::string& root, const std::string& rel, const Camera& cam, const std::string& camera_rel,
+                   const char* scale) {
+  return read_rgb(SceneReader(root), rel, cam, camera_rel, scale);
+}
+std::vector<std::uint8_t> read_binary_mask(const std::string& root, const std::string& rel, int width, int height) {
+  return read_binary_png(SceneReader(root), rel, width, height);
+}
+void read_feature_files(const std::string& root, DycheckScene& scene) { read_features(SceneReader(root), scene); }
+void make_dir(const std::string& root, const std::string& rel) { SceneWriter(root).dir(rel); }
+void write_file(const std::string& root, const std::string& rel, const std::string& bytes) {
+  SceneWriter(root).file(rel, bytes);
+}
+void write_png_file(const std::string& root, const std::string& rel, const Image& image) { SceneWriter(root).png(rel, image); }
+std::string nerfies_camera_json(const Camera& cam, int factor) { return camera_json(cam, factor); }
+std::string split_file_json(const std::vector<DycheckFrame>& frames) { return split_json(frames); }
+Image mask_image(const std::uint8_t* mask, int width, int height) { return binary_image(mask, width, height); }
+
+}  // namespace layout_io
+
 DycheckScene read_dycheck(const std::string& dir, const DycheckReadOptions& options) {
   const SceneReader in(dir);
   DycheckScene s;
@@ -494,17 +548,12 @@ DycheckScene read_dycheck(const std::string& dir, const DycheckReadOptions& opti
   }
 
   // Splits; training frames sorted by time id, each time id once.
-  s.train = read_split(in, "splits/train.json");
-  if (s.train.empty()) fail("splits/train.json", "no training frames");
-  std::stable_sort(s.train.begin(), s.train.end(), [](const DycheckFrame& a, const DycheckFrame& b) { return a.time < b.time; });
-  for (std::size_t t = 1; t < s.train.size(); ++t)
-    if (s.train[t].time == s.train[t - 1].time)
-      fail("splits/train.json", "time id " + std::to_string(s.train[t].time) + " appears more than once");
+  s.train = layout_io::read_train_split(dir);
   const std::size_t T = s.train.size();
 
   // Training cameras (one image size), images, depth.
   for (std::size_t t = 0; t < T; ++t) {
-    s.train_cameras.push_back(read_camera(in, s.train[t].name));
+    s.train_cameras.push_back(read_camera(in, "camera/" + s.train[t].name + ".json", 2));
     const Camera& c = s.train_cameras.back();
     if (t == 0) {
       s.width = c.width;
@@ -526,7 +575,7 @@ DycheckScene read_dycheck(const std::string& dir, const DycheckReadOptions& opti
   if (options.read_val) {
     s.val = read_split(in, "splits/val.json");
     for (const DycheckFrame& f : s.val) {
-      s.val_cameras.push_back(read_camera(in, f.name));
+      s.val_cameras.push_back(read_camera(in, "camera/" + f.name + ".json", 2));
       const Camera& c = s.val_cameras.back();
       s.val_rgb.push_back(read_rgb(in, "rgb/2x/" + f.name + ".png", c, "camera/" + f.name + ".json"));
       s.val_covisible.push_back(read_binary_png(in, "covisible/2x/val/" + f.name + ".png", c.width, c.height));

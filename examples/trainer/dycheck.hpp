@@ -83,6 +83,11 @@ struct DycheckReadOptions {
   // Track samples reported visible may lie at most this far outside the image (pixels at 2x,
   // a tracker's extrapolation); farther, or NaN/Inf anywhere, is an error naming tracks.npz.
   double track_margin_px = 64.0;
+  // Shape-of-Motion layout only (read_som): its tracks are a grid of queries in every frame's
+  // mask (often millions in all), so at most this many are kept, spread evenly over the query
+  // frames and, within a frame, over its rows (as SoM's get_tracks_3d samples num_samples of
+  // them, deterministically here). 0 keeps every track.
+  int max_tracks = 20000;
 };
 
 // Reads and validates a scene (docs/data.md). Throws DataError ("<file>: <problem>") on a missing

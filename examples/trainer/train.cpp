@@ -8,14 +8,15 @@
 // output folder that cannot be written: one line on stderr and exit code 2, before any work.
 // A failure during training: one line on stderr and exit code 1.
 //
-// --data SCENE trains on a scene on disk in the Dycheck iPhone layout plus priors (docs/data.md):
+// --data SCENE trains on a scene on disk (docs/data.md): the Dycheck iPhone layout plus priors,
+// or Shape-of-Motion's preprocessed layout, detected from the folder's contents (layouts.hpp);
 // OUT/renders/<frame>.png for every validation frame, OUT/metrics.json with Dycheck's mPSNR and
 // mSSIM, and with --track-queries Q.json OUT/tracks3d.npy [M][T][3]. A missing or inconsistent
 // file, or a scene too poor to train (too few lifted object tracks): exit 2 with one line naming
 // the file or the cause, control characters escaped, before any training; OUT is created only
 // once the scene has passed stage 0. Without feature files the graph is geometric (one stderr
 // note). --export-dycheck DIR writes the procedural scene in that layout (plus queries.json and
-// queries_tracks3d.npy, the true tracks).
+// queries_tracks3d.npy, the true tracks); with --export-layout som, in Shape-of-Motion's.
 //
 // --export-case DIR stops after stage 0 (lifting, node selection, graph, initial rotations) and
 // writes stage 1's problem as .npy files and case.json into DIR instead of training
@@ -40,6 +41,7 @@
 #include "json_line.hpp"
 #include "npy.hpp"
 #include "trainer/data_scene.hpp"
+#include "trainer/layouts.hpp"
 #include "trainer/dycheck.hpp"
 #include "trainer/flags.hpp"
 #include "trainer/image_io.hpp"
@@ -84,12 +86,14 @@ std::vector<cli::FlagSpec> flags() {
                                         "were observed"},
           {"export-case", "", "write the stage-1 problem (lifted node tracks, visibility, ground truth, rotations, "
                               "graph: .npy + case.json) into this folder and exit without training"},
-          {"data", "", "train on this scene folder (Dycheck iPhone layout plus priors/, docs/data.md) instead of "
-                       "the generated scene"},
+          {"data", "", "train on this scene folder (Dycheck iPhone layout plus priors/, or Shape-of-Motion's "
+                       "flow3d_preprocessed/ layout, detected; docs/data.md) instead of the generated scene"},
           {"track-queries", "", "with --data: query pixels (Q.json) whose 3D tracks go to OUT/tracks3d.npy"},
           {"track-truth", "", "with --track-queries: true tracks [M][T][3] (.npy) to report the 3D EPE against"},
           {"export-dycheck", "", "write the generated scene in the Dycheck layout (docs/data.md) into this folder, "
                                  "with queries.json and their true tracks queries_tracks3d.npy, and exit"},
+          {"export-layout", "", "with --export-dycheck: the layout written, dycheck (default) | som "
+                                "(Shape-of-Motion, docs/data.md)"},
           {"no-pictures", "", "skip the PNG output", true},
           {"quiet", "", "no progress lines", true},
           {"help", "", "print this help", true}};
@@ -237,13 +241,14 @@ double peak_memory_mib() {
 
 // --data: trains on a scene from disk and writes renders, tracks3d.npy and metrics.json. OUT is
 // created after stage 0, which can still refuse the scene (DataError).
-int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double seconds_read,
+int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const char* layout, double seconds_read,
              const trainer::TrackQueries* queries, const std::vector<float>* truth, const fs::path& out,
              bool quiet) {
   // Stage 0's progress lines are held back (a temporary file) until the scene is accepted, so that
   // a refused scene prints its one error line and nothing else.
   const std::unique_ptr<std::FILE, int (*)(std::FILE*)> held(quiet ? nullptr : std::tmpfile(), &std::fclose);
   const trainer::Progress early(held.get(), quiet);
+  early.line("data", std::string("layout: ") + layout);
   early.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", scene " +
                           cli::escape_line(data.source) + ", output " + cli::escape_line(out.string()));
   trainer::TrainerResult stage0 = trainer::run_stage0(cfg, std::move(data), early);
@@ -329,11 +334,15 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double se
 }
 
 // --export-dycheck: the generated scene in the Dycheck layout, with 3D query tracks.
-int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, bool quiet) {
+// som: the same scene in Shape-of-Motion's layout (layouts.hpp).
+int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, bool som, bool quiet) {
   const trainer::Progress progress(stderr, quiet);
   const auto t0 = std::chrono::steady_clock::now();
   const trainer::Dataset d = trainer::make_dataset(cfg.dataset, smg::ParallelOptions{cfg.threads, 0});
-  trainer::write_dycheck(dir.string(), trainer::to_dycheck(d));
+  if (som)
+    trainer::write_som(dir.string(), trainer::to_dycheck(d));
+  else
+    trainer::write_dycheck(dir.string(), trainer::to_dycheck(d));
   trainer::TrackQueries q;
   std::vector<float> truth;
   trainer::export_queries(d, 256, &q, &truth);
@@ -351,7 +360,8 @@ int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, bool 
 int main(int argc, char** argv) {
   trainer::TrainerConfig cfg;
   fs::path out, export_dir, dycheck_dir;
-  bool pictures = true, quiet = false;
+  bool pictures = true, quiet = false, export_som = false;
+  const char* data_layout = nullptr;  // --data: the detected layout's description
   // --data: the scene, read and validated before anything is trained.
   trainer::Dataset data;
   bool have_data = false;
@@ -406,10 +416,13 @@ int main(int argc, char** argv) {
       for (const char* f : {"track-queries", "track-truth"})
         if (args.given(f)) throw cli::UsageError(std::string("--") + f + " needs --data");
     }
+    if (args.given("export-layout") && !args.given("export-dycheck"))
+      throw cli::UsageError("--export-layout needs --export-dycheck");
     if (args.given("track-truth") && !args.given("track-queries"))
       throw cli::UsageError("--track-truth needs --track-queries");
     if (args.given("export-dycheck")) {
       dycheck_dir = args.get("export-dycheck");
+      export_som = args.given("export-layout") && args.get_choice("export-layout", {"dycheck", "som"}) == "som";
       if (dycheck_dir.empty()) throw cli::UsageError("--export-dycheck needs a folder");
       cli::ensure_writable_dir(dycheck_dir);
     } else if (args.given("export-case")) {
@@ -431,7 +444,9 @@ int main(int argc, char** argv) {
       // Every file is validated here: a bad scene exits 2 with one line naming the file.
       const auto t0 = std::chrono::steady_clock::now();
       if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
-      data = trainer::dataset_from_dycheck(trainer::read_dycheck(args.get("data")));
+      trainer::DataLayout layout = trainer::DataLayout::dycheck;
+      data = trainer::dataset_from_dycheck(trainer::read_data_scene(args.get("data"), &layout));
+      data_layout = trainer::data_layout_description(layout);
       have_data = true;
       if (args.given("track-queries")) {
         queries = trainer::read_track_queries(args.get("track-queries"), data);
@@ -462,9 +477,9 @@ int main(int argc, char** argv) {
   try {
     if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
     if (have_data)
-      return run_data(cfg, std::move(data), seconds_read, have_queries ? &queries : nullptr,
+      return run_data(cfg, std::move(data), data_layout, seconds_read, have_queries ? &queries : nullptr,
                       have_truth ? &truth : nullptr, out, quiet);
-    if (!dycheck_dir.empty()) return export_dycheck(cfg, dycheck_dir, quiet);
+    if (!dycheck_dir.empty()) return export_dycheck(cfg, dycheck_dir, export_som, quiet);
     const trainer::Progress progress(stderr, quiet);
     if (!export_dir.empty()) {
       progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", seed " +

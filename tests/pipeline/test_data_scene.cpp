@@ -18,6 +18,7 @@
 #include "trainer/data_scene.hpp"
 #include "trainer/dycheck.hpp"
 #include "trainer/pipeline.hpp"
+#include "scene_on_disk.hpp"
 
 namespace fs = std::filesystem;
 
@@ -31,20 +32,7 @@ const trainer::Progress& silent() {
 }
 
 // A small scene (12 frames at 64x48, 400 tracks) and short stages.
-trainer::TrainerConfig tiny_config() {
-  trainer::TrainerConfig c = trainer::default_config(true);
-  c.dataset.scene.frames = 12;
-  c.dataset.scene.width = 64;
-  c.dataset.scene.height = 48;
-  c.dataset.priors.tracks = 400;
-  c.stage1.iterations = 150;
-  c.stage2.iterations = 120;
-  c.stage2.prune_from = 40;
-  c.stage2.prune_every = 40;
-  c.stage2.prune_tail = 20;
-  c.threads = 2;
-  return c;
-}
+trainer::TrainerConfig tiny_config() { return smg::test::tiny_scene_config(); }
 
 struct Exported {
   trainer::TrainerConfig config;
@@ -278,13 +266,7 @@ TEST_CASE("smg_trainer --export-dycheck and --data: renders, tracks3d.npy, metri
   };
   for (const auto& c : cases) {
     CAPTURE(c.args);
-    const smg::test::ProgramRun b = trainer_run(c.args + " --out " + bad_out.string());
-    CAPTURE(b.err);
-    CHECK(b.code == 2);
-    CHECK(smg::test::count_lines(b.err) == 1);
-    CHECK(b.err.find(c.message) != std::string::npos);
-    CHECK_FALSE(fs::exists(bad_out / "metrics.json"));
-    CHECK_FALSE(fs::exists(bad_out));  // nothing is created for a refused scene or bad flags
+    smg::test::check_refused(trainer_run(c.args + " --out " + bad_out.string()), c.message, bad_out);
   }
   fs::remove_all(scene);
   fs::remove_all(out);

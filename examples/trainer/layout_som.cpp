@@ -1,0 +1,292 @@
+// examples/trainer/layout_som.cpp — Shape-of-Motion's preprocessed iPhone layout (docs/data.md,
+// "Shape-of-Motion"): the reader and the writer. Our own code, following the loader
+// vye16/shape-of-motion flow3d/data/iphone_dataset.py::iPhoneDataset (camera_type "original",
+// factor 1) and flow3d/data/utils.py::parse_tapir_track_info:
+// - Pixels: SoM's tracks, depth samples and K use integer pixel centres (grid_sample with
+//   align_corners=True, get_bkgd_points's arange grid, K straight from camera/<frame>.json). The
+//   trainer puts the centre of pixel i at i + 0.5, so track x, y and the principal point get
+//   + 0.5 here: every ray is the ray SoM computes.
+// - Depth: with the Nerfies (metric) cameras SoM's README pairs depth_type "depth_anything_lidar"
+//   (flow3d_preprocessed/aligned_depth_anything_lidar/1x, disparity aligned to the lidar): depth =
+//   1 / max(disparity, 1e-3), except that a disparity of exactly 0 is a hole (no depth, 0) where
+//   SoM would put 1000 m: our exporter writes holes that way. Without it, the lidar depth/1x/<frame>.npy [H, W, 1] (0 = none).
+//   Either way SoM clamps depth to 2.5 x the median over frames of each frame's maximum; so do we.
+//   aligned_depth_anything_colmap is in COLMAP's scale and goes with COLMAP cameras: not read.
+// - Visibility: vis = 1 - sigmoid(occ), conf = 1 - sigmoid(dist); visible iff vis * conf > 0.5.
+//   (SoM's further filter, the query frame's mask, is our stage 0's object-mask rule.)
+// - Masks: track_anything/1x value / 255 > 0.5 is dynamic (SoM thresholds masks at 0.5).
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "npy.hpp"
+#include "trainer/layout_io.hpp"
+#include "trainer/layouts.hpp"
+
+namespace trainer {
+
+namespace {
+
+namespace fs = std::filesystem;
+using layout_io::fail_at;
+
+const char* const kSomPre = "flow3d_preprocessed/";
+const char* const kSomLidarDisparity = "flow3d_preprocessed/aligned_depth_anything_lidar/1x/";
+
+bool som_is_dir(const std::string& root, const std::string& rel) {
+  std::error_code ec;
+  return fs::is_directory(fs::path(root) / rel, ec);
+}
+
+// sigmoid in double (the logits are float32 in the file).
+double som_sigmoid(double x) { return 1.0 / (1.0 + std::exp(-x)); }
+
+// parse_tapir_track_info's "visible": (1 - sigmoid(occ)) * (1 - sigmoid(dist)) > 0.5.
+bool som_visible(double occ_logit, double dist_logit) {
+  return (1.0 - som_sigmoid(occ_logit)) * (1.0 - som_sigmoid(dist_logit)) > 0.5;
+}
+
+// One depth frame [H][W] metres: disparity (1 / max(d, 1e-3)) or lidar z (0 = none).
+std::vector<float> som_read_depth(const std::string& root, const std::string& rel, bool disparity, int W, int H) {
+  const npy::Array a = layout_io::read_npy(root, rel);
+  const auto& sh = a.shape;
+  const bool ok = (sh.size() == 3 && sh[2] == 1) || sh.size() == 2;
+  if (!ok || sh[0] != H || sh[1] != W)
+    fail_at(rel, "shape " + npy::shape_string(sh) + ", expected [" + std::to_string(H) + ", " + std::to_string(W) +
+                     (disparity ? "]" : ", 1]") + " (the 1x image size)");
+  std::vector<float> d = layout_io::float_values(a, rel);
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    const std::string at = " at pixel (" + std::to_string(i % static_cast<std::size_t>(W)) + ", " +
+                           std::to_string(i / static_cast<std::size_t>(W)) + ")";
+    if (!std::isfinite(d[i])) fail_at(rel, std::string(disparity ? "disparity" : "depth") + " is not finite" + at);
+    if (disparity) {
+      // 0 is a hole (no depth), as the lidar's 0; SoM's max(d, 1e-3) would put it at 1000 m.
+      d[i] = d[i] == 0.0f ? 0.0f : 1.0f / std::max(d[i], 1e-3f);
+    } else if (d[i] < 0) {
+      fail_at(rel, "negative depth" + at);
+    }
+  }
+  return d;
+}
+
+// track_anything/1x/<frame>.png: one channel (grey or grey + alpha), value / 255 > 0.5 = dynamic.
+std::vector<std::uint8_t> som_read_mask(const std::string& root, const std::string& rel, int W, int H) {
+  const files::Png8 png = layout_io::read_png(root, rel);
+  if (png.width != W || png.height != H)
+    fail_at(rel, "image is " + std::to_string(png.width) + "x" + std::to_string(png.height) + ", expected " +
+                     std::to_string(W) + "x" + std::to_string(H));
+  if (png.channels > 2) fail_at(rel, "expected a one-channel mask, found " + std::to_string(png.channels) + " channels");
+  std::vector<std::uint8_t> m(static_cast<std::size_t>(W) * static_cast<std::size_t>(H));
+  for (std::size_t i = 0; i < m.size(); ++i) m[i] = png.pixels[i * static_cast<std::size_t>(png.channels)] > 127 ? 1 : 0;
+  return m;
+}
+
+// 2d_tracks/1x/<q>_<t>.npy for every pair of training frames, into s.tracks ([T][Q] with the
+// tracks of query frame 0 first, then 1, ...).
+void som_read_tracks(const std::string& root, DycheckScene& s, const DycheckReadOptions& options) {
+  const std::size_t T = s.train.size();
+  const std::string dir = std::string(kSomPre) + "2d_tracks/1x/";
+  auto rel_of = [&](std::size_t q, std::size_t t) { return dir + s.train[q].name + "_" + s.train[t].name + ".npy"; };
+  // Per query frame: N_q rows (the query's own file), of which keep[q] are kept (rows
+  // k * N_q / keep[q]: options.max_tracks spread over the frames, the first frames taking the
+  // remainder).
+  std::vector<std::int64_t> rows(T), keep(T), first(T);
+  std::int64_t Q = 0;
+  const std::int64_t cap = options.max_tracks;
+  for (std::size_t q = 0; q < T; ++q) {
+    const std::string rel = rel_of(q, q);
+    const npy::Array a = layout_io::read_npy(root, rel);
+    if (a.shape.size() != 2 || a.shape[1] != 4) fail_at(rel, "shape " + npy::shape_string(a.shape) + ", expected [N, 4]");
+    rows[q] = a.shape[0];
+    const std::int64_t Ti = static_cast<std::int64_t>(T), qi = static_cast<std::int64_t>(q);
+    const std::int64_t share = cap / Ti + (qi < cap % Ti ? 1 : 0);
+    keep[q] = cap > 0 ? std::min(rows[q], share) : rows[q];
+    first[q] = Q;
+    Q += keep[q];
+    if (Q > std::numeric_limits<int>::max() / 4) fail_at(rel, "too many tracks");
+  }
+  DycheckTracks& tr = s.tracks;
+  tr.count = static_cast<int>(Q);
+  tr.frames = static_cast<int>(T);
+  tr.uv.assign(T * static_cast<std::size_t>(Q) * 2, 0.0f);
+  tr.visible.assign(T * static_cast<std::size_t>(Q), 0);
+  tr.query_t.assign(static_cast<std::size_t>(Q), 0);
+  const double m = options.track_margin_px;
+  for (std::size_t q = 0; q < T; ++q) {
+    for (std::int64_t k = 0; k < keep[q]; ++k) tr.query_t[static_cast<std::size_t>(first[q] + k)] = static_cast<std::int32_t>(q);
+    for (std::size_t t = 0; t < T; ++t) {
+      const std::string rel = rel_of(q, t);
+      const npy::Array a = layout_io::read_npy(root, rel);
+      if (a.shape != std::vector<std::int64_t>{rows[q], 4})
+        fail_at(rel, "shape " + npy::shape_string(a.shape) + ", expected [" + std::to_string(rows[q]) + ", 4] (the rows of " +
+                         rel_of(q, q) + ")");
+      const std::vector<float> v = layout_io::float_values(a, rel);
+      for (std::size_t i = 0; i < v.size(); ++i)  // every row, kept or not
+        if (!std::isfinite(v[i])) fail_at(rel, "row " + std::to_string(i / 4) + " column " + std::to_string(i % 4) + " is not finite");
+      for (std::int64_t k = 0; k < keep[q]; ++k) {
+        const std::int64_t src_row = k * rows[q] / keep[q];
+        const float* row = v.data() + 4 * src_row;
+        // + 0.5: SoM's integer pixel centres to the trainer's (file comment).
+        const double x = static_cast<double>(row[0]) + 0.5, y = static_cast<double>(row[1]) + 0.5;
+        const bool vis = som_visible(row[2], row[3]);
+        if (vis && (x < -m || y < -m || x > s.width + m || y > s.height + m))
+          fail_at(rel, "row " + std::to_string(src_row) + " is visible at (" + std::to_string(row[0]) + ", " + std::to_string(row[1]) +
+                           "), more than " + std::to_string(static_cast<int>(m)) + " px outside the image");
+        const std::size_t dst = t * static_cast<std::size_t>(Q) + static_cast<std::size_t>(first[q] + k);
+        tr.uv[2 * dst] = static_cast<float>(x);
+        tr.uv[2 * dst + 1] = static_cast<float>(y);
+        tr.visible[dst] = vis ? 1 : 0;
+      }
+    }
+  }
+}
+
+// A camera at 1x from camera/<frame>.json with SoM's principal point moved to our pixel centres.
+Camera som_read_camera(const std::string& root, const std::string& frame) {
+  const std::string rel = "camera/" + frame + ".json";
+  if (!layout_io::has_file(root, rel) && som_is_dir(root, std::string(kSomPre) + "colmap"))
+    fail_at(rel, "missing; COLMAP cameras (flow3d_preprocessed/colmap/sparse) are not supported, the Nerfies camera/ JSON files are needed");
+  Camera c = layout_io::read_nerfies_camera(root, rel, 1);
+  c.cx += 0.5;
+  c.cy += 0.5;
+  return c;
+}
+
+}  // namespace
+
+DycheckScene read_som(const std::string& dir, const DycheckReadOptions& options) {
+  DycheckScene s;
+  s.root = dir;
+  s.train = layout_io::read_train_split(dir);
+  const std::size_t T = s.train.size();
+  for (std::size_t t = 0; t < T; ++t) {
+    s.train_cameras.push_back(som_read_camera(dir, s.train[t].name));
+    const Camera& c = s.train_cameras.back();
+    if (t == 0) {
+      s.width = c.width;
+      s.height = c.height;
+    } else if (c.width != s.width || c.height != s.height) {
+      fail_at("camera/" + s.train[t].name + ".json", "image size differs from the first training frame's");
+    }
+    s.train_rgb.push_back(layout_io::read_rgb_png(dir, "rgb/1x/" + s.train[t].name + ".png", c,
+                                                  "camera/" + s.train[t].name + ".json", "1x"));
+  }
+
+  // Depth (file comment): lidar-aligned disparity, else lidar z; then SoM's clamp.
+  const bool disparity = som_is_dir(dir, kSomLidarDisparity);
+  if (!disparity && !som_is_dir(dir, "depth/1x")) {
+    if (som_is_dir(dir, std::string(kSomPre) + "aligned_depth_anything_colmap"))
+      fail_at(std::string(kSomPre) + "aligned_depth_anything_colmap",
+              "in COLMAP's scale, which needs COLMAP cameras (not supported); add aligned_depth_anything_lidar/1x or depth/1x");
+    fail_at(kSomLidarDisparity, "missing, and no lidar depth/1x either");
+  }
+  const std::size_t HW = static_cast<std::size_t>(s.width) * static_cast<std::size_t>(s.height);
+  s.depth.assign(T * HW, 0.0f);
+  std::vector<float> frame_max(T, 0.0f);
+  for (std::size_t t = 0; t < T; ++t) {
+    const std::string rel = (disparity ? std::string(kSomLidarDisparity) : std::string("depth/1x/")) + s.train[t].name + ".npy";
+    const std::vector<float> d = som_read_depth(dir, rel, disparity, s.width, s.height);
+    frame_max[t] = *std::max_element(d.begin(), d.end());
+    std::copy(d.begin(), d.end(), s.depth.begin() + static_cast<std::ptrdiff_t>(t * HW));
+  }
+  {
+    // torch's median of an even count is the lower middle value.
+    std::vector<float> sorted = frame_max;
+    std::sort(sorted.begin(), sorted.end());
+    const float limit = sorted[(T - 1) / 2] * 2.5f;
+    for (float& z : s.depth) z = std::min(z, limit);
+  }
+
+  // Validation frames: camera, rgb/1x, covisible/1x/val.
+  s.val = layout_io::read_split_file(dir, "splits/val.json");
+  for (const DycheckFrame& f : s.val) {
+    s.val_cameras.push_back(som_read_camera(dir, f.name));
+    const Camera& c = s.val_cameras.back();
+    s.val_rgb.push_back(layout_io::read_rgb_png(dir, "rgb/1x/" + f.name + ".png", c, "camera/" + f.name + ".json", "1x"));
+    s.val_covisible.push_back(
+        layout_io::read_binary_mask(dir, std::string(kSomPre) + "covisible/1x/val/" + f.name + ".png", c.width, c.height));
+  }
+
+  // Priors: masks (every training frame), tracks, optional feature maps (our priors/features/).
+  s.dynamic_mask.assign(T * HW, 0);
+  s.has_mask.assign(T, 1);
+  for (std::size_t t = 0; t < T; ++t) {
+    const std::vector<std::uint8_t> m =
+        som_read_mask(dir, std::string(kSomPre) + "track_anything/1x/" + s.train[t].name + ".png", s.width, s.height);
+    std::copy(m.begin(), m.end(), s.dynamic_mask.begin() + static_cast<std::ptrdiff_t>(t * HW));
+  }
+  som_read_tracks(dir, s, options);
+  layout_io::read_feature_files(dir, s);
+  return s;
+}
+
+void write_som(const std::string& dir, const DycheckScene& s) {
+  const std::size_t T = s.train.size(), V = s.val.size();
+  const std::size_t HW = static_cast<std::size_t>(s.width) * static_cast<std::size_t>(s.height);
+  const DycheckTracks& tr = s.tracks;
+  const std::size_t Q = static_cast<std::size_t>(tr.count);
+  if (s.train_cameras.size() != T || s.train_rgb.size() != T || s.depth.size() != T * HW || s.val_cameras.size() != V ||
+      s.val_rgb.size() != V || s.val_covisible.size() != V || s.dynamic_mask.size() != T * HW ||
+      tr.uv.size() != T * Q * 2 || tr.visible.size() != T * Q || tr.query_t.size() != Q)
+    fail_at(dir, "the scene to write is inconsistent");
+  const std::string pre = kSomPre;
+  for (const std::string& d : std::vector<std::string>{"camera", "rgb/1x", "splits", "priors/features", pre + "aligned_depth_anything_lidar/1x",
+                              pre + "track_anything/1x", pre + "covisible/1x/val", pre + "2d_tracks/1x"})
+    layout_io::make_dir(dir, d);
+  layout_io::write_file(dir, "splits/train.json", layout_io::split_file_json(s.train));
+  layout_io::write_file(dir, "splits/val.json", layout_io::split_file_json(s.val));
+  layout_io::write_file(dir, "extra.json", "{\"fps\": 30.0, \"factor\": 1}\n");  // SoM reads fps from it
+  // Cameras: back to SoM's integer pixel centres.
+  auto write_frame = [&](const DycheckFrame& f, Camera cam, const Image& rgb) {
+    cam.cx -= 0.5;
+    cam.cy -= 0.5;
+    layout_io::write_file(dir, "camera/" + f.name + ".json", layout_io::nerfies_camera_json(cam, 1));
+    layout_io::write_png_file(dir, "rgb/1x/" + f.name + ".png", rgb);
+  };
+  for (std::size_t t = 0; t < T; ++t) {
+    write_frame(s.train[t], s.train_cameras[t], s.train_rgb[t]);
+    std::vector<float> disp(HW);
+    for (std::size_t i = 0; i < HW; ++i) {
+      const float z = s.depth[t * HW + i];
+      disp[i] = z > 0 ? 1.0f / z : 0.0f;
+    }
+    layout_io::write_file(dir, pre + "aligned_depth_anything_lidar/1x/" + s.train[t].name + ".npy",
+                          npy::to_bytes(disp.data(), {s.height, s.width}));
+    layout_io::write_png_file(dir, pre + "track_anything/1x/" + s.train[t].name + ".png",
+                              layout_io::mask_image(s.dynamic_mask.data() + t * HW, s.width, s.height));
+  }
+  for (std::size_t v = 0; v < V; ++v) {
+    write_frame(s.val[v], s.val_cameras[v], s.val_rgb[v]);
+    layout_io::write_png_file(dir, pre + "covisible/1x/val/" + s.val[v].name + ".png",
+                              layout_io::mask_image(s.val_covisible[v].data(), s.val_cameras[v].width, s.val_cameras[v].height));
+  }
+  // Tracks: one [N_q, 4] file per (query, target) pair; logits +-10 give visible / invisible.
+  for (std::size_t q = 0; q < T; ++q) {
+    std::vector<std::size_t> rows;
+    for (std::size_t k = 0; k < Q; ++k)
+      if (static_cast<std::size_t>(tr.query_t[k]) == q) rows.push_back(k);
+    for (std::size_t t = 0; t < T; ++t) {
+      std::vector<float> v(rows.size() * 4);
+      for (std::size_t r = 0; r < rows.size(); ++r) {
+        const std::size_t src = t * Q + rows[r];
+        v[4 * r] = static_cast<float>(static_cast<double>(tr.uv[2 * src]) - 0.5);
+        v[4 * r + 1] = static_cast<float>(static_cast<double>(tr.uv[2 * src + 1]) - 0.5);
+        v[4 * r + 2] = tr.visible[src] ? -10.0f : 10.0f;
+        v[4 * r + 3] = -10.0f;
+      }
+      layout_io::write_file(dir, pre + "2d_tracks/1x/" + s.train[q].name + "_" + s.train[t].name + ".npy",
+                            npy::to_bytes(v.data(), {static_cast<std::int64_t>(rows.size()), 4}));
+    }
+  }
+  const std::size_t per = static_cast<std::size_t>(s.feature_height) * static_cast<std::size_t>(s.feature_width) *
+                          static_cast<std::size_t>(s.feature_dim);
+  for (std::size_t t = 0; t < T && per > 0 && s.features.size() == T * per; ++t)
+    if (t < s.has_features.size() && s.has_features[t])
+      layout_io::write_file(dir, "priors/features/" + s.train[t].name + ".npy",
+                            npy::to_bytes(s.features.data() + t * per, {s.feature_height, s.feature_width, s.feature_dim}));
+}
+
+}  // namespace trainer

@@ -1,0 +1,88 @@
+// examples/trainer/layouts.cpp — which layout a scene folder is in, and the reader for it
+// (layouts.hpp, docs/data.md).
+#include "trainer/layouts.hpp"
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace trainer {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+bool layouts_is_dir(const fs::path& p) {
+  std::error_code ec;
+  return fs::is_directory(p, ec);
+}
+bool layouts_exists(const fs::path& p) {
+  std::error_code ec;
+  return fs::exists(p, ec);
+}
+
+// A *bootstapir*.npz file directly in the folder (MoSca's Saved2D globs "*<key>*.npz").
+bool layouts_has_bootstapir(const fs::path& dir) {
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.find("bootstapir") != std::string::npos && name.size() > 4 && name.compare(name.size() - 4, 4, ".npz") == 0)
+      return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+const char* data_layout_name(DataLayout layout) {
+  switch (layout) {
+    case DataLayout::som: return "som";
+    case DataLayout::mosca: return "mosca";
+    case DataLayout::dycheck: break;
+  }
+  return "dycheck";
+}
+
+const char* data_layout_description(DataLayout layout) {
+  switch (layout) {
+    case DataLayout::som:
+      return "Shape-of-Motion (flow3d_preprocessed/: 1x images, 2d_tracks/1x, aligned_depth_anything_lidar/1x or lidar "
+             "depth/1x, Nerfies cameras)";
+    case DataLayout::mosca: return "MoSca (sensor_depth/, cameras/, *bootstapir*.npz)";
+    case DataLayout::dycheck: break;
+  }
+  return "Dycheck + priors (2x images, depth/2x, priors/tracks.npz)";
+}
+
+DataLayout detect_data_layout(const std::string& dir) {
+  const fs::path d(dir);
+  if (!layouts_is_dir(d)) throw DataError(dir + ": not a folder");
+  const bool som = layouts_is_dir(d / "flow3d_preprocessed");
+  const bool mosca = layouts_is_dir(d / "sensor_depth") && layouts_is_dir(d / "cameras") && layouts_has_bootstapir(d);
+  const bool ours_tracks = layouts_exists(d / "priors/tracks.npz");
+  if (som && mosca)
+    throw DataError(dir + ": ambiguous scene folder: it holds both flow3d_preprocessed/ (Shape-of-Motion) and "
+                          "sensor_depth/ + cameras/ + *bootstapir*.npz (MoSca)");
+  if ((som || mosca) && ours_tracks)
+    throw DataError(dir + ": ambiguous scene folder: it holds priors/tracks.npz (Dycheck + priors) and " +
+                    (som ? "flow3d_preprocessed/ (Shape-of-Motion)" : "sensor_depth/ + cameras/ + *bootstapir*.npz (MoSca)"));
+  if (som) return DataLayout::som;
+  if (mosca) return DataLayout::mosca;
+  if (layouts_exists(d / "priors") || layouts_exists(d / "splits") || layouts_exists(d / "camera")) return DataLayout::dycheck;
+  throw DataError(dir + ": not a scene folder: looked for flow3d_preprocessed/ (Shape-of-Motion), sensor_depth/ + cameras/ "
+                        "+ *bootstapir*.npz (MoSca), and priors/, splits/ or camera/ (Dycheck + priors)");
+}
+
+DycheckScene read_data_scene(const std::string& dir, DataLayout* layout_out) {
+  const DataLayout layout = detect_data_layout(dir);
+  if (layout_out) *layout_out = layout;
+  switch (layout) {
+    case DataLayout::som: return read_som(dir);
+    case DataLayout::mosca:
+      throw DataError(dir + ": MoSca layout (sensor_depth/, cameras/, *bootstapir*.npz) detected; reading it is not supported yet");
+    case DataLayout::dycheck: break;
+  }
+  return read_dycheck(dir);
+}
+
+}  // namespace trainer
