@@ -45,6 +45,7 @@
 #include "trainer/image_io.hpp"
 #include "trainer/pictures.hpp"
 #include "trainer/pipeline.hpp"
+#include "trainer/view_html.hpp"
 
 namespace {
 
@@ -91,6 +92,7 @@ std::vector<cli::FlagSpec> flags() {
           {"export-dycheck", "", "write the generated scene in the Dycheck layout (docs/data.md) into this folder, "
                                  "with queries.json and their true tracks queries_tracks3d.npy, and exit"},
           {"no-pictures", "", "skip the PNG output", true},
+          {"no-view", "", "skip OUT/view.html, the page of the run (docs/trainer.md)", true},
           {"quiet", "", "no progress lines", true},
           {"help", "", "print this help", true}};
 }
@@ -239,7 +241,7 @@ double peak_memory_mib() {
 // created after stage 0, which can still refuse the scene (DataError).
 int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double seconds_read,
              const trainer::TrackQueries* queries, const std::vector<float>* truth, const fs::path& out,
-             bool quiet) {
+             bool quiet, bool view) {
   // Stage 0's progress lines are held back (a temporary file) until the scene is accepted, so that
   // a refused scene prints its one error line and nothing else.
   const std::unique_ptr<std::FILE, int (*)(std::FILE*)> held(quiet ? nullptr : std::tmpfile(), &std::fclose);
@@ -291,8 +293,9 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double se
     frames += (frames.size() > 1 ? "," : "") + fj.str();
   }
   j.add_raw("per_frame", frames + "]");
+  std::vector<float> tracks;
   if (queries) {
-    const std::vector<float> tracks = trainer::carry_queries(*queries, r.data, r.nodes, r.model);
+    tracks = trainer::carry_queries(*queries, r.data, r.nodes, r.model);
     npy::write((out / "tracks3d.npy").string(), tracks.data(),
                {queries->count(), r.data.scene.frames(), 3});
     j.add("queries", queries->count());
@@ -323,6 +326,16 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, double se
     f << line << "\n";
     if (!f) throw std::runtime_error("cannot write " + (out / "metrics.json").string());
   }
+  if (view) {
+    trainer::ViewInputs vi;
+    vi.metrics_json = line;
+    if (queries) {
+      vi.tracks = &tracks;
+      vi.truth = truth;
+      vi.queries = queries->count();
+    }
+    progress.line("done", "page of the run: " + cli::escape_line(trainer::write_view_html(out.string(), r, vi)));
+  }
   progress.line("done", std::to_string(r.eval_renders.size()) + " renders and metrics.json in " + out.string() + "/");
   std::cout << line << std::endl;
   return 0;
@@ -351,7 +364,7 @@ int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, bool 
 int main(int argc, char** argv) {
   trainer::TrainerConfig cfg;
   fs::path out, export_dir, dycheck_dir;
-  bool pictures = true, quiet = false;
+  bool pictures = true, quiet = false, view = true;
   // --data: the scene, read and validated before anything is trained.
   trainer::Dataset data;
   bool have_data = false;
@@ -395,6 +408,7 @@ int main(int argc, char** argv) {
       cfg.node_loss.confidence_visibility = args.get_choice("confidence-visibility", {"on", "off"}) == "on";
     if (args.given("lambda-depth")) cfg.stage2.lambda_depth = double_in(args, "lambda-depth", 0.0, 100.0);
     pictures = !args.get_switch("no-pictures");
+    view = !args.get_switch("no-view");
     quiet = args.get_switch("quiet");
     trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
     if (args.given("data")) {
@@ -463,7 +477,7 @@ int main(int argc, char** argv) {
     if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
     if (have_data)
       return run_data(cfg, std::move(data), seconds_read, have_queries ? &queries : nullptr,
-                      have_truth ? &truth : nullptr, out, quiet);
+                      have_truth ? &truth : nullptr, out, quiet, view);
     if (!dycheck_dir.empty()) return export_dycheck(cfg, dycheck_dir, quiet);
     const trainer::Progress progress(stderr, quiet);
     if (!export_dir.empty()) {
@@ -523,6 +537,11 @@ int main(int argc, char** argv) {
       std::ofstream f(out / "metrics.json");
       f << line << "\n";
       if (!f) throw std::runtime_error("cannot write " + (out / "metrics.json").string());
+    }
+    if (view) {
+      trainer::ViewInputs vi;
+      vi.metrics_json = line;
+      written.push_back(trainer::write_view_html(out.string(), r, vi));
     }
     if (!quiet) {
       progress.line("done", "pictures and metrics.json in " + out.string() + "/");
