@@ -13,6 +13,8 @@ DevTools protocol on --remote-debugging-pipe with the standard library only. It 
     the last frame match OUT/view_nodes.npy to 1e-4 of the scene extent (the uint16 quantisation
     bounds the error by half a step, at most 7.7e-6 of the box per axis), the page's T, N and
     metrics equal metrics.json's, and every confidence lies in [0, 1];
+  * the page fetches nothing but itself and its own images (file:, blob:, data: URLs only), and
+    its base64 block decodes with Python's base64 module (validate=True) to the bytes the page read;
   * clicking a node (the test hook's select) fills the node panel with its c(t) plot.
 It prints the frame rates of 30 frames drawn back to back (requestAnimationFrame), and with
 --screenshots writes the docs' pictures. Without chromium it prints one "skipped" line and exits
@@ -173,14 +175,17 @@ def main():
     else:
         run = os.path.join(work, "run")
         t0 = time.time()
-        subprocess.run([a.trainer, "--quick", "--quiet", "--no-pictures", "--out", run], check=True,
-                       stdout=subprocess.DEVNULL)
-        print("view_html: smg_trainer --quick in %.1f s" % (time.time() - t0))
+        # --stage2-iters 60 (quick: 300): the page is the same kind, the test 7 s faster.
+        subprocess.run([a.trainer, "--quick", "--stage2-iters", "60", "--quiet", "--no-pictures", "--out", run],
+                       check=True, stdout=subprocess.DEVNULL)
+        print("view_html: smg_trainer --quick --stage2-iters 60 in %.1f s" % (time.time() - t0))
     page = os.path.abspath(os.path.join(run, "view.html"))
     print("view_html: %s is %d bytes" % (page, os.path.getsize(page)))
     with open(os.path.join(run, "metrics.json")) as f:
         metrics = json.load(f)
     shape, positions = read_npy_float32(os.path.join(run, "view_nodes.npy"))
+    with open(page, encoding="utf-8") as f:
+        html = f.read()
 
     failures = []
 
@@ -194,7 +199,7 @@ def main():
     try:
         target = dt.call("Target.createTarget", {"url": "about:blank"}, session=False)["targetId"]
         dt.session = dt.call("Target.attachToTarget", {"targetId": target, "flatten": True}, session=False)["sessionId"]
-        for method in ("Runtime.enable", "Log.enable", "Page.enable"):
+        for method in ("Runtime.enable", "Log.enable", "Page.enable", "Network.enable"):
             dt.call(method)
         dt.call("Emulation.setDeviceMetricsOverride",
                 {"width": 1280, "height": 760, "deviceScaleFactor": 1, "mobile": False})
@@ -219,6 +224,17 @@ def main():
             err = max(abs(g - w) for g, w in zip(got, want))
             expect(len(got) == N * 3 and err <= 1e-4 * extent,
                    "node positions at frame %d round-trip: max error %.2e m (%.1e of the extent)" % (t, err, err / extent))
+        # The C++ base64 encoder against Python's decoder: the block decodes strictly, to the
+        # bytes the page decoded (its nodes array, quantised, read back through the header).
+        block = html.split('<script type="application/octet-stream" id="smg-data">', 1)[1].split("</script>", 1)[0]
+        blob = base64.b64decode(block.strip(), validate=True)
+        nodes = dt.evaluate("__smgView.header.arrays.nodes")
+        lo, step = dt.evaluate("__smgView.header.quant.lo"), dt.evaluate("__smgView.header.quant.step")
+        q = struct.unpack_from("<%dH" % (nodes["bytes"] // 2), blob, nodes["offset"])
+        page_t0 = dt.evaluate("__smgView.nodesAt(0)")
+        expect(len(blob) == dt.evaluate("atob(document.getElementById('smg-data').textContent.trim()).length")
+               and all(abs(lo[k % 3] + q[k] * step[k % 3] - page_t0[k]) <= 1e-6 * extent for k in range(N * 3)),
+               "the data block (%d bytes) decodes with Python's base64 to what the page decoded" % len(blob))
         conf = dt.evaluate("[].concat(...Array.from({length: __smgView.frameCount}, (_, t) => __smgView.confidenceAt(t)))")
         expect(len(conf) == T * N and all(0 <= c <= 1 for c in conf) and max(conf) > min(conf),
                "confidences [T][N] in [0, 1], not constant")
@@ -253,6 +269,10 @@ def main():
             fps = dt.evaluate("__smgView.measureFps(%d, '%s')" % (a.fps_frames, mode), timeout=120)
             print("view_html: %s: %.1f frames per second over %d frames in headless Chromium (SwiftShader WebGL), "
                   "%d nodes, %d edges, %d + %d Gaussian centres" % (mode, fps, a.fps_frames, N, c["edges"], c["S"], c["D"]))
+        fetched = sorted({m["params"]["request"]["url"].split(":", 1)[0] for m in dt.events
+                          if m.get("method") == "Network.requestWillBeSent"})
+        expect(set(fetched) <= {"file", "blob", "data"}, "nothing fetched but the page and its own images (%s)"
+               % ", ".join(fetched))
         errors = dt.errors()
         expect(not errors, "no console errors" + ("" if not errors else ": " + " | ".join(errors)))
     finally:
