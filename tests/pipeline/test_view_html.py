@@ -242,11 +242,11 @@ def main():
         first = dt.evaluate("__smgView.pixels()")
         lit = first["lit"] / (first["width"] * first["height"])
         expect(lit > 0.01, "the canvas is not blank: %.1f%% of %dx%d pixels drawn" % (100 * lit, first["width"], first["height"]))
-        if a.screenshots:
+        if a.screenshots:  # without the Gaussian centres, whose noise would triple the PNGs
             os.makedirs(a.screenshots, exist_ok=True)
-            dt.evaluate("__smgView.setFrame(%d)" % (T // 2))
+            dt.evaluate("__smgView.show('gaussians', false); __smgView.setFrame(%d)" % (T // 2))
             screenshot(dt, os.path.join(a.screenshots, "view_frame.png"))
-            dt.evaluate("__smgView.setFrame(0)")
+            dt.evaluate("__smgView.show('gaussians', true); __smgView.setFrame(0)")
         dt.evaluate("(() => { const s = document.getElementById('time'); s.value = String(%d); "
                     "s.dispatchEvent(new Event('input')); })()" % (T - 1))
         moved = dt.evaluate("__smgView.pixels()")
@@ -260,8 +260,10 @@ def main():
                            "document.getElementById('node-title').textContent.startsWith('node 0')"),
                "selecting node 0 shows its panel and c(t) plot")
         if a.screenshots:
-            dt.evaluate("__smgView.setFrame(%d); __smgView.select(%d)" % (T // 2, N // 2))
+            dt.evaluate("__smgView.show('gaussians', false); __smgView.show('cut', true); "
+                        "__smgView.setFrame(%d); __smgView.select(%d)" % (T // 2, N // 2))
             screenshot(dt, os.path.join(a.screenshots, "view_node.png"))
+            dt.evaluate("__smgView.show('gaussians', true); __smgView.show('cut', false)")
         dt.evaluate("__smgView.select(-1); __smgView.setColour('confidence')")
 
         c = dt.evaluate("__smgView.counts")

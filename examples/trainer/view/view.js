@@ -164,7 +164,7 @@
   const view = { target: centre, yaw: 0.6, pitch: 0.4, dist: 2 * extent };
   if (cam0) {  // start where the training camera stands
     const d = sub(cam0.c, centre), h = [dot(d, e1), dot(d, e2), dot(d, up)];
-    view.dist = Math.max(Math.hypot(h[0], h[1], h[2]), 0.2 * extent);
+    view.dist = 1.5 * Math.max(Math.hypot(h[0], h[1], h[2]), 0.2 * extent);  // a step back: the cameras in view
     view.yaw = Math.atan2(h[1], h[0]);
     view.pitch = Math.asin(Math.min(Math.max(h[2] / view.dist, -0.99), 0.99));
   }
@@ -244,10 +244,10 @@
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
     gl.uniformMatrix4fv(loc.mvp, false, mvp());
     gl.uniform1f(loc.alpha, 1);
+    gl.uniform1f(loc.round, 0);  // square points and lines (gl_PointCoord means nothing on a line)
     const t = state.t, dpi = dpr;
 
     if (ui('show-gaussians').checked) {
-      gl.uniform1f(loc.round, 0);
       gl.uniform1f(loc.size, Math.max(1, Math.round(2 * dpi)));
       gl.disable(gl.BLEND);  // opaque squares: software rasterisers draw them several times faster
       if (S) { bind(staticBuf, staticColBuf); gl.drawArrays(gl.POINTS, 0, S); }
@@ -317,8 +317,8 @@
       gl.drawArrays(gl.LINES, 0, M * t * 2);
     }
     if (ui('show-cameras').checked) {
-      const segs = [], cols = [], depth = 0.08 * extent;
-      head.train_cameras.forEach((c, i) => { if (i === t) frustum(c, depth * 1.5, [1, 0.85, 0.3], segs, cols); });
+      const segs = [], cols = [], depth = 0.05 * extent;
+      head.train_cameras.forEach((c, i) => { if (i === t) frustum(c, depth, [1, 0.85, 0.3], segs, cols); });
       head.test_cameras.forEach((c) => frustum(c, depth, [0.4, 0.75, 1], segs, cols));
       if (segs.length) lines(new Float32Array(segs), new Float32Array(cols));
     }
@@ -556,6 +556,7 @@
     confidenceAt: (t) => Array.from(conf.subarray(t * N, (t + 1) * N), (v) => v / 255),
     select: (i) => { state.selected = i; nodePanel(); draw(); },
     setColour: (by) => { ui('colour-by').value = by; legend(); draw(); },
+    show: (id, on) => { ui('show-' + id).checked = on; draw(); },
     orbit: (dyaw, dpitch, zoom) => { view.yaw += dyaw; view.pitch += dpitch; view.dist *= zoom || 1; draw(); },
     pixels: pixels, measureFps: measureFps, counts: { edges: edges.length / 2, cut: cut ? cut.length / 2 : 0, S: S, D: D, M: M },
     ready: true
