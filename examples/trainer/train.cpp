@@ -4,7 +4,8 @@
 //   smg_trainer [--variant full] [--seed 0] [--out trainer_out] [--quick] [--threads 0] ...
 //
 // Progress lines go to stderr; the last line on stdout is one JSON object with the metrics,
-// also written to OUT/metrics.json, next to the pictures (pictures.hpp). Bad flags or an
+// also written to OUT/metrics.json, next to the pictures (pictures.hpp) and OUT/view.html, one
+// self-contained page of the run (view_html.hpp; --no-view skips it). Bad flags or an
 // output folder that cannot be written: one line on stderr and exit code 2, before any work.
 // A failure during training: one line on stderr and exit code 1.
 //

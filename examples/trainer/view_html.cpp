@@ -156,29 +156,20 @@ ViewGaussians view_gaussians(const TrainerResult& r, int budget) {
   }
   g.fixed_count = fixed_budget;
   if (P == 0 || T == 0 || moving_budget == 0) return g;
-  std::vector<std::int32_t> drivers, t_ref;
-  std::vector<float> weights, positions, quats;
+  // The chosen dynamic rows as a model of their own, posed as the renderer poses them.
+  GaussianModel<float> sub;
+  sub.skin.width = D;
   for (int k = 0; k < moving_budget; ++k) {
     const int p = static_cast<int>(static_cast<long long>(k) * P / moving_budget);
-    const std::size_t row = sz(F) + sz(p);
-    drivers.insert(drivers.end(), m.skin.drivers.begin() + static_cast<long>(sz(p) * sz(D)),
-                   m.skin.drivers.begin() + static_cast<long>(sz(p + 1) * sz(D)));
-    weights.insert(weights.end(), m.skin.weights.begin() + static_cast<long>(sz(p) * sz(D)),
-                   m.skin.weights.begin() + static_cast<long>(sz(p + 1) * sz(D)));
-    t_ref.push_back(m.skin.t_ref[sz(p)]);
-    positions.insert(positions.end(), m.table.means.begin() + static_cast<long>(row * 3),
-                     m.table.means.begin() + static_cast<long>(row * 3 + 3));
-    quats.insert(quats.end(), m.table.quats.begin() + static_cast<long>(row * 4),
-                 m.table.quats.begin() + static_cast<long>(row * 4 + 4));
-    rgb(static_cast<int>(row), g.moving_rgb);
+    const auto from = static_cast<long>(sz(p) * sz(D)), to = static_cast<long>(sz(p + 1) * sz(D));
+    sub.table.push_row(m.table, F + p);
+    sub.skin.drivers.insert(sub.skin.drivers.end(), m.skin.drivers.begin() + from, m.skin.drivers.begin() + to);
+    sub.skin.weights.insert(sub.skin.weights.end(), m.skin.weights.begin() + from, m.skin.weights.begin() + to);
+    sub.skin.t_ref.push_back(m.skin.t_ref[sz(p)]);
+    rgb(F + p, g.moving_rgb);
   }
   const int n = moving_budget;
-  smg::SkinPoints<float> pts;
-  pts.drivers = smg::SkinDriversView(drivers.data(), n, D);
-  pts.weights = smg::TableView<const float, Eigen::Dynamic>(weights.data(), n, D);
-  pts.t_ref = smg::SkinIndexView(t_ref.data(), n);
-  pts.positions = smg::TableView<const float, 3>(positions.data(), n);
-  pts.quaternions = smg::TableView<const float, 4>(quats.data(), n);
+  const smg::SkinPoints<float> pts = skin_points(sub);
   NodeState<float> ns;
   ns.assign(r.nodes);
   std::vector<std::int32_t> frames(sz(T));

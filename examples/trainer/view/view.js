@@ -140,10 +140,6 @@
   const dynamicBuf = D ? buffer(new Float32Array(D * 3), gl.DYNAMIC_DRAW) : null;
   const dynamicColBuf = D ? buffer(unit(gDynamicRgb)) : null;
   const TRAIL = Math.min(12, T);
-  const trailBuf = buffer(new Float32Array(N * TRAIL * 2 * 3), gl.DYNAMIC_DRAW);
-  const trailColBuf = buffer(new Float32Array(N * TRAIL * 2 * 3), gl.DYNAMIC_DRAW);
-  const queryBuf = M ? buffer(new Float32Array(M * (T - 1) * 2 * 3), gl.DYNAMIC_DRAW) : null;
-  const queryColBuf = M ? buffer(new Float32Array(M * (T - 1) * 2 * 3), gl.DYNAMIC_DRAW) : null;
   const lineBuf = buffer(new Float32Array(6), gl.DYNAMIC_DRAW);
   const lineColBuf = buffer(new Float32Array(6), gl.DYNAMIC_DRAW);
 
@@ -211,13 +207,13 @@
     for (let k = 0; k < K; ++k) if (graph[i * K + k] !== 65535) out.push(graph[i * K + k]);
     return out;
   }
-  function lines(segs, cols, width) {
+  // Line segments [2 S][3] with per-vertex colours, uploaded anew (trails, tracks, frusta).
+  function lines(segs, cols) {
     gl.bindBuffer(gl.ARRAY_BUFFER, lineBuf);
     gl.bufferData(gl.ARRAY_BUFFER, segs, gl.DYNAMIC_DRAW);
     gl.bindBuffer(gl.ARRAY_BUFFER, lineColBuf);
     gl.bufferData(gl.ARRAY_BUFFER, cols, gl.DYNAMIC_DRAW);
     bind(lineBuf, lineColBuf);
-    gl.lineWidth(width || 1);
     gl.drawArrays(gl.LINES, 0, segs.length / 3);
   }
   // Four rays and the image rectangle of a camera, `depth` metres deep.
@@ -290,12 +286,7 @@
           for (let c = 0; c < 3; ++c) { cols[o + c] = base[i * 3 + c] * fa; cols[o + 3 + c] = base[i * 3 + c] * fb; }
           o += 6;
         }
-      gl.bindBuffer(gl.ARRAY_BUFFER, trailBuf);
-      gl.bufferSubData(gl.ARRAY_BUFFER, 0, segs);
-      gl.bindBuffer(gl.ARRAY_BUFFER, trailColBuf);
-      gl.bufferSubData(gl.ARRAY_BUFFER, 0, cols);
-      bind(trailBuf, trailColBuf);
-      gl.drawArrays(gl.LINES, 0, N * n * 2);
+      lines(segs, cols);
     }
     if (M && ui('show-queries').checked && t > 0) {  // query tracks up to t, coloured by error if known
       const segs = new Float32Array(M * t * 6), cols = new Float32Array(M * t * 6);
@@ -309,12 +300,7 @@
           cols.set(c, o + 3);
           o += 6;
         }
-      gl.bindBuffer(gl.ARRAY_BUFFER, queryBuf);
-      gl.bufferSubData(gl.ARRAY_BUFFER, 0, segs);
-      gl.bindBuffer(gl.ARRAY_BUFFER, queryColBuf);
-      gl.bufferSubData(gl.ARRAY_BUFFER, 0, cols);
-      bind(queryBuf, queryColBuf);
-      gl.drawArrays(gl.LINES, 0, M * t * 2);
+      lines(segs, cols);
     }
     if (ui('show-cameras').checked) {
       const segs = [], cols = [], depth = 0.05 * extent;
@@ -349,7 +335,8 @@
                              ' seed ' + fmt(metrics.seed) : head.source);
   const summaryKeys = [['T', 'frames'], ['nodes', 'nodes'], ['edges', 'edges'], ['gate_removed_edges', 'gate cut'],
                        ['gaussians', 'Gaussians'], ['test_psnr', 'test PSNR'], ['test_psnr_masked', 'test mPSNR'],
-                       ['mpsnr', 'mPSNR'], ['mssim', 'mSSIM'], ['epe', 'node EPE (m)'], ['delta_5', 'δ5%'],
+                       ['mpsnr', 'mPSNR'], ['mssim', 'mSSIM'],
+                       ['epe', head.has_truth ? 'node EPE (m)' : 'query EPE (m)'], ['delta_5', 'δ5%'],
                        ['alpha', 'α'], ['seconds_total', 'seconds']];
   ui('summary').innerHTML = '';
   for (const [key, label] of summaryKeys)
