@@ -120,13 +120,13 @@ std::uint8_t view_unit_byte(double v) {
 std::string view_camera_json(const Camera& c, const std::string& name) {
   const Eigen::Vector3d o = c.center();
   const Eigen::Matrix3d R = c.rotation();
-  char b[512];
+  char b[512];  // numbers only: the name, of any length, is joined as a string
   std::snprintf(b, sizeof b,
-                "{\"name\":%s,\"c\":[%.6g,%.6g,%.6g],\"R\":[%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g],"
+                ",\"c\":[%.6g,%.6g,%.6g],\"R\":[%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g],"
                 "\"f\":[%.6g,%.6g],\"pp\":[%.6g,%.6g],\"size\":[%d,%d]}",
-                cli::JsonLine::quote(name).c_str(), o.x(), o.y(), o.z(), R(0, 0), R(0, 1), R(0, 2), R(1, 0), R(1, 1),
-                R(1, 2), R(2, 0), R(2, 1), R(2, 2), c.fx, c.fy, c.cx, c.cy, c.width, c.height);
-  return b;
+                o.x(), o.y(), o.z(), R(0, 0), R(0, 1), R(0, 2), R(1, 0), R(1, 1), R(1, 2), R(2, 0), R(2, 1), R(2, 2),
+                c.fx, c.fy, c.cx, c.cy, c.width, c.height);
+  return "{\"name\":" + cli::JsonLine::quote(name) + b;
 }
 
 // The Gaussian centres the page draws: up to `budget` rows; static ones once, dynamic ones posed
