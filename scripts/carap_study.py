@@ -73,7 +73,7 @@ def run(trainer, out, scene, seed, name, variant, extra):
     if os.path.exists(path):
         return json.load(open(path))
     cmd = [trainer, "--scene", scene, "--seed", str(seed), "--variant", variant, "--stage2-iters", "0",
-           "--threads", "1", "--no-pictures", "--quiet", "--out", d] + extra
+           "--threads", "1", "--no-pictures", "--no-view", "--quiet", "--out", d] + extra
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     return json.load(open(path))
 

@@ -79,7 +79,7 @@ if [[ $report_only == 0 ]]; then
     v=$1; seed=$2; dir="$LADDER_OUT/${v}_s${seed}"
     echo "ladder: variant $v, seed $seed $LADDER_FLAGS" >&2
     # shellcheck disable=SC2086
-    "$LADDER_BIN" --variant "$v" --seed "$seed" --threads "$LADDER_THREADS" --out "$dir" --quiet --no-pictures \
+    "$LADDER_BIN" --variant "$v" --seed "$seed" --threads "$LADDER_THREADS" --out "$dir" --quiet --no-pictures --no-view \
       $LADDER_FLAGS > "$dir.json" && printf "%s" "$LADDER_FLAGS" > "$dir/flags.txt"' _
 fi
 python3 scripts/ladder_report.py --out "$out" --doc "$doc" --section "$section" --seeds "$seeds" \

@@ -22,6 +22,9 @@ for arg in "$@"; do
   esac
 done
 scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev zlib1g-dev
+# Headless Chromium for the view.html test (tests/pipeline/test_view_html.py); optional: without
+# it (not root, or no package) that test prints one "skipped" line.
+scripts/deps.sh chromium >/dev/null 2>&1 || echo "smg: chromium is not installed: the view.html browser test will be skipped"
 jobs=$(nproc)
 if [ "$mode" = asan ]; then
   build=${SMG_BUILD_DIR:-build/asan}

@@ -198,7 +198,6 @@ smg::splat::GaussianParams<S> ModelRenderer<S>::params(const GaussianModel<S>& m
   return p;
 }
 
-namespace {
 template <class S>
 smg::SkinPoints<S> skin_points(const GaussianModel<S>& m) {
   const int P = m.dynamic(), F = m.fixed, D = m.skin.width;
@@ -210,7 +209,6 @@ smg::SkinPoints<S> skin_points(const GaussianModel<S>& m) {
   pts.quaternions = smg::TableView<const S, 4>(m.table.quats.data() + sz(F) * 4, P);
   return pts;
 }
-}  // namespace
 
 template <class S>
 void ModelRenderer<S>::render(const GaussianModel<S>& m, const NodeState<S>& n, int t,
@@ -335,6 +333,7 @@ int prune(GaussianModel<S>& m, double min_opacity, double max_scale, std::vector
   template smg::splat::Camera<S> splat_camera<S>(const Camera&);                                                \
   template GaussianModel<S> init_model<S>(const Dataset&, const Nodes&, const InitOptions&, smg::ParallelOptions); \
   template void update_skinning_weights<S>(GaussianModel<S>&, const NodeState<S>&, smg::ParallelOptions);       \
+  template smg::SkinPoints<S> skin_points<S>(const GaussianModel<S>&);                                          \
   template int prune<S>(GaussianModel<S>&, double, double, std::vector<std::uint8_t>*);
 TRAINER_INSTANTIATE(float)
 TRAINER_INSTANTIATE(double)

@@ -120,6 +120,11 @@ GaussianModel<S> init_model(const Dataset& data, const Nodes& nodes, const InitO
 template <class S>
 void update_skinning_weights(GaussianModel<S>& model, const NodeState<S>& nodes, smg::ParallelOptions parallel = {});
 
+// The model's dynamic rows as smg's skinning input: views into the model (drivers, weights and
+// reference frames [P], reference positions and rotations of rows [fixed, count)).
+template <class S>
+smg::SkinPoints<S> skin_points(const GaussianModel<S>& model);
+
 // Renders a model at frame t and back-propagates image gradients into model and node gradients.
 template <class S>
 class ModelRenderer {

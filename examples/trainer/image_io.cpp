@@ -65,15 +65,44 @@ Eigen::Vector3f turbo(double t) {
 
 }  // namespace
 
-void write_png(const std::string& path, const Image& image) {
-  if (image.empty() || image.channels < 1 || image.channels > 4)
-    throw std::runtime_error("cannot write PNG '" + path + "': empty image or bad channel count");
+namespace {
+// The image's pixels as 8-bit values (clamped to [0, 1] and rounded), for stb_image_write.
+std::vector<unsigned char> image_bytes(const Image& image) {
   std::vector<unsigned char> bytes(image.pixels.size());
   for (std::size_t i = 0; i < bytes.size(); ++i)
     bytes[i] = static_cast<unsigned char>(std::lround(std::clamp(image.pixels[i], 0.0f, 1.0f) * 255.0f));
+  return bytes;
+}
+
+// stb_image_write's callback: appends the encoded bytes to a std::vector<std::uint8_t>.
+void append_encoded_bytes(void* context, void* data, int size) {
+  auto* out = static_cast<std::vector<std::uint8_t>*>(context);
+  const auto* p = static_cast<const std::uint8_t*>(data);
+  out->insert(out->end(), p, p + size);
+}
+}  // namespace
+
+void write_png(const std::string& path, const Image& image) {
+  if (image.empty() || image.channels < 1 || image.channels > 4)
+    throw std::runtime_error("cannot write PNG '" + path + "': empty image or bad channel count");
+  const std::vector<unsigned char> bytes = image_bytes(image);
   if (!stbi_write_png(path.c_str(), image.width, image.height, image.channels, bytes.data(),
                       image.width * image.channels))
     throw std::runtime_error("cannot write PNG '" + path + "'");
+}
+
+std::vector<std::uint8_t> encode_image(const Image& image, ImageCodec codec, int jpeg_quality) {
+  if (image.empty() || image.channels < 1 || image.channels > 4)
+    throw std::runtime_error("cannot encode an empty image or one with a bad channel count");
+  const std::vector<unsigned char> bytes = image_bytes(image);
+  std::vector<std::uint8_t> out;
+  const int ok = codec == ImageCodec::png
+                     ? stbi_write_png_to_func(append_encoded_bytes, &out, image.width, image.height, image.channels,
+                                              bytes.data(), image.width * image.channels)
+                     : stbi_write_jpg_to_func(append_encoded_bytes, &out, image.width, image.height, image.channels,
+                                              bytes.data(), jpeg_quality);
+  if (!ok) throw std::runtime_error("cannot encode an image");
+  return out;
 }
 
 namespace {

@@ -2,7 +2,7 @@
 //
 // PNGs are written with stb_image_write (Debian's libstb-dev): one small, widely used,
 // well-kept public-domain header with no dependencies of its own, packaged by Debian, so the
-// example needs no image library and nothing is downloaded. Only the writer is used (8-bit PNG).
+// example needs no image library and nothing is downloaded. Only the writer is used (8-bit PNG; JPEG for view.html).
 //
 // Helpers build the example's pictures: strips (ground truth | render), contact sheets (a grid
 // over time), colour-mapped depth, semantic features projected to RGB by PCA, track overlays
@@ -22,6 +22,11 @@ namespace trainer {
 // Writes an 8-bit PNG (1, 2, 3 or 4 channels; values clamped to [0, 1] and rounded). Throws
 // std::runtime_error naming the path when it cannot be written.
 void write_png(const std::string& path, const Image& image);
+
+// The same image encoded in memory: PNG (lossless) or baseline JPEG at `jpeg_quality` (1..100;
+// 1 or 3 channels), e.g. for embedding in a page (view_html.hpp). Throws std::runtime_error.
+enum class ImageCodec { png, jpeg };
+std::vector<std::uint8_t> encode_image(const Image& image, ImageCodec codec, int jpeg_quality = 85);
 
 // Side by side, top aligned, separated by `gap` pixels of `gap_value`. One-channel parts are
 // expanded to three channels when any part has three.

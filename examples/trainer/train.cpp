@@ -4,7 +4,8 @@
 //   smg_trainer [--variant full] [--seed 0] [--out trainer_out] [--quick] [--threads 0] ...
 //
 // Progress lines go to stderr; the last line on stdout is one JSON object with the metrics,
-// also written to OUT/metrics.json, next to the pictures (pictures.hpp). Bad flags or an
+// also written to OUT/metrics.json, next to the pictures (pictures.hpp) and OUT/view.html, one
+// self-contained page of the run (view_html.hpp; --no-view skips it). Bad flags or an
 // output folder that cannot be written: one line on stderr and exit code 2, before any work.
 // A failure during training: one line on stderr and exit code 1.
 //
@@ -47,6 +48,7 @@
 #include "trainer/image_io.hpp"
 #include "trainer/pictures.hpp"
 #include "trainer/pipeline.hpp"
+#include "trainer/view_html.hpp"
 
 namespace {
 
@@ -95,6 +97,7 @@ std::vector<cli::FlagSpec> flags() {
           {"export-layout", "", "with --export-dycheck: the layout written, dycheck (default) | som "
                                 "(Shape-of-Motion, docs/data.md)"},
           {"no-pictures", "", "skip the PNG output", true},
+          {"no-view", "", "skip OUT/view.html, the page of the run (docs/trainer.md)", true},
           {"quiet", "", "no progress lines", true},
           {"help", "", "print this help", true}};
 }
@@ -243,7 +246,7 @@ double peak_memory_mib() {
 // created after stage 0, which can still refuse the scene (DataError).
 int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const char* layout, double seconds_read,
              const trainer::TrackQueries* queries, const std::vector<float>* truth, const fs::path& out,
-             bool quiet) {
+             bool quiet, bool view) {
   // Stage 0's progress lines are held back (a temporary file) until the scene is accepted, so that
   // a refused scene prints its one error line and nothing else.
   const std::unique_ptr<std::FILE, int (*)(std::FILE*)> held(quiet ? nullptr : std::tmpfile(), &std::fclose);
@@ -296,8 +299,9 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const cha
     frames += (frames.size() > 1 ? "," : "") + fj.str();
   }
   j.add_raw("per_frame", frames + "]");
+  std::vector<float> tracks;
   if (queries) {
-    const std::vector<float> tracks = trainer::carry_queries(*queries, r.data, r.nodes, r.model);
+    tracks = trainer::carry_queries(*queries, r.data, r.nodes, r.model);
     npy::write((out / "tracks3d.npy").string(), tracks.data(),
                {queries->count(), r.data.scene.frames(), 3});
     j.add("queries", queries->count());
@@ -327,6 +331,16 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const cha
     std::ofstream f(out / "metrics.json");
     f << line << "\n";
     if (!f) throw std::runtime_error("cannot write " + (out / "metrics.json").string());
+  }
+  if (view) {
+    trainer::ViewInputs vi;
+    vi.metrics_json = line;
+    if (queries) {
+      vi.tracks = &tracks;
+      vi.truth = truth;
+      vi.queries = queries->count();
+    }
+    progress.line("done", "page of the run: " + cli::escape_line(trainer::write_view_html(out.string(), r, vi)));
   }
   progress.line("done", std::to_string(r.eval_renders.size()) + " renders and metrics.json in " + out.string() + "/");
   std::cout << line << std::endl;
@@ -360,7 +374,7 @@ int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, bool 
 int main(int argc, char** argv) {
   trainer::TrainerConfig cfg;
   fs::path out, export_dir, dycheck_dir;
-  bool pictures = true, quiet = false, export_som = false;
+  bool pictures = true, quiet = false, export_som = false, view = true;
   const char* data_layout = nullptr;  // --data: the detected layout's description
   // --data: the scene, read and validated before anything is trained.
   trainer::Dataset data;
@@ -405,6 +419,7 @@ int main(int argc, char** argv) {
       cfg.node_loss.confidence_visibility = args.get_choice("confidence-visibility", {"on", "off"}) == "on";
     if (args.given("lambda-depth")) cfg.stage2.lambda_depth = double_in(args, "lambda-depth", 0.0, 100.0);
     pictures = !args.get_switch("no-pictures");
+    view = !args.get_switch("no-view");
     quiet = args.get_switch("quiet");
     trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
     if (args.given("data")) {
@@ -478,7 +493,7 @@ int main(int argc, char** argv) {
     if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
     if (have_data)
       return run_data(cfg, std::move(data), data_layout, seconds_read, have_queries ? &queries : nullptr,
-                      have_truth ? &truth : nullptr, out, quiet);
+                      have_truth ? &truth : nullptr, out, quiet, view);
     if (!dycheck_dir.empty()) return export_dycheck(cfg, dycheck_dir, export_som, quiet);
     const trainer::Progress progress(stderr, quiet);
     if (!export_dir.empty()) {
@@ -538,6 +553,11 @@ int main(int argc, char** argv) {
       std::ofstream f(out / "metrics.json");
       f << line << "\n";
       if (!f) throw std::runtime_error("cannot write " + (out / "metrics.json").string());
+    }
+    if (view) {
+      trainer::ViewInputs vi;
+      vi.metrics_json = line;
+      written.push_back(trainer::write_view_html(out.string(), r, vi));
     }
     if (!quiet) {
       progress.line("done", "pictures and metrics.json in " + out.string() + "/");
