@@ -185,11 +185,7 @@ void mosca_read_tracks(const std::string& root, DycheckScene& s) {
   }
   if (Q > (1 << 28)) fail_at(files.front(), "too many tracks");
   DycheckTracks& tr = s.tracks;
-  tr.count = static_cast<int>(Q);
-  tr.frames = static_cast<int>(T);
-  tr.uv.assign(static_cast<std::size_t>(T * Q * 2), 0.0f);
-  tr.visible.assign(static_cast<std::size_t>(T * Q), 0);
-  tr.query_t.assign(static_cast<std::size_t>(Q), 0);
+  layout_io::size_tracks(tr, T, Q);
   std::int64_t k0 = 0;
   for (std::size_t f = 0; f < parts.size(); ++f) {
     const Part& p = parts[f];
@@ -324,14 +320,11 @@ DycheckScene read_mosca(const std::string& dir) {
 }
 
 void write_mosca(const std::string& dir, const DycheckScene& s) {
+  layout_io::check_scene_to_write(dir, s);
   const std::size_t T = s.train.size(), V = s.val.size();
   const std::size_t HW = static_cast<std::size_t>(s.width) * static_cast<std::size_t>(s.height);
   const DycheckTracks& tr = s.tracks;
   const std::size_t Q = static_cast<std::size_t>(tr.count);
-  if (s.train_cameras.size() != T || s.train_rgb.size() != T || s.depth.size() != T * HW || s.val_cameras.size() != V ||
-      s.val_rgb.size() != V || s.val_covisible.size() != V || s.dynamic_mask.size() != T * HW ||
-      tr.uv.size() != T * Q * 2 || tr.visible.size() != T * Q || tr.query_t.size() != Q)
-    fail_at(dir, "the scene to write is inconsistent");
   for (const char* d : {"images", "cameras", "sensor_depth", "epi/error", "test_images", "test_cameras", "test_covisible", "priors/features"})
     layout_io::make_dir(dir, d);
   // Cameras at the images' size, back to integer pixel centres.
@@ -376,12 +369,7 @@ void write_mosca(const std::string& dir, const DycheckScene& s) {
                         files::npz_bytes({{"tracks", npy::to_bytes(xy.data(), {Ti, Qi, 2})},
                                           {"visibility", npy::to_bytes(vis.get(), {Ti, Qi})},
                                           {"queries", npy::to_bytes(queries.data(), {Qi, 3})}}));
-  const std::size_t per = static_cast<std::size_t>(s.feature_height) * static_cast<std::size_t>(s.feature_width) *
-                          static_cast<std::size_t>(s.feature_dim);
-  for (std::size_t t = 0; t < T && per > 0 && s.features.size() == T * per; ++t)
-    if (t < s.has_features.size() && s.has_features[t])
-      layout_io::write_file(dir, "priors/features/" + s.train[t].name + ".npy",
-                            npy::to_bytes(s.features.data() + t * per, {s.feature_height, s.feature_width, s.feature_dim}));
+  layout_io::write_feature_files(dir, s);
 }
 
 }  // namespace trainer

@@ -77,7 +77,7 @@ TEST_CASE("read_mosca: the numpy-written MoSca fixture, every conversion") {
   const trainer::DycheckTracks& tr = s.tracks;
   REQUIRE(tr.count == 20);
   REQUIRE(tr.frames == 3);
-  auto at = [&](int t, int k) { return static_cast<std::size_t>(t * 20 + k); };
+  auto at = [](std::size_t t, std::size_t k) { return t * 20 + k; };
   CHECK(tr.query_t[0] == 1);  // no queries array: the first visible frame
   CHECK(tr.query_t[1] == 0);
   CHECK(tr.query_t[2] == 0);  // queries[:, 0]

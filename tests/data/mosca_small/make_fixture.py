@@ -1,26 +1,25 @@
 #!/usr/bin/env python3
 """Writes the small MoSca scene beside this script (tests/data/mosca_small), with numpy and the
-standard library only, following MoSca's conventions (JiahuiLei/MoSca
+standard library only (the PNG writer of ../som_small/make_fixture.py), following MoSca's conventions (JiahuiLei/MoSca
 lib_prior/prior_loading.py::Saved2D, data_utils/iphone_helpers.py, lib_prior/tracking/
 bootstapir_wrapper.py writes its tracks with np.savez_compressed):
 
-  images/<frame>.png                     RGB, half of the cameras' image_size (as the iPhone release)
+  images/<frame>.png                     RGBA, half of the cameras' image_size (as the iPhone release)
   cameras/<frame>.json                   Nerfies JSON at full size (image_size [2W, 2H])
   sensor_depth/<frame>.npz               np.savez_compressed(dep=float32 [H, W]), 0 = no depth
   epi/error/<frame>.npy                  float32 [H, W] epipolar error (> 0.001 = dynamic)
   test_images/, test_cameras/, test_covisible/  camera 1 at time 1 (covisible: pixel > 0)
   uniform_dep=sensor_bootstapir_tap.npz  tracks [T, N, 2] float32, visibility [T, N] bool, queries [N, 3]
   dynamic_dep=sensor_bootstapir_tap.npz  a second file, concatenated along N (no queries)
-  vos_deva/Annotations/<frame>.png       RGB instance ids (R + 256 G + 65536 B)
+  vos_deva/Annotations/<frame>.png       RGB(A) instance ids (R + 256 G + 65536 B)
 
 The scene: a plane at 2 m, a square at 1 m moving 1 px per frame to the right (as som_small),
 camera 0 at the origin looking down +z. Tests (tests/trainer/test_layout_mosca.cpp) check the
 values this script writes. Run: /usr/bin/python3 tests/data/mosca_small/make_fixture.py
 """
+import importlib.util
 import json
 import os
-import struct
-import zlib
 
 import numpy as np
 
@@ -30,28 +29,16 @@ FOCAL = 40.0          # at full size (32 x 24): 20 px at the images' size
 PP = [15.5, 11.5]     # full-size integer-centre principal point; halved: 7.75, 5.75
 
 
-def png(path, array):
-    """8-bit PNG (grey [H, W] or RGB [H, W, 3]) written with zlib: PIL is not installed."""
-    a = np.ascontiguousarray(array, dtype=np.uint8)
-    h, w = a.shape[:2]
-    colour = 0 if a.ndim == 2 else 2
-    raw = b"".join(b"\x00" + a[y].tobytes() for y in range(h))
-
-    def chunk(kind, data):
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-
-    with open(path, "wb") as f:
-        f.write(b"\x89PNG\r\n\x1a\n")
-        f.write(chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, colour, 0, 0, 0)))
-        f.write(chunk(b"IDAT", zlib.compress(raw, 9)))
-        f.write(chunk(b"IEND", b""))
+def _som_fixture():
+    """som_small's script (the same tiny scene): its PNG writer and moving square are reused."""
+    spec = importlib.util.spec_from_file_location("som_fixture", os.path.join(HERE, "..", "som_small", "make_fixture.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
-def square(t):
-    """The moving square's pixels at time t: columns 4+t .. 7+t, rows 4 .. 7."""
-    m = np.zeros((H, W), bool)
-    m[4:8, 4 + t:8 + t] = True
-    return m
+SOM = _som_fixture()
+png, square = SOM.png, SOM.square  # grey [H, W] or RGBA [H, W, 4] PNGs (PIL is not installed)
 
 
 def camera(x):
@@ -61,7 +48,7 @@ def camera(x):
 
 
 def rgb(t):
-    a = np.zeros((H, W, 3), np.uint8)
+    a = np.full((H, W, 4), 255, np.uint8)
     a[..., 0] = np.where(square(t), 200, 40)
     a[..., 1] = 10 * np.arange(W)[None, :]
     a[..., 2] = 20 * np.arange(H)[:, None]
@@ -83,9 +70,10 @@ def main():
         np.savez_compressed(os.path.join(HERE, "sensor_depth", name + ".npz"), dep=dep)
         err = np.where(square(t), 0.01, 0.0005).astype(np.float32)  # either side of epi_th 0.001
         np.save(os.path.join(HERE, "epi/error", name + ".npy"), err)
-        inst = np.zeros((H, W, 3), np.uint8)
-        inst[square(t)] = [1, 1, 0]     # id 257
-        inst[10:, :] = [5, 0, 0]        # id 5 (the floor)
+        inst = np.zeros((H, W, 4), np.uint8)
+        inst[..., 3] = 255
+        inst[square(t), :3] = [1, 1, 0]     # id 257
+        inst[10:, :, :3] = [5, 0, 0]        # id 5 (the floor)
         png(os.path.join(HERE, "vos_deva/Annotations", name + ".png"), inst)
     with open(os.path.join(HERE, "test_cameras", "1_00001.json"), "w") as f:
         json.dump(camera(0.1), f, indent=2)
