@@ -321,10 +321,7 @@ DycheckScene read_mosca(const std::string& dir) {
 
 void write_mosca(const std::string& dir, const DycheckScene& s) {
   layout_io::check_scene_to_write(dir, s);
-  const std::size_t T = s.train.size(), V = s.val.size();
-  const std::size_t HW = static_cast<std::size_t>(s.width) * static_cast<std::size_t>(s.height);
-  const DycheckTracks& tr = s.tracks;
-  const std::size_t Q = static_cast<std::size_t>(tr.count);
+  const std::size_t T = s.train.size(), HW = static_cast<std::size_t>(s.width) * static_cast<std::size_t>(s.height);
   for (const char* d : {"images", "cameras", "sensor_depth", "epi/error", "test_images", "test_cameras", "test_covisible", "priors/features"})
     layout_io::make_dir(dir, d);
   // Cameras at the images' size, back to integer pixel centres.
@@ -343,7 +340,7 @@ void write_mosca(const std::string& dir, const DycheckScene& s) {
     for (std::size_t i = 0; i < HW; ++i) err[i] = s.dynamic_mask[t * HW + i] ? 1.0f : 0.0f;
     layout_io::write_file(dir, "epi/error/" + n + ".npy", npy::to_bytes(err.data(), {s.height, s.width}));
   }
-  for (std::size_t v = 0; v < V; ++v) {
+  for (std::size_t v = 0; v < s.val.size(); ++v) {
     const std::string& n = s.val[v].name;
     const Camera& c = s.val_cameras[v];
     layout_io::write_file(dir, "test_cameras/" + n + ".json", camera_json(c));
@@ -351,6 +348,8 @@ void write_mosca(const std::string& dir, const DycheckScene& s) {
     layout_io::write_png_file(dir, "test_covisible/" + n + ".png", layout_io::mask_image(s.val_covisible[v].data(), c.width, c.height));
   }
   // One track file: tracks [T, Q, 2] at integer pixel centres, visibility [T, Q], queries (t, y, x).
+  const DycheckTracks& tr = s.tracks;
+  const std::size_t Q = static_cast<std::size_t>(tr.count);
   std::vector<float> xy(T * Q * 2), queries(Q * 3);
   const std::unique_ptr<bool[]> vis(new bool[T * Q]);
   for (std::size_t i = 0; i < T * Q; ++i) {

@@ -161,32 +161,47 @@ TEST_CASE("the procedural scene in the Dycheck, Shape-of-Motion and MoSca layout
 }
 
 #ifdef SMG_TRAINER_PATH
+namespace {
+
 const float kNoDep = 1.0f;  // the one value of an .npz whose array is not named dep
+
+smg::test::ProgramRun layout_cli_run(const std::string& args) {
+  return smg::test::run_program(SMG_TRAINER_PATH, args, "smg_test_layout_cli_io");
+}
+
+// smg_trainer --export-dycheck SCENE --export-layout LAYOUT (8 frames at 48 x 36, 300 tracks)
+// writes `files`; --data SCENE names `detected` in its layout line and trains a short run into OUT.
+void layout_cli_round_trip(const fs::path& scene, const fs::path& out, const std::string& layout,
+                           const std::vector<std::string>& files, const std::string& detected) {
+  for (const fs::path& p : {scene, out}) fs::remove_all(p);
+  smg::test::ProgramRun r = layout_cli_run("--export-dycheck " + scene.string() + " --export-layout " + layout +
+                                           " --frames 8 --width 48 --height 36 --tracks 300 --threads 2 --quiet");
+  CAPTURE(r.err);
+  REQUIRE(r.code == 0);
+  for (const std::string& f : files) {
+    CAPTURE(f);
+    CHECK(fs::exists(scene / f));
+  }
+  r = layout_cli_run("--data " + scene.string() + " --quick --stage1-iters 30 --stage2-iters 20 --threads 2 --out " + out.string());
+  CAPTURE(r.err);
+  REQUIRE(r.code == 0);
+  CHECK(r.err.find("layout: " + detected) != std::string::npos);
+  CHECK(fs::exists(out / "metrics.json"));
+  CHECK(fs::exists(out / "renders/1_00000.png"));
+}
+
+}  // namespace
 
 TEST_CASE("smg_trainer --export-layout som, --data on it; the SoM layout's refusals: exit 2, one line, no OUT") {
   const fs::path scene = fs::temp_directory_path() / "smg_test_layout_cli_som";
   const fs::path out = fs::temp_directory_path() / "smg_test_layout_cli_out";
-  fs::remove_all(scene);
-  fs::remove_all(out);
-  auto run = [](const std::string& args) { return smg::test::run_program(SMG_TRAINER_PATH, args, "smg_test_layout_cli_io"); };
-  smg::test::ProgramRun r = run("--export-dycheck " + scene.string() + " --export-layout som --frames 8 --width 48 "
-                                "--height 36 --tracks 300 --threads 2 --quiet");
-  CAPTURE(r.err);
-  REQUIRE(r.code == 0);
   const std::string pre = "flow3d_preprocessed/";
-  for (const std::string& f : std::vector<std::string>{"splits/train.json", "camera/0_00000.json", "rgb/1x/0_00007.png", "extra.json",
-                              pre + "aligned_depth_anything_lidar/1x/0_00007.npy", pre + "track_anything/1x/0_00000.png",
-                              pre + "covisible/1x/val/1_00000.png", pre + "2d_tracks/1x/0_00003_0_00005.npy"}) {
-    CAPTURE(f);
-    CHECK(fs::exists(scene / f));
-  }
-  r = run("--data " + scene.string() + " --quick --stage1-iters 30 --stage2-iters 20 --threads 2 --out " + out.string());
-  CAPTURE(r.err);
-  REQUIRE(r.code == 0);
-  CHECK(r.err.find("layout: Shape-of-Motion") != std::string::npos);
-  CHECK(fs::exists(out / "metrics.json"));
-  CHECK(fs::exists(out / "renders/1_00000.png"));
-
+  layout_cli_round_trip(scene, out, "som",
+                        {"splits/train.json", "camera/0_00000.json", "rgb/1x/0_00007.png", "extra.json",
+                         pre + "aligned_depth_anything_lidar/1x/0_00007.npy", pre + "track_anything/1x/0_00000.png",
+                         pre + "covisible/1x/val/1_00000.png", pre + "2d_tracks/1x/0_00003_0_00005.npy"},
+                        "Shape-of-Motion");
+  auto run = layout_cli_run;
   const fs::path bad_out = fs::temp_directory_path() / "smg_test_layout_cli_bad_out";
   fs::remove_all(bad_out);
   fs::remove(scene / "camera/0_00004.json");
@@ -211,24 +226,12 @@ TEST_CASE("smg_trainer --export-layout som, --data on it; the SoM layout's refus
 TEST_CASE("smg_trainer --export-layout mosca, --data on it; the MoSca layout's refusals: exit 2, one line, no OUT") {
   const fs::path scene = fs::temp_directory_path() / "smg_test_layout_cli_mosca";
   const fs::path out = fs::temp_directory_path() / "smg_test_layout_cli_mosca_out";
-  for (const fs::path& p : {scene, out}) fs::remove_all(p);
-  auto run = [](const std::string& args) { return smg::test::run_program(SMG_TRAINER_PATH, args, "smg_test_layout_cli_mosca_io"); };
-  smg::test::ProgramRun r = run("--export-dycheck " + scene.string() + " --export-layout mosca --frames 8 --width 48 "
-                                "--height 36 --tracks 300 --threads 2 --quiet");
-  CAPTURE(r.err);
-  REQUIRE(r.code == 0);
-  for (const char* f : {"images/0_00007.png", "cameras/0_00000.json", "sensor_depth/0_00003.npz", "epi/error/0_00002.npy",
-                        "test_images/1_00000.png", "test_cameras/1_00000.json", "test_covisible/1_00000.png",
-                        "uniform_dep=sensor_bootstapir_tap.npz"}) {
-    CAPTURE(f);
-    CHECK(fs::exists(scene / f));
-  }
-  r = run("--data " + scene.string() + " --quick --stage1-iters 30 --stage2-iters 20 --threads 2 --out " + out.string());
-  CAPTURE(r.err);
-  REQUIRE(r.code == 0);
-  CHECK(r.err.find("layout: MoSca") != std::string::npos);
-  CHECK(fs::exists(out / "metrics.json"));
-
+  layout_cli_round_trip(scene, out, "mosca",
+                        {"images/0_00007.png", "cameras/0_00000.json", "sensor_depth/0_00003.npz", "epi/error/0_00002.npy",
+                         "test_images/1_00000.png", "test_cameras/1_00000.json", "test_covisible/1_00000.png",
+                         "uniform_dep=sensor_bootstapir_tap.npz"},
+                        "MoSca");
+  auto run = layout_cli_run;
   const fs::path bad_out = fs::temp_directory_path() / "smg_test_layout_cli_mosca_bad_out";
   fs::remove_all(bad_out);
   fs::remove(scene / "test_cameras/1_00000.json");

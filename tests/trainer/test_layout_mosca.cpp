@@ -6,52 +6,38 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "npy.hpp"
-#include "support/errors.hpp"
 #include "support/files.hpp"
 #include "trainer/file_formats.hpp"
+#include "layout_fixture.hpp"
 #include "trainer/layouts.hpp"
 
 namespace fs = std::filesystem;
 
-namespace {
+using trainer::test::layout_read_error;
 
-const fs::path kMoscaFixture = fs::path(SMG_TEST_DATA_DIR) / "mosca_small";
-
-// A fresh copy of the fixture (to break one file of).
-fs::path mosca_copy(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / ("smg_test_layout_mosca_" + name);
-  fs::remove_all(p);
-  fs::copy(kMoscaFixture, p, fs::copy_options::recursive);
-  return p;
-}
-
-std::string mosca_error(const fs::path& dir) {
-  return smg::test::error_message<trainer::DataError>([&] { (void)trainer::read_data_scene(dir.string()); }, "(read)");
-}
-
-}  // namespace
+// A fresh copy of tests/data/mosca_small, to break one file of.
+static fs::path mosca_copy(const std::string& name) { return trainer::test::layout_fixture_copy("mosca_small", name); }
 
 TEST_CASE("read_mosca: the numpy-written MoSca fixture, every conversion") {
-  trainer::DataLayout layout = trainer::DataLayout::dycheck;
-  const trainer::DycheckScene s = trainer::read_data_scene(kMoscaFixture.string(), &layout);
-  CHECK(layout == trainer::DataLayout::mosca);
-  REQUIRE(s.frames() == 3);
-  CHECK(s.width == 16);
-  CHECK(s.height == 12);
+  const fs::path fixture = fs::path(SMG_TEST_DATA_DIR) / "mosca_small";
+  CHECK(trainer::detect_data_layout(fixture.string()) == trainer::DataLayout::mosca);
+  const trainer::DycheckScene s = trainer::read_mosca(fixture.string());
+  REQUIRE(s.train.size() == 3);
   CHECK(s.train[2].name == "0_00002");
   CHECK(s.train[2].time == 2);
+  CHECK(s.width == 16);
+  CHECK(s.height == 12);
   // Cameras: the JSON is at twice the images' size (halved, MoSca's ratios); its integer-centred
   // principal point (15.5, 11.5) / 2 + 0.5.
   for (const trainer::Camera& c : s.train_cameras) {
-    CHECK(c.width == 16);
-    CHECK(c.fx == 20.0);
-    CHECK(c.fy == 20.0);
-    CHECK(c.cx == 8.25);
-    CHECK(c.cy == 6.25);
+    CHECK((c.width == 16 && c.height == 12));
+    CHECK((c.fx == 20.0 && c.fy == 20.0));  // 40 / 2
+    CHECK((c.cx == 8.25 && c.cy == 6.25));
   }
   CHECK(s.train_rgb[0].pixels[0] == doctest::Approx(40.0 / 255.0));
   REQUIRE(s.val.size() == 1);
@@ -120,39 +106,34 @@ TEST_CASE("read_mosca: one broken file at a time names that file") {
     const fs::path d = mosca_copy("no_dep");
     std::vector<float> v(16 * 12, 1.0f);
     smg::test::write_bytes(d / dep, trainer::files::npz_bytes({{"depth", npy::to_bytes(v.data(), {12, 16})}}));
-    CHECK(mosca_error(d) == dep + ": no array `dep` (MoSca's sensor depth key)");
+    CHECK(layout_read_error(d) == dep + ": no array `dep` (MoSca's sensor depth key)");
   }
   SUBCASE("dep of the wrong size") {
     const fs::path d = mosca_copy("dep_size");
     std::vector<float> v(8 * 6, 1.0f);
     smg::test::write_bytes(d / dep, trainer::files::npz_bytes({{"dep", npy::to_bytes(v.data(), {6, 8})}}));
-    CHECK(mosca_error(d) == dep + ": dep has shape [6, 8], expected [12, 16]");
+    CHECK(layout_read_error(d) == dep + ": dep has shape [6, 8], expected [12, 16]");
   }
+  // A track file: tracks [frames, n, 2] (ones), visibility [vis_frames, vis_n] (false).
+  auto track_file = [](std::int64_t frames, std::int64_t n, std::int64_t vis_frames, std::int64_t vis_n) {
+    const std::vector<float> xy(static_cast<std::size_t>(frames * n * 2), 1.0f);
+    const std::unique_ptr<bool[]> vis(new bool[static_cast<std::size_t>(vis_frames * vis_n)]());
+    return trainer::files::npz_bytes({{"tracks", npy::to_bytes(xy.data(), {frames, n, 2})},
+                                      {"visibility", npy::to_bytes(vis.get(), {vis_frames, vis_n})}});
+  };
   SUBCASE("tracks and visibility of different shapes") {
     const fs::path d = mosca_copy("track_shape");
-    std::vector<float> xy(3 * 18 * 2, 1.0f);
-    const bool vis[3 * 17] = {};
-    smg::test::write_bytes(d / uni, trainer::files::npz_bytes({{"tracks", npy::to_bytes(xy.data(), {3, 18, 2})},
-                                                               {"visibility", npy::to_bytes(vis, {3, 17})}}));
-    CHECK(mosca_error(d) == uni + ": visibility has shape [3, 17], expected [3, 18] (that of tracks)");
+    smg::test::write_bytes(d / uni, track_file(3, 18, 3, 17));
+    CHECK(layout_read_error(d) == uni + ": visibility has shape [3, 17], expected [3, 18] (that of tracks)");
   }
   SUBCASE("tracks over another number of frames") {
     const fs::path d = mosca_copy("track_frames");
-    std::vector<float> xy(2 * 18 * 2, 1.0f);
-    const bool vis[2 * 18] = {};
-    smg::test::write_bytes(d / uni, trainer::files::npz_bytes({{"tracks", npy::to_bytes(xy.data(), {2, 18, 2})},
-                                                               {"visibility", npy::to_bytes(vis, {2, 18})}}));
-    CHECK(mosca_error(d) == uni + ": tracks has shape [2, 18, 2], expected [3, N, 2] (3 frames in images/)");
+    smg::test::write_bytes(d / uni, track_file(2, 18, 2, 18));
+    CHECK(layout_read_error(d) == uni + ": tracks has shape [2, 18, 2], expected [3, N, 2] (3 frames in images/)");
   }
   SUBCASE("a missing camera JSON, depth, test camera, covisible mask, epipolar error") {
-    for (const std::string& rel : std::vector<std::string>{"cameras/0_00002.json", "sensor_depth/0_00000.npz",
-                                                          "test_cameras/1_00001.json", "test_covisible/1_00001.png",
-                                                          "epi/error/0_00001.npy"}) {
-      CAPTURE(rel);
-      const fs::path d = mosca_copy("missing");
-      fs::remove(d / rel);
-      CHECK(mosca_error(d).rfind(rel + ": ", 0) == 0);
-    }
+    trainer::test::check_missing_files("mosca_small", {"cameras/0_00002.json", "sensor_depth/0_00000.npz", "test_cameras/1_00001.json",
+                                                       "test_covisible/1_00001.png", "epi/error/0_00001.npy"});
   }
   SUBCASE("an image neither the camera's size nor half of it") {
     const fs::path d = mosca_copy("image_size");
@@ -161,17 +142,17 @@ TEST_CASE("read_mosca: one broken file at a time names that file") {
                                                        "\"focal_length\": 40, \"principal_point\": [15.5, 11.5], \"skew\": 0, "
                                                        "\"pixel_aspect_ratio\": 1, \"radial_distortion\": [0, 0, 0], "
                                                        "\"tangential_distortion\": [0, 0], \"image_size\": [20, 20]}");
-    CHECK(mosca_error(d) == "images/0_00001.png: image is 16x12, but cameras/0_00001.json says 20x20 (nor half of it)");
+    CHECK(layout_read_error(d) == "images/0_00001.png: image is 16x12, but cameras/0_00001.json says 20x20 (nor half of it)");
   }
   SUBCASE("JPEG images") {
     const fs::path d = mosca_copy("jpeg");
     smg::test::write_bytes(d / "images/0_00003.jpg", "jpeg");
-    CHECK(mosca_error(d) == "images/0_00003.jpg: JPEG images are not supported; convert images/ to PNG");
+    CHECK(layout_read_error(d) == "images/0_00003.jpg: JPEG images are not supported; convert images/ to PNG");
   }
   SUBCASE("an epipolar error map of the wrong shape") {
     const fs::path d = mosca_copy("epi_shape");
     std::vector<float> v(16, 0.0f);
     smg::test::write_bytes(d / "epi/error/0_00000.npy", npy::to_bytes(v.data(), {16}));
-    CHECK(mosca_error(d) == "epi/error/0_00000.npy: shape [16], expected [12, 16]");
+    CHECK(layout_read_error(d) == "epi/error/0_00000.npy: shape [16], expected [12, 16]");
   }
 }
