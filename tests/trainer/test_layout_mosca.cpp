@@ -108,12 +108,6 @@ TEST_CASE("read_mosca: one broken file at a time names that file") {
     smg::test::write_bytes(d / dep, trainer::files::npz_bytes({{"depth", npy::to_bytes(v.data(), {12, 16})}}));
     CHECK(layout_read_error(d) == dep + ": no array `dep` (MoSca's sensor depth key)");
   }
-  SUBCASE("dep of the wrong size") {
-    const fs::path d = mosca_copy("dep_size");
-    std::vector<float> v(8 * 6, 1.0f);
-    smg::test::write_bytes(d / dep, trainer::files::npz_bytes({{"dep", npy::to_bytes(v.data(), {6, 8})}}));
-    CHECK(layout_read_error(d) == dep + ": dep has shape [6, 8], expected [12, 16]");
-  }
   // A track file: tracks [frames, n, 2] (ones), visibility [vis_frames, vis_n] (false).
   auto track_file = [](std::int64_t frames, std::int64_t n, std::int64_t vis_frames, std::int64_t vis_n) {
     const std::vector<float> xy(static_cast<std::size_t>(frames * n * 2), 1.0f);
@@ -144,15 +138,20 @@ TEST_CASE("read_mosca: one broken file at a time names that file") {
                                                        "\"tangential_distortion\": [0, 0], \"image_size\": [20, 20]}");
     CHECK(layout_read_error(d) == "images/0_00001.png: image is 16x12, but cameras/0_00001.json says 20x20 (nor half of it)");
   }
-  SUBCASE("JPEG images") {
-    const fs::path d = mosca_copy("jpeg");
-    smg::test::write_bytes(d / "images/0_00003.jpg", "jpeg");
-    CHECK(layout_read_error(d) == "images/0_00003.jpg: JPEG images are not supported; convert images/ to PNG");
-  }
-  SUBCASE("an epipolar error map of the wrong shape") {
-    const fs::path d = mosca_copy("epi_shape");
-    std::vector<float> v(16, 0.0f);
-    smg::test::write_bytes(d / "epi/error/0_00000.npy", npy::to_bytes(v.data(), {16}));
-    CHECK(layout_read_error(d) == "epi/error/0_00000.npy: shape [16], expected [12, 16]");
+  SUBCASE("one file replaced: a JPEG image, dep or an epipolar error map of the wrong shape") {
+    const std::vector<float> v(16, 0.0f);
+    const struct {
+      std::string rel, bytes, message;
+    } cases[] = {
+        {"images/0_00003.jpg", "jpeg", "images/0_00003.jpg: JPEG images are not supported; convert images/ to PNG"},
+        {dep, trainer::files::npz_bytes({{"dep", npy::to_bytes(v.data(), {2, 8})}}), dep + ": dep has shape [2, 8], expected [12, 16]"},
+        {"epi/error/0_00000.npy", npy::to_bytes(v.data(), {16}), "epi/error/0_00000.npy: shape [16], expected [12, 16]"},
+    };
+    for (const auto& c : cases) {
+      CAPTURE(c.rel);
+      const fs::path d = mosca_copy("replaced");
+      smg::test::write_bytes(d / c.rel, c.bytes);
+      CHECK(layout_read_error(d) == c.message);
+    }
   }
 }
