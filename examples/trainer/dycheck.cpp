@@ -330,11 +330,7 @@ void read_tracks(const SceneReader& in, DycheckScene& s, const DycheckReadOption
   std::map<std::int64_t, int> index_of_time;
   for (int t = 0; t < s.frames(); ++t) index_of_time[s.train[static_cast<std::size_t>(t)].time] = t;
   DycheckTracks& tr = s.tracks;
-  tr.count = static_cast<int>(Q);
-  tr.frames = static_cast<int>(T);
-  tr.uv.assign(static_cast<std::size_t>(T * Q * 2), 0.0f);
-  tr.visible.assign(static_cast<std::size_t>(T * Q), 0);
-  tr.query_t.assign(static_cast<std::size_t>(Q), 0);
+  layout_io::size_tracks(tr, T, Q);
   const double m = options.track_margin_px;
   for (std::int64_t q = 0; q < Q; ++q) {
     const auto it = index_of_time.find(qt[static_cast<std::size_t>(q)]);
@@ -535,6 +531,32 @@ void write_png_file(const std::string& root, const std::string& rel, const Image
 std::string nerfies_camera_json(const Camera& cam, int factor) { return camera_json(cam, factor); }
 std::string split_file_json(const std::vector<DycheckFrame>& frames) { return split_json(frames); }
 Image mask_image(const std::uint8_t* mask, int width, int height) { return binary_image(mask, width, height); }
+void size_tracks(DycheckTracks& tr, std::int64_t frames, std::int64_t count) {
+  tr.count = static_cast<int>(count);
+  tr.frames = static_cast<int>(frames);
+  tr.uv.assign(static_cast<std::size_t>(frames * count * 2), 0.0f);
+  tr.visible.assign(static_cast<std::size_t>(frames * count), 0);
+  tr.query_t.assign(static_cast<std::size_t>(count), 0);
+}
+void check_scene_to_write(const std::string& root, const DycheckScene& s) {
+  const std::size_t T = s.train.size(), V = s.val.size();
+  const std::size_t HW = static_cast<std::size_t>(s.width) * static_cast<std::size_t>(s.height);
+  const DycheckTracks& tr = s.tracks;
+  const std::size_t Q = static_cast<std::size_t>(tr.count);
+  if (s.train_cameras.size() != T || s.train_rgb.size() != T || s.depth.size() != T * HW || s.val_cameras.size() != V ||
+      s.val_rgb.size() != V || s.val_covisible.size() != V || s.dynamic_mask.size() != T * HW ||
+      tr.uv.size() != T * Q * 2 || tr.visible.size() != T * Q || tr.query_t.size() != Q)
+    fail_at(root, "the scene to write is inconsistent");
+}
+void write_feature_files(const std::string& root, const DycheckScene& s) {
+  const std::size_t T = s.train.size();
+  const std::size_t per = static_cast<std::size_t>(s.feature_height) * static_cast<std::size_t>(s.feature_width) *
+                          static_cast<std::size_t>(s.feature_dim);
+  for (std::size_t t = 0; t < T && per > 0 && s.features.size() == T * per; ++t)
+    if (t < s.has_features.size() && s.has_features[t])
+      write_file(root, "priors/features/" + s.train[t].name + ".npy",
+                 npy::to_bytes(s.features.data() + t * per, {s.feature_height, s.feature_width, s.feature_dim}));
+}
 
 }  // namespace layout_io
 

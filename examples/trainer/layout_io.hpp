@@ -1,5 +1,6 @@
 // examples/trainer/layout_io.hpp — the file readers and writers that the on-disk layouts share
-// (Dycheck + priors in dycheck.cpp, Shape-of-Motion in layout_som.cpp; docs/data.md). Defined in
+// (Dycheck + priors in dycheck.cpp, Shape-of-Motion in layout_som.cpp, MoSca in
+// layout_mosca.cpp; docs/data.md). Defined in
 // dycheck.cpp. Every `rel` is a path under the scene folder `root`; every reader throws
 // DataError("<rel>: <problem>") so that a refused scene names its file.
 #pragma once
@@ -55,5 +56,13 @@ std::string nerfies_camera_json(const Camera& cam, int factor);
 std::string split_file_json(const std::vector<DycheckFrame>& frames);
 // A 0/1 mask [H][W] as a one-channel image (0 / 1.0).
 Image mask_image(const std::uint8_t* mask, int width, int height);
+// The writers' precondition: every per-frame array of `scene` has its frames' sizes; else
+// DataError("<root>: the scene to write is inconsistent").
+void check_scene_to_write(const std::string& root, const DycheckScene& scene);
+// priors/features/<frame>.npy (float32 [h, w, C]) of every training frame with features.
+void write_feature_files(const std::string& root, const DycheckScene& scene);
+
+// tr sized for `frames` x `count` samples ([T][Q] uv, visible; [Q] query_t), all zero.
+void size_tracks(DycheckTracks& tr, std::int64_t frames, std::int64_t count);
 
 }  // namespace trainer::layout_io

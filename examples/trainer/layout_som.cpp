@@ -224,14 +224,11 @@ DycheckScene read_som(const std::string& dir, const DycheckReadOptions& options)
 }
 
 void write_som(const std::string& dir, const DycheckScene& s) {
+  layout_io::check_scene_to_write(dir, s);
   const std::size_t T = s.train.size(), V = s.val.size();
   const std::size_t HW = static_cast<std::size_t>(s.width) * static_cast<std::size_t>(s.height);
   const DycheckTracks& tr = s.tracks;
   const std::size_t Q = static_cast<std::size_t>(tr.count);
-  if (s.train_cameras.size() != T || s.train_rgb.size() != T || s.depth.size() != T * HW || s.val_cameras.size() != V ||
-      s.val_rgb.size() != V || s.val_covisible.size() != V || s.dynamic_mask.size() != T * HW ||
-      tr.uv.size() != T * Q * 2 || tr.visible.size() != T * Q || tr.query_t.size() != Q)
-    fail_at(dir, "the scene to write is inconsistent");
   const std::string pre = kSomPre;
   for (const std::string& d : std::vector<std::string>{"camera", "rgb/1x", "splits", "priors/features", pre + "aligned_depth_anything_lidar/1x",
                               pre + "track_anything/1x", pre + "covisible/1x/val", pre + "2d_tracks/1x"})
@@ -281,12 +278,7 @@ void write_som(const std::string& dir, const DycheckScene& s) {
                             npy::to_bytes(v.data(), {static_cast<std::int64_t>(rows.size()), 4}));
     }
   }
-  const std::size_t per = static_cast<std::size_t>(s.feature_height) * static_cast<std::size_t>(s.feature_width) *
-                          static_cast<std::size_t>(s.feature_dim);
-  for (std::size_t t = 0; t < T && per > 0 && s.features.size() == T * per; ++t)
-    if (t < s.has_features.size() && s.has_features[t])
-      layout_io::write_file(dir, "priors/features/" + s.train[t].name + ".npy",
-                            npy::to_bytes(s.features.data() + t * per, {s.feature_height, s.feature_width, s.feature_dim}));
+  layout_io::write_feature_files(dir, s);
 }
 
 }  // namespace trainer

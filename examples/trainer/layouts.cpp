@@ -48,7 +48,7 @@ const char* data_layout_description(DataLayout layout) {
     case DataLayout::som:
       return "Shape-of-Motion (flow3d_preprocessed/: 1x images, 2d_tracks/1x, aligned_depth_anything_lidar/1x or lidar "
              "depth/1x, Nerfies cameras)";
-    case DataLayout::mosca: return "MoSca (sensor_depth/, cameras/, *bootstapir*.npz)";
+    case DataLayout::mosca: return "MoSca (images/, sensor_depth/ dep, cameras/, *bootstapir*.npz tracks, epi/error masks)";
     case DataLayout::dycheck: break;
   }
   return "Dycheck + priors (2x images, depth/2x, priors/tracks.npz)";
@@ -78,8 +78,7 @@ DycheckScene read_data_scene(const std::string& dir, DataLayout* layout_out) {
   if (layout_out) *layout_out = layout;
   switch (layout) {
     case DataLayout::som: return read_som(dir);
-    case DataLayout::mosca:
-      throw DataError(dir + ": MoSca layout (sensor_depth/, cameras/, *bootstapir*.npz) detected; reading it is not supported yet");
+    case DataLayout::mosca: return read_mosca(dir);
     case DataLayout::dycheck: break;
   }
   return read_dycheck(dir);

@@ -1,6 +1,6 @@
 // examples/trainer/layouts.hpp — the on-disk scene layouts that `smg_trainer --data` reads
 // (docs/data.md): our Dycheck + priors layout (dycheck.hpp), Shape-of-Motion's preprocessed iPhone
-// layout (layout_som.cpp) and MoSca's (detected, not read yet). Each adapter fills the same
+// layout (layout_som.cpp) and MoSca's (layout_mosca.cpp). Each adapter fills the same
 // DycheckScene, so everything from dataset_from_dycheck onwards is shared.
 #pragma once
 
@@ -25,8 +25,7 @@ const char* data_layout_description(DataLayout layout);
 // matches none, or one that matches two (e.g. flow3d_preprocessed/ beside priors/tracks.npz).
 DataLayout detect_data_layout(const std::string& dir);
 
-// Reads a scene of the detected layout (layout_out: which one). MoSca throws DataError ("not
-// supported yet").
+// Reads a scene of the detected layout (layout_out: which one).
 DycheckScene read_data_scene(const std::string& dir, DataLayout* layout_out = nullptr);
 
 // Shape-of-Motion (vye16/shape-of-motion, flow3d/data/iphone_dataset.py::iPhoneDataset with
@@ -42,5 +41,20 @@ DycheckScene read_som(const std::string& dir, const DycheckReadOptions& options 
 // parse_tapir_track_info, tracks grouped by query frame (read_som gives them back in that order:
 // stable-sorted by query_t). priors/features/ is written when the scene has feature maps.
 void write_som(const std::string& dir, const DycheckScene& scene);
+
+// MoSca (JiahuiLei/MoSca lib_prior/prior_loading.py::Saved2D, data_utils/iphone_helpers.py;
+// docs/data.md): images/*.png, cameras/ (Nerfies JSON at the images' size or twice it),
+// sensor_depth/<stem>.npz `dep`, every *bootstapir*.npz (tracks [T, N, 2], visibility [T, N]),
+// epi/error/<stem>.npy > 0.001 as the dynamic mask (all dynamic without it), test_images/ +
+// test_cameras/ + test_covisible/ for evaluation, vos_deva/Annotations instance ids as one-hot
+// features. Integer pixel centres in the files, + 0.5 here (as read_som). Throws
+// DataError("<file>: <problem>").
+DycheckScene read_mosca(const std::string& dir);
+
+// Writes `scene` in the MoSca layout read by read_mosca: cameras at the images' size, dep in
+// stored .npz archives, the dynamic mask as an epipolar error of 1 / 0, one
+// uniform_dep=sensor_bootstapir_tap.npz with the tracks in the scene's order and queries
+// (t, y, x); priors/features/ when the scene has feature maps.
+void write_mosca(const std::string& dir, const DycheckScene& scene);
 
 }  // namespace trainer

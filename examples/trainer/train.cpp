@@ -17,7 +17,7 @@
 // the file or the cause, control characters escaped, before any training; OUT is created only
 // once the scene has passed stage 0. Without feature files the graph is geometric (one stderr
 // note). --export-dycheck DIR writes the procedural scene in that layout (plus queries.json and
-// queries_tracks3d.npy, the true tracks); with --export-layout som, in Shape-of-Motion's.
+// queries_tracks3d.npy, the true tracks); with --export-layout som / mosca, in Shape-of-Motion's / MoSca's.
 //
 // --export-case DIR stops after stage 0 (lifting, node selection, graph, initial rotations) and
 // writes stage 1's problem as .npy files and case.json into DIR instead of training
@@ -95,7 +95,7 @@ std::vector<cli::FlagSpec> flags() {
           {"export-dycheck", "", "write the generated scene in the Dycheck layout (docs/data.md) into this folder, "
                                  "with queries.json and their true tracks queries_tracks3d.npy, and exit"},
           {"export-layout", "", "with --export-dycheck: the layout written, dycheck (default) | som "
-                                "(Shape-of-Motion, docs/data.md)"},
+                                "(Shape-of-Motion) | mosca (MoSca; docs/data.md)"},
           {"no-pictures", "", "skip the PNG output", true},
           {"no-view", "", "skip OUT/view.html, the page of the run (docs/trainer.md)", true},
           {"quiet", "", "no progress lines", true},
@@ -348,13 +348,15 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const cha
 }
 
 // --export-dycheck: the generated scene in the Dycheck layout, with 3D query tracks.
-// som: the same scene in Shape-of-Motion's layout (layouts.hpp).
-int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, bool som, bool quiet) {
+// layout som / mosca: the same scene in Shape-of-Motion's or MoSca's layout (layouts.hpp).
+int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, const std::string& layout, bool quiet) {
   const trainer::Progress progress(stderr, quiet);
   const auto t0 = std::chrono::steady_clock::now();
   const trainer::Dataset d = trainer::make_dataset(cfg.dataset, smg::ParallelOptions{cfg.threads, 0});
-  if (som)
+  if (layout == "som")
     trainer::write_som(dir.string(), trainer::to_dycheck(d));
+  else if (layout == "mosca")
+    trainer::write_mosca(dir.string(), trainer::to_dycheck(d));
   else
     trainer::write_dycheck(dir.string(), trainer::to_dycheck(d));
   trainer::TrackQueries q;
@@ -374,7 +376,8 @@ int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, bool 
 int main(int argc, char** argv) {
   trainer::TrainerConfig cfg;
   fs::path out, export_dir, dycheck_dir;
-  bool pictures = true, quiet = false, export_som = false, view = true;
+  bool pictures = true, quiet = false, view = true;
+  std::string export_layout = "dycheck";
   const char* data_layout = nullptr;  // --data: the detected layout's description
   // --data: the scene, read and validated before anything is trained.
   trainer::Dataset data;
@@ -437,7 +440,7 @@ int main(int argc, char** argv) {
       throw cli::UsageError("--track-truth needs --track-queries");
     if (args.given("export-dycheck")) {
       dycheck_dir = args.get("export-dycheck");
-      export_som = args.given("export-layout") && args.get_choice("export-layout", {"dycheck", "som"}) == "som";
+      export_layout = args.given("export-layout") ? args.get_choice("export-layout", {"dycheck", "som", "mosca"}) : "dycheck";
       if (dycheck_dir.empty()) throw cli::UsageError("--export-dycheck needs a folder");
       cli::ensure_writable_dir(dycheck_dir);
     } else if (args.given("export-case")) {
@@ -494,7 +497,7 @@ int main(int argc, char** argv) {
     if (have_data)
       return run_data(cfg, std::move(data), data_layout, seconds_read, have_queries ? &queries : nullptr,
                       have_truth ? &truth : nullptr, out, quiet, view);
-    if (!dycheck_dir.empty()) return export_dycheck(cfg, dycheck_dir, export_som, quiet);
+    if (!dycheck_dir.empty()) return export_dycheck(cfg, dycheck_dir, export_layout, quiet);
     const trainer::Progress progress(stderr, quiet);
     if (!export_dir.empty()) {
       progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", seed " +

@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "npy.hpp"
-#include "support/errors.hpp"
 #include "support/files.hpp"
+#include "layout_fixture.hpp"
 #include "trainer/layouts.hpp"
 
 namespace fs = std::filesystem;
@@ -21,17 +21,8 @@ namespace {
 
 const fs::path kSomFixture = fs::path(SMG_TEST_DATA_DIR) / "som_small";
 
-// A fresh copy of the fixture (to break one file of).
-fs::path som_copy(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / ("smg_test_layout_som_" + name);
-  fs::remove_all(p);
-  fs::copy(kSomFixture, p, fs::copy_options::recursive);
-  return p;
-}
-
-std::string som_error(const fs::path& dir) {
-  return smg::test::error_message<trainer::DataError>([&] { (void)trainer::read_data_scene(dir.string()); }, "(read)");
-}
+fs::path som_copy(const std::string& name) { return trainer::test::layout_fixture_copy("som_small", name); }
+std::string som_error(const fs::path& dir) { return trainer::test::layout_read_error(dir); }
 
 }  // namespace
 
@@ -119,13 +110,8 @@ TEST_CASE("read_som: one broken file at a time names that file") {
     CHECK(som_error(d) == pre + "2d_tracks/1x/0_00002_0_00001.npy: row 2 column 1 is not finite");
   }
   SUBCASE("a missing track file, camera JSON, mask") {
-    for (const std::string& rel : std::vector<std::string>{pre + "2d_tracks/1x/0_00001_0_00002.npy", "camera/0_00002.json",
-                                                          pre + "track_anything/1x/0_00001.png"}) {
-      CAPTURE(rel);
-      const fs::path d = som_copy("missing");
-      fs::remove(d / rel);
-      CHECK(som_error(d).rfind(rel + ": ", 0) == 0);
-    }
+    trainer::test::check_missing_files("som_small", {pre + "2d_tracks/1x/0_00001_0_00002.npy", "camera/0_00002.json",
+                                                     pre + "track_anything/1x/0_00001.png"});
   }
   SUBCASE("COLMAP cameras only") {
     const fs::path d = som_copy("colmap");
@@ -182,7 +168,6 @@ TEST_CASE("detect_data_layout: by the folder's contents; ambiguous or unknown fo
                                      "and sensor_depth/ + cameras/ + *bootstapir*.npz (MoSca)");
   fs::remove_all(d / "flow3d_preprocessed");
   CHECK(trainer::detect_data_layout(d.string()) == trainer::DataLayout::mosca);
-  CHECK(som_error(d) == d.string() + ": MoSca layout (sensor_depth/, cameras/, *bootstapir*.npz) detected; reading it "
-                                     "is not supported yet");
+  CHECK(som_error(d) == "images: no PNG images");  // read as MoSca (tests/trainer/test_layout_mosca.cpp)
   fs::remove_all(d);
 }

@@ -1,0 +1,157 @@
+// Tests of examples/trainer/layout_mosca.cpp on files others wrote: the MoSca fixture
+// tests/data/mosca_small (made by make_fixture.py there with numpy's savez_compressed, following
+// MoSca's Saved2D) read with every conversion checked against the values the script wrote; one
+// broken file at a time, each an error naming that file.
+#include <doctest/doctest.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "npy.hpp"
+#include "support/files.hpp"
+#include "trainer/file_formats.hpp"
+#include "layout_fixture.hpp"
+#include "trainer/layouts.hpp"
+
+namespace fs = std::filesystem;
+
+using trainer::test::layout_read_error;
+
+// A fresh copy of tests/data/mosca_small, to break one file of.
+static fs::path mosca_copy(const std::string& name) { return trainer::test::layout_fixture_copy("mosca_small", name); }
+
+TEST_CASE("read_mosca: the numpy-written MoSca fixture, every conversion") {
+  const fs::path fixture = fs::path(SMG_TEST_DATA_DIR) / "mosca_small";
+  CHECK(trainer::detect_data_layout(fixture.string()) == trainer::DataLayout::mosca);
+  const trainer::DycheckScene s = trainer::read_mosca(fixture.string());
+  REQUIRE(s.train.size() == 3);
+  CHECK(s.train[2].name == "0_00002");
+  CHECK(s.train[2].time == 2);
+  CHECK(s.width == 16);
+  CHECK(s.height == 12);
+  // Cameras: the JSON is at twice the images' size (halved, MoSca's ratios); its integer-centred
+  // principal point (15.5, 11.5) / 2 + 0.5.
+  for (const trainer::Camera& c : s.train_cameras) {
+    CHECK((c.width == 16 && c.height == 12));
+    CHECK((c.fx == 20.0 && c.fy == 20.0));  // 40 / 2
+    CHECK((c.cx == 8.25 && c.cy == 6.25));
+  }
+  CHECK(s.train_rgb[0].pixels[0] == doctest::Approx(40.0 / 255.0));
+  REQUIRE(s.val.size() == 1);
+  CHECK(s.val[0].camera == 1);
+  CHECK(s.val[0].time == 1);
+  CHECK(s.val_cameras[0].center().x() == doctest::Approx(0.1));
+  CHECK(s.val_covisible[0][11] == 1);  // 7 > 0
+  CHECK(s.val_covisible[0][12] == 0);
+  // Depth: 1 m on the square, 2 m elsewhere; 0 and 5000 m (beyond the 1000 m clip) invalid.
+  const std::size_t HW = 16 * 12;
+  for (std::size_t t = 0; t < 3; ++t) {
+    CAPTURE(t);
+    CHECK(s.depth[t * HW + 0] == 0.0f);
+    CHECK(s.depth[t * HW + 1] == 0.0f);
+    CHECK(s.depth[t * HW + 2] == 2.0f);
+    CHECK(s.depth[t * HW + 5 * 16 + 4 + t] == 1.0f);
+    // Dynamic mask: epipolar error 0.01 > 0.001 on the square, 0.0005 elsewhere.
+    CHECK(s.has_mask[t] == 1);
+    CHECK(s.dynamic_mask[t * HW + 5 * 16 + 4 + t] == 1);
+    CHECK(s.dynamic_mask[t * HW + 5 * 16 + 3 + t] == 0);
+  }
+  // Tracks: dynamic_dep (2) then uniform_dep (18), by file name; x, y + 0.5.
+  const trainer::DycheckTracks& tr = s.tracks;
+  REQUIRE(tr.count == 20);
+  REQUIRE(tr.frames == 3);
+  auto at = [](std::size_t t, std::size_t k) { return t * 20 + k; };
+  CHECK(tr.query_t[0] == 1);  // no queries array: the first visible frame
+  CHECK(tr.query_t[1] == 0);
+  CHECK(tr.query_t[2] == 0);  // queries[:, 0]
+  CHECK(tr.visible[at(0, 0)] == 0);
+  CHECK(tr.uv[2 * at(0, 0)] == 5.75f);
+  CHECK(tr.uv[2 * at(0, 0) + 1] == 5.25f);
+  CHECK(tr.uv[2 * at(2, 2)] == 6.5f);   // the square's (4, 4), 2 px right at t = 2
+  CHECK(tr.uv[2 * at(2, 2) + 1] == 4.5f);
+  CHECK(tr.visible[at(2, 2)] == 1);
+  CHECK(tr.visible[at(2, 18)] == 0);     // (0, 0): invisible in the file at t = 2
+  CHECK(tr.visible[at(1, 18)] == 1);
+  CHECK(tr.visible[at(1, 19)] == 0);     // x = 16.2: outside the image, cleared
+  CHECK(tr.visible[at(2, 19)] == 1);
+  // vos_deva instance ids 5 and 257 -> channels 0 and 1, full-resolution grid.
+  REQUIRE(s.feature_dim == 2);
+  CHECK(s.feature_width == 16);
+  CHECK(s.feature_height == 12);
+  CHECK(s.has_features == std::vector<std::uint8_t>{1, 1, 1});
+  const std::size_t per = HW * 2;
+  CHECK(s.features[0 * per + (4 * 16 + 4) * 2 + 1] == 1.0f);
+  CHECK(s.features[0 * per + (4 * 16 + 4) * 2 + 0] == 0.0f);
+  CHECK(s.features[2 * per + (10 * 16 + 0) * 2 + 0] == 1.0f);
+  CHECK(s.features[2 * per + (0 * 16 + 0) * 2 + 0] == 0.0f);
+  CHECK(s.features[2 * per + (0 * 16 + 0) * 2 + 1] == 0.0f);
+}
+
+TEST_CASE("read_mosca: without epi/error every pixel is dynamic; without vos_deva no features") {
+  const fs::path d = mosca_copy("no_epi");
+  fs::remove_all(d / "epi");
+  fs::remove_all(d / "vos_deva");
+  const trainer::DycheckScene s = trainer::read_data_scene(d.string());
+  CHECK(s.dynamic_mask == std::vector<std::uint8_t>(3 * 16 * 12, 1));
+  CHECK(s.feature_dim == 0);
+  fs::remove_all(d);
+}
+
+TEST_CASE("read_mosca: one broken file at a time names that file") {
+  const std::string dep = "sensor_depth/0_00001.npz", uni = "uniform_dep=sensor_bootstapir_tap.npz";
+  SUBCASE("an npz without dep") {
+    const fs::path d = mosca_copy("no_dep");
+    std::vector<float> v(16 * 12, 1.0f);
+    smg::test::write_bytes(d / dep, trainer::files::npz_bytes({{"depth", npy::to_bytes(v.data(), {12, 16})}}));
+    CHECK(layout_read_error(d) == dep + ": no array `dep` (MoSca's sensor depth key)");
+  }
+  // A track file: tracks [frames, n, 2] (ones), visibility [vis_frames, vis_n] (false).
+  auto track_file = [](std::int64_t frames, std::int64_t n, std::int64_t vis_frames, std::int64_t vis_n) {
+    const std::vector<float> xy(static_cast<std::size_t>(frames * n * 2), 1.0f);
+    const std::unique_ptr<bool[]> vis(new bool[static_cast<std::size_t>(vis_frames * vis_n)]());
+    return trainer::files::npz_bytes({{"tracks", npy::to_bytes(xy.data(), {frames, n, 2})},
+                                      {"visibility", npy::to_bytes(vis.get(), {vis_frames, vis_n})}});
+  };
+  SUBCASE("tracks and visibility of different shapes") {
+    const fs::path d = mosca_copy("track_shape");
+    smg::test::write_bytes(d / uni, track_file(3, 18, 3, 17));
+    CHECK(layout_read_error(d) == uni + ": visibility has shape [3, 17], expected [3, 18] (that of tracks)");
+  }
+  SUBCASE("tracks over another number of frames") {
+    const fs::path d = mosca_copy("track_frames");
+    smg::test::write_bytes(d / uni, track_file(2, 18, 2, 18));
+    CHECK(layout_read_error(d) == uni + ": tracks has shape [2, 18, 2], expected [3, N, 2] (3 frames in images/)");
+  }
+  SUBCASE("a missing camera JSON, depth, test camera, covisible mask, epipolar error") {
+    trainer::test::check_missing_files("mosca_small", {"cameras/0_00002.json", "sensor_depth/0_00000.npz", "test_cameras/1_00001.json",
+                                                       "test_covisible/1_00001.png", "epi/error/0_00001.npy"});
+  }
+  SUBCASE("an image neither the camera's size nor half of it") {
+    const fs::path d = mosca_copy("image_size");
+    fs::copy_file(d / "vos_deva/Annotations/0_00000.png", d / "images/0_00001.png", fs::copy_options::overwrite_existing);
+    smg::test::write_bytes(d / "cameras/0_00001.json", "{\"orientation\": [[1,0,0],[0,1,0],[0,0,1]], \"position\": [0,0,0], "
+                                                       "\"focal_length\": 40, \"principal_point\": [15.5, 11.5], \"skew\": 0, "
+                                                       "\"pixel_aspect_ratio\": 1, \"radial_distortion\": [0, 0, 0], "
+                                                       "\"tangential_distortion\": [0, 0], \"image_size\": [20, 20]}");
+    CHECK(layout_read_error(d) == "images/0_00001.png: image is 16x12, but cameras/0_00001.json says 20x20 (nor half of it)");
+  }
+  SUBCASE("one file replaced: a JPEG image, dep or an epipolar error map of the wrong shape") {
+    const std::vector<float> v(16, 0.0f);
+    const struct {
+      std::string rel, bytes, message;
+    } cases[] = {
+        {"images/0_00003.jpg", "jpeg", "images/0_00003.jpg: JPEG images are not supported; convert images/ to PNG"},
+        {dep, trainer::files::npz_bytes({{"dep", npy::to_bytes(v.data(), {2, 8})}}), dep + ": dep has shape [2, 8], expected [12, 16]"},
+        {"epi/error/0_00000.npy", npy::to_bytes(v.data(), {16}), "epi/error/0_00000.npy: shape [16], expected [12, 16]"},
+    };
+    for (const auto& c : cases) {
+      CAPTURE(c.rel);
+      const fs::path d = mosca_copy("replaced");
+      smg::test::write_bytes(d / c.rel, c.bytes);
+      CHECK(layout_read_error(d) == c.message);
+    }
+  }
+}
