@@ -34,15 +34,6 @@ bool layouts_has_bootstapir(const fs::path& dir) {
 
 }  // namespace
 
-const char* data_layout_name(DataLayout layout) {
-  switch (layout) {
-    case DataLayout::som: return "som";
-    case DataLayout::mosca: return "mosca";
-    case DataLayout::dycheck: break;
-  }
-  return "dycheck";
-}
-
 const char* data_layout_description(DataLayout layout) {
   switch (layout) {
     case DataLayout::som:

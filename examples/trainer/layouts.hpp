@@ -12,8 +12,6 @@ namespace trainer {
 
 enum class DataLayout { dycheck, som, mosca };
 
-// "dycheck", "som", "mosca" (the --export-layout names).
-const char* data_layout_name(DataLayout layout);
 // One line for the user: which layout, which files carry depth and tracks.
 const char* data_layout_description(DataLayout layout);
 

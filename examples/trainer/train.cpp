@@ -10,7 +10,7 @@
 // A failure during training: one line on stderr and exit code 1.
 //
 // --data SCENE trains on a scene on disk (docs/data.md): the Dycheck iPhone layout plus priors,
-// or Shape-of-Motion's preprocessed layout, detected from the folder's contents (layouts.hpp);
+// or Shape-of-Motion's or MoSca's preprocessed layout, detected from the folder's contents (layouts.hpp);
 // OUT/renders/<frame>.png for every validation frame, OUT/metrics.json with Dycheck's mPSNR and
 // mSSIM, and with --track-queries Q.json OUT/tracks3d.npy [M][T][3]. A missing or inconsistent
 // file, or a scene too poor to train (too few lifted object tracks): exit 2 with one line naming
@@ -88,8 +88,8 @@ std::vector<cli::FlagSpec> flags() {
                                         "were observed"},
           {"export-case", "", "write the stage-1 problem (lifted node tracks, visibility, ground truth, rotations, "
                               "graph: .npy + case.json) into this folder and exit without training"},
-          {"data", "", "train on this scene folder (Dycheck iPhone layout plus priors/, or Shape-of-Motion's "
-                       "flow3d_preprocessed/ layout, detected; docs/data.md) instead of the generated scene"},
+          {"data", "", "train on this scene folder (Dycheck iPhone layout plus priors/, Shape-of-Motion's "
+                       "flow3d_preprocessed/ or MoSca's layout, detected; docs/data.md) instead of the generated scene"},
           {"track-queries", "", "with --data: query pixels (Q.json) whose 3D tracks go to OUT/tracks3d.npy"},
           {"track-truth", "", "with --track-queries: true tracks [M][T][3] (.npy) to report the 3D EPE against"},
           {"export-dycheck", "", "write the generated scene in the Dycheck layout (docs/data.md) into this folder, "
