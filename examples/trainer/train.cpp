@@ -48,59 +48,12 @@
 #include "trainer/image_io.hpp"
 #include "trainer/pictures.hpp"
 #include "trainer/pipeline.hpp"
+#include "trainer/settings.hpp"
 #include "trainer/view_html.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
-using trainer::flags::double_in;
-using trainer::flags::int_in;
-
-std::vector<cli::FlagSpec> flags() {
-  std::string variants;
-  for (const auto& v : trainer::variant_names()) variants += (variants.empty() ? "" : " | ") + v;
-  std::string layouts;
-  for (const auto& l : trainer::scene_layout_names()) layouts += (layouts.empty() ? "" : " | ") + l;
-  return {{"variant", "full", "ablation rung: " + variants},
-          {"scene", "standard", "generated scene: " + layouts + " (docs/trainer.md)"},
-          {"seed", "0", "scene, prior and training seed"},
-          {"out", "trainer_out", "output folder (created if missing): pictures and metrics.json"},
-          {"quick", "", "small, fast run for CI (16 frames at 96x72, few iterations)", true},
-          {"threads", "0", "worker threads, 0 = all hardware threads"},
-          {"frames", "", "number of frames T (default 32, quick 16)"},
-          {"width", "", "image width in pixels (default 160, quick 96)"},
-          {"height", "", "image height in pixels (default 120, quick 72)"},
-          {"tracks", "", "number of 2D tracks (default 1000, quick 500)"},
-          {"stage1-iters", "", "stage-1 (nodes) iterations (default 500)"},
-          {"stage2-iters", "", "stage-2 (Gaussians) iterations (default 1200, quick 300)"},
-          {"unit", "", "node selection unit in metres (default 0.04)"},
-          {"lambda-depth", "", "weight of the expected-depth L1 loss (default 0.1)"},
-          {"w-data", "", "weight of the node data term (default 1)"},
-          {"w-rigidity", "", "weight of the rigidity term, ARAP or C-ARAP (default 0.1)"},
-          {"w-lrm", "", "weight of the LRM term (default 0.1)"},
-          {"alpha", "", "confidence floor alpha of C-ARAP and LRM, E7 (default 0.6; 1 makes C-ARAP plain ARAP)"},
-          {"carap-reading", "", "how C-ARAP moves the nodes: symmetric (the gradient of E9, default) | directed "
-                                "(term i-j moves node i only, E20; docs/results.md)"},
-          {"confidence-from", "", "trajectories the confidences E6 are computed from: estimate (the current one, "
-                                  "default) | lifted (stage 1's start, once) | truth (procedural ground truth, an "
-                                  "oracle)"},
-          {"confidence-visibility", "", "on (default) | off: leave out E6's visibility factor, as if every sample "
-                                        "were observed"},
-          {"export-case", "", "write the stage-1 problem (lifted node tracks, visibility, ground truth, rotations, "
-                              "graph: .npy + case.json) into this folder and exit without training"},
-          {"data", "", "train on this scene folder (Dycheck iPhone layout plus priors/, Shape-of-Motion's "
-                       "flow3d_preprocessed/ or MoSca's layout, detected; docs/data.md) instead of the generated scene"},
-          {"track-queries", "", "with --data: query pixels (Q.json) whose 3D tracks go to OUT/tracks3d.npy"},
-          {"track-truth", "", "with --track-queries: true tracks [M][T][3] (.npy) to report the 3D EPE against"},
-          {"export-dycheck", "", "write the generated scene in the Dycheck layout (docs/data.md) into this folder, "
-                                 "with queries.json and their true tracks queries_tracks3d.npy, and exit"},
-          {"export-layout", "", "with --export-dycheck: the layout written, dycheck (default) | som "
-                                "(Shape-of-Motion) | mosca (MoSca; docs/data.md)"},
-          {"no-pictures", "", "skip the PNG output", true},
-          {"no-view", "", "skip OUT/view.html, the page of the run (docs/trainer.md)", true},
-          {"quiet", "", "no progress lines", true},
-          {"help", "", "print this help", true}};
-}
 
 std::string view_json(const trainer::ViewMetrics& v) {
   cli::JsonLine j;
@@ -111,11 +64,6 @@ std::string view_json(const trainer::ViewMetrics& v) {
       .add("psnr_box", v.psnr_box)
       .add("psnr_objects", v.psnr_objects);
   return j.str();
-}
-
-// Position of `name` in `names` (a value get_choice has already checked).
-std::size_t choice_index(const std::string& name, const std::vector<std::string>& names) {
-  return static_cast<std::size_t>(std::find(names.begin(), names.end(), name) - names.begin());
 }
 
 // The C-ARAP settings (docs/trainer.md, "C-ARAP options"), in both metrics.json layouts.
@@ -377,7 +325,7 @@ int main(int argc, char** argv) {
   trainer::TrainerConfig cfg;
   fs::path out, export_dir, dycheck_dir;
   bool pictures = true, quiet = false, view = true;
-  std::string export_layout = "dycheck";
+  std::string export_layout;
   const char* data_layout = nullptr;  // --data: the detected layout's description
   // --data: the scene, read and validated before anything is trained.
   trainer::Dataset data;
@@ -387,40 +335,14 @@ int main(int argc, char** argv) {
   std::vector<float> truth;
   bool have_queries = false, have_truth = false;
   try {
-    cli::Args args(flags());
+    cli::Args args(trainer::setting_flags());
     if (!trainer::flags::parse(args, argc, argv, "smg_trainer",
                                "Reconstructs the example dynamic scene with SMG and evaluates it on two held-out "
                                "views (docs/trainer.md)."))
       return 0;
     const bool quick = args.get_switch("quick");
     cfg = trainer::default_config(quick);
-    if (!trainer::parse_variant(args.get_choice("variant", trainer::variant_names()), &cfg.variant))
-      throw cli::UsageError("unknown variant");
-    trainer::SceneLayout layout = trainer::SceneLayout::standard;
-    trainer::parse_scene_layout(args.get_choice("scene", trainer::scene_layout_names()), &layout);
-    trainer::apply_scene_layout(layout, &cfg.dataset);
-    cfg.dataset.scene.seed = static_cast<std::uint64_t>(int_in(args, "seed", 0, 2147483647));
-    cfg.threads = int_in(args, "threads", 0, 1024);
-    if (args.given("frames")) cfg.dataset.scene.frames = int_in(args, "frames", 4, 1000);
-    if (args.given("width")) cfg.dataset.scene.width = int_in(args, "width", 32, 4096);
-    if (args.given("height")) cfg.dataset.scene.height = int_in(args, "height", 32, 4096);
-    if (args.given("tracks")) cfg.dataset.priors.tracks = int_in(args, "tracks", 10, 1000000);
-    if (args.given("stage1-iters")) cfg.stage1.iterations = int_in(args, "stage1-iters", 0, 1000000);
-    if (args.given("stage2-iters")) cfg.stage2.iterations = int_in(args, "stage2-iters", 0, 1000000);
-    if (args.given("unit")) cfg.nodes.unit = double_in(args, "unit", 0.005, 1.0);
-    if (args.given("w-data")) cfg.node_loss.data_weight = double_in(args, "w-data", 0.0, 1e6);
-    if (args.given("w-rigidity")) cfg.node_loss.rigidity_weight = double_in(args, "w-rigidity", 0.0, 1e6);
-    if (args.given("w-lrm")) cfg.node_loss.lrm_weight = double_in(args, "w-lrm", 0.0, 1e6);
-    if (args.given("alpha")) cfg.node_loss.alpha = double_in(args, "alpha", 0.0, 1.0);
-    if (args.given("carap-reading"))
-      cfg.node_loss.carap_reading = static_cast<trainer::CarapReading>(
-          choice_index(args.get_choice("carap-reading", trainer::carap_reading_names()), trainer::carap_reading_names()));
-    if (args.given("confidence-from"))
-      cfg.node_loss.confidence_source = static_cast<trainer::ConfidenceSource>(choice_index(
-          args.get_choice("confidence-from", trainer::confidence_source_names()), trainer::confidence_source_names()));
-    if (args.given("confidence-visibility"))
-      cfg.node_loss.confidence_visibility = args.get_choice("confidence-visibility", {"on", "off"}) == "on";
-    if (args.given("lambda-depth")) cfg.stage2.lambda_depth = double_in(args, "lambda-depth", 0.0, 100.0);
+    trainer::apply_settings(args, &cfg);
     pictures = !args.get_switch("no-pictures");
     view = !args.get_switch("no-view");
     quiet = args.get_switch("quiet");
@@ -428,8 +350,9 @@ int main(int argc, char** argv) {
     if (args.given("data")) {
       if (cfg.node_loss.confidence_source == trainer::ConfidenceSource::truth)
         throw cli::UsageError("--confidence-from truth needs the generated scene's ground truth, not --data");
-      for (const char* f : {"frames", "width", "height", "tracks", "seed", "scene", "export-case", "export-dycheck"})
-        if (args.given(f)) throw cli::UsageError(std::string("--") + f + " cannot be used with --data");
+      for (const trainer::Setting& f : trainer::settings())
+        if (f.generated_only && args.given(f.name))
+          throw cli::UsageError(std::string("--") + f.name + " cannot be used with --data");
     } else {
       for (const char* f : {"track-queries", "track-truth"})
         if (args.given(f)) throw cli::UsageError(std::string("--") + f + " needs --data");
@@ -440,7 +363,7 @@ int main(int argc, char** argv) {
       throw cli::UsageError("--track-truth needs --track-queries");
     if (args.given("export-dycheck")) {
       dycheck_dir = args.get("export-dycheck");
-      export_layout = args.given("export-layout") ? args.get_choice("export-layout", {"dycheck", "som", "mosca"}) : "dycheck";
+      export_layout = args.get_choice("export-layout", trainer::export_layout_names());
       if (dycheck_dir.empty()) throw cli::UsageError("--export-dycheck needs a folder");
       cli::ensure_writable_dir(dycheck_dir);
     } else if (args.given("export-case")) {
