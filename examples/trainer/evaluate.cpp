@@ -34,7 +34,6 @@ Image to_image(const std::vector<float>& rgb, int W, int H) {
 TrackMetrics track_metrics(const Scene& scene, const Nodes& n) {
   const int T = n.frames, N = n.count;
   const int box = scene.find_body("box"), ball = scene.find_body("ball");
-  const int upper = scene.find_body("upper_arm"), fore = scene.find_body("forearm");
   auto masked = [&](auto pick) {
     std::vector<std::uint8_t> mask(sz(T) * N, 0);
     for (int t = 0; t < T; ++t)
@@ -47,7 +46,9 @@ TrackMetrics track_metrics(const Scene& scene, const Nodes& n) {
   TrackMetrics m;
   m.all = tracking_error(n.positions_view(), n.truth_view(), scene.extent);
   m.box = masked([&](int, int i) { return body(i) == box; });
-  m.arm = masked([&](int, int i) { return body(i) == upper || body(i) == fore; });
+  m.arm = masked([&](int, int i) {  // every link of the arm (two, or the bending layout's six)
+    return body(i) >= 0 && scene.bodies[sz(body(i))].semantic_class == classes::arm;
+  });
   m.ball = masked([&](int, int i) { return body(i) == ball; });
   m.hidden = masked([&](int t, int i) { return hidden(t, i); });
   m.box_hidden = masked([&](int t, int i) { return body(i) == box && hidden(t, i); });

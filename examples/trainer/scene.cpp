@@ -256,13 +256,23 @@ Pose body_pose(const Scene& s, int b, double frame) {
     case Motion::fixed:
       return body.rest;
     case Motion::upper_arm:
-    case Motion::forearm: {
+    case Motion::forearm:
+    case Motion::arm_link: {
       const ArmMotion& a = s.arm;
       const double w = 2 * kPi * a.cycles * u + a.phase;
       const double yaw = a.yaw_mean + a.yaw_amplitude * std::sin(w);
       const double pitch = a.pitch_mean + a.pitch_amplitude * std::sin(w + kPi / 2);
       const Pose upper{rot_z(yaw) * rot_y(-pitch), a.shoulder};
       if (body.motion == Motion::upper_arm) return upper;
+      if (body.motion == Motion::arm_link) {
+        Pose p = upper;
+        for (int k = 1; k <= body.link; ++k) {
+          const double bend =
+              (a.elbow_mean + a.elbow_amplitude * std::sin(w - a.elbow_lag - a.wave * (k - 1))) / (a.links - 1);
+          p = {p.R * rot_z(bend), p.apply(Eigen::Vector3d(a.link_length, 0, 0))};
+        }
+        return p;
+      }
       const double elbow = a.elbow_mean + a.elbow_amplitude * std::sin(w - a.elbow_lag);
       return {upper.R * rot_z(elbow), upper.apply(Eigen::Vector3d(a.upper_length, 0, 0))};
     }
@@ -371,6 +381,7 @@ Scene make_scene(const SceneConfig& config) {
   // left, where the forearm leaves the training view; fewer cycles, so each stretch is long.
   // Both layouts draw the same random numbers in the same order.
   const bool occluder = config.layout == SceneLayout::occluder;
+  const bool bending = config.layout == SceneLayout::bending;  // otherwise standard's arrangement
   s.arm.shoulder = occluder ? Eigen::Vector3d(-0.42 + rng.uniform(-0.02, 0.02), 0.32, 0.30)
                             : Eigen::Vector3d(-0.55 + rng.uniform(-0.02, 0.02), -0.02, 0.25);
   s.arm.upper_length = 0.30;
@@ -382,8 +393,8 @@ Scene make_scene(const SceneConfig& config) {
   s.arm.yaw_amplitude = (occluder ? 1.3 : 0.42) * amp;
   s.arm.pitch_mean = 0.0;
   s.arm.pitch_amplitude = (occluder ? 0.06 : 0.08) * amp;
-  s.arm.elbow_mean = occluder ? 0.3 : 0.25;
-  s.arm.elbow_amplitude = 0.3 * amp;
+  s.arm.elbow_mean = occluder ? 0.3 : bending ? 0.6 : 0.25;
+  s.arm.elbow_amplitude = (bending ? 0.9 : 0.3) * amp;
   s.arm.elbow_lag = rng.uniform(0.5, 0.9);
   const double cycles = rng.uniform(1.3, 1.7);
   s.arm.cycles = occluder ? 1.0 + 0.625 * (cycles - 1.3) : cycles;  // occluder: [1, 1.25]
@@ -392,12 +403,28 @@ Scene make_scene(const SceneConfig& config) {
     Material m = draw_material(tex, Pattern::stripes, {0.90, 0.55, 0.25}, 0.05, {0.55, 0.20, 0.12}, 0.05,
                                0.06, 0.08, 0.15);
     m.stripe_axis = Eigen::Vector3d(1.0, 0.35, 0.0).normalized();
-    add("upper_arm", classes::arm, true, Motion::upper_arm,
-        {ShapeKind::capsule, {s.arm.upper_length, s.arm.upper_radius, 0}}, m, {});
-    m.seed = tex.next();
-    m.stripe_axis = Eigen::Vector3d(1.0, -0.35, 0.0).normalized();
-    add("forearm", classes::arm, true, Motion::forearm,
-        {ShapeKind::capsule, {s.arm.fore_length, s.arm.fore_radius, 0}}, m, {});
+    if (bending) {
+      // Six links of 10 cm (the two-link arm's 60 cm), radii tapering from the upper arm's 5 cm
+      // by 3 mm a link: each link's start cap lies inside the previous link's end cap, so no
+      // surface belongs to two links. The wave puts about a quarter turn of phase along the tube.
+      s.arm.links = 6;
+      s.arm.link_length = 0.1;
+      s.arm.wave = 0.45;
+      for (int k = 0; k < s.arm.links; ++k) {
+        if (k > 0) m.seed = tex.next();
+        m.stripe_axis = Eigen::Vector3d(1.0, k % 2 ? -0.35 : 0.35, 0.0).normalized();
+        add("arm_link" + std::to_string(k), classes::arm, true, Motion::arm_link,
+            {ShapeKind::capsule, {s.arm.link_length, s.arm.upper_radius - 0.003 * k, 0}}, m, {});
+        s.bodies.back().link = k;
+      }
+    } else {
+      add("upper_arm", classes::arm, true, Motion::upper_arm,
+          {ShapeKind::capsule, {s.arm.upper_length, s.arm.upper_radius, 0}}, m, {});
+      m.seed = tex.next();
+      m.stripe_axis = Eigen::Vector3d(1.0, -0.35, 0.0).normalized();
+      add("forearm", classes::arm, true, Motion::forearm,
+          {ShapeKind::capsule, {s.arm.fore_length, s.arm.fore_radius, 0}}, m, {});
+    }
   }
 
   // Static box on the floor behind the arm's sweep, pushed back until the arm's closest
@@ -418,8 +445,9 @@ Scene make_scene(const SceneConfig& config) {
     std::vector<Eigen::Vector3d> pts;
     std::vector<double> reach;  // radius + slack per point
     for (int k = 0; k <= gap_samples(s); ++k)
-      for (const char* link : {"upper_arm", "forearm"}) {
-        const Core c = core_of(s, s.find_body(link), gap_time(s, k));
+      for (const Body& link : s.bodies) {
+        if (link.semantic_class != classes::arm) continue;
+        const Core c = core_of(s, link.id, gap_time(s, k));
         const double slack = round_core_points(c, 0.005, &pts);
         reach.resize(pts.size(), c.radius + slack);
       }

@@ -21,6 +21,13 @@
 //
 // and make_priors' depth is noisier on moving bodies there (apply_scene_layout in dataset.hpp).
 //
+// A third layout, SceneLayout::bending, is the standard scene with a flexible arm: the two links
+// become a tube of ArmMotion::links short capsules (radii tapering from the shoulder), each joint
+// bending about its link's z axis by the same curl split evenly, plus a wave travelling along the
+// tube. Every link is class "arm", so motion inside that one semantic class is not rigid: the
+// distance between two points of the arm changes over time (the case C-ARAP's confidence is meant
+// for). Each link is still a rigid part, so true trajectories and visibility stay exact.
+//
 // World frame: z up, metres; the floor is z = 0 and the wall is the plane y = wall_y, facing -y.
 // Every body is a rigid part with its own local frame; a surface point given in that frame is at
 // pose(t) * p in the world at frame t (see world_point). Poses are analytic functions of the
@@ -87,7 +94,7 @@ struct Material {
 };
 
 // How a body moves (the parameters live in Scene::arm and Scene::ball).
-enum class Motion { fixed, upper_arm, forearm, ball };
+enum class Motion { fixed, upper_arm, forearm, ball, arm_link };
 
 // Semantic classes (Scene::class_names gives their names).
 namespace classes {
@@ -102,6 +109,7 @@ struct Body {
   bool foreground = false;    // an object (arm, box, ball), not floor or wall
   bool moves = false;
   Motion motion = Motion::fixed;
+  int link = 0;               // Motion::arm_link: position along the bending arm, 0 at the shoulder
   Pose rest;                  // the pose of a fixed body
   Shape shape;
   Material material;
@@ -125,6 +133,13 @@ struct ArmMotion {
   double pitch_mean = 0, pitch_amplitude = 0;
   double elbow_mean = 0, elbow_amplitude = 0;
   double cycles = 1.5, phase = 0, elbow_lag = 0;
+  // SceneLayout::bending: `links` capsules of link_length each; link k (k >= 1) starts at link
+  // k-1's end, turned about its z axis by
+  //   bend_k = (elbow_mean + elbow_amplitude sin(w - elbow_lag - wave (k - 1))) / (links - 1),
+  // so the whole tube curls by about the elbow's angle and the curl travels along it.
+  // Link 0 has the upper arm's pose. 0 links: the two-link arm above.
+  int links = 0;
+  double link_length = 0.1, wave = 0;
 };
 
 // Ball rolling on the floor around an ellipse: angle a = phase + direction 2 pi laps u,
@@ -151,10 +166,10 @@ struct OrbitPath {
 };
 
 // Arrangement of the bodies (see the top of this file).
-enum class SceneLayout { standard, occluder };
+enum class SceneLayout { standard, occluder, bending };
 
 inline const std::vector<std::string>& scene_layout_names() {
-  static const std::vector<std::string> names = {"standard", "occluder"};
+  static const std::vector<std::string> names = {"standard", "occluder", "bending"};
   return names;
 }
 inline std::string to_string(SceneLayout layout) { return scene_layout_names()[static_cast<std::size_t>(layout)]; }

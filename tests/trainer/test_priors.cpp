@@ -518,3 +518,21 @@ TEST_CASE("validate_prior_config rejects bad values with a clear message") {
   CHECK_THROWS_AS(make_priors(d.scene, d.train, c), std::invalid_argument);
   CHECK_THROWS_AS(make_priors(d.scene, {}, PriorConfig()), std::invalid_argument);
 }
+
+TEST_CASE("bending layout: tracks and lifted tracks cover the arm's links, with the standard priors") {
+  DatasetConfig cfg = test::small_config(2);
+  apply_scene_layout(SceneLayout::bending, &cfg);
+  CHECK(cfg.priors.moving_depth_factor == PriorConfig().moving_depth_factor);
+  const Dataset d = make_dataset(cfg);
+  std::vector<int> per_link(static_cast<std::size_t>(d.scene.arm.links), 0);
+  for (int b : d.priors.tracks.body) {
+    const Body& body = d.scene.bodies[static_cast<std::size_t>(b)];
+    if (body.semantic_class == classes::arm) ++per_link[static_cast<std::size_t>(body.link)];
+  }
+  // Every link is tracked: the graph then has edges inside the arm across its bending joints.
+  for (int n : per_link) CHECK(n >= 3);
+  const LiftedTracks l = lift_tracks(d.scene, d.priors, {3, true});
+  int arm = 0;
+  for (int b : l.body) arm += d.scene.bodies[static_cast<std::size_t>(b)].semantic_class == classes::arm;
+  CHECK(arm >= 20);
+}

@@ -132,8 +132,54 @@ TEST_CASE("analytic motion: rotations are proper, the elbow joint holds, the tab
   CHECK((s.poses[0][ball].t - s.poses[s.frames() / 3][ball].t).norm() > 0.05);
 }
 
+TEST_CASE("the bending layout: six arm links of one class, joints hold, the arm bends (not rigid)") {
+  for (std::uint64_t seed : {0u, 3u}) {
+    CAPTURE(seed);
+    const Scene s = make_scene(config(seed, 24, SceneLayout::bending));
+    std::vector<int> links;
+    for (const Body& b : s.bodies)
+      if (b.semantic_class == classes::arm) {
+        CHECK(b.motion == Motion::arm_link);
+        CHECK(b.moves);
+        CHECK(b.link == static_cast<int>(links.size()));
+        links.push_back(b.id);
+      }
+    REQUIRE(links.size() == 6);
+    CHECK(s.find_body("upper_arm") == -1);
+    double r_prev = 1e9;
+    for (int b : links) {  // tapering: each start cap inside the previous end cap
+      CHECK(s.bodies[b].shape.size.y() < r_prev);
+      r_prev = s.bodies[b].shape.size.y();
+    }
+    const auto tip = [&](double f) {
+      return body_pose(s, links.back(), f).apply(Vector3d(s.arm.link_length, 0, 0));
+    };
+    double dmin = 1e9, dmax = 0, curl_min = 1e9, curl_max = -1e9;
+    for (double f = 0; f <= s.frames() - 1; f += 0.25) {
+      for (std::size_t k = 1; k < links.size(); ++k) {
+        // Link k starts where link k-1 ends.
+        const Pose a = body_pose(s, links[k - 1], f), b = body_pose(s, links[k], f);
+        CHECK((a.apply(Vector3d(s.arm.link_length, 0, 0)) - b.t).norm() < 1e-12);
+      }
+      CHECK((body_pose(s, links[0], f).t - s.arm.shoulder).norm() == 0.0);
+      // Shoulder-to-tip distance and the angle between the first and last link's axes: a rigid
+      // arm would keep both constant.
+      const double d = (tip(f) - s.arm.shoulder).norm();
+      dmin = std::min(dmin, d);
+      dmax = std::max(dmax, d);
+      const Vector3d x0 = body_pose(s, links.front(), f).R.col(0), x5 = body_pose(s, links.back(), f).R.col(0);
+      const double curl = std::atan2(x0.cross(x5).norm(), x0.dot(x5));
+      curl_min = std::min(curl_min, curl);
+      curl_max = std::max(curl_max, curl);
+    }
+    CHECK(dmax - dmin > 0.05);            // the tube's chord changes by more than 5 cm
+    CHECK(curl_max - curl_min > 0.5);     // and its curl by more than 0.5 rad
+    CHECK(dmax <= 6 * s.arm.link_length + 1e-12);
+  }
+}
+
 TEST_CASE("the arm never touches the box or the floor, the ball never touches the box (independent SDF check)") {
-  for (const SceneLayout layout : {SceneLayout::standard, SceneLayout::occluder})
+  for (const SceneLayout layout : {SceneLayout::standard, SceneLayout::occluder, SceneLayout::bending})
   for (std::uint64_t seed : {0u, 1u, 5u}) {
     CAPTURE(to_string(layout));
     CAPTURE(seed);
@@ -146,8 +192,9 @@ TEST_CASE("the arm never touches the box or the floor, the ball never touches th
     // along the axis minus r; sampled every millimetre, 10 times a frame.
     for (double f = 0; f <= s.frames() - 1; f += 0.1) {
       const Pose box_pose = body_pose(s, box, f);
-      for (const char* link : {"upper_arm", "forearm"}) {
-        const int b = s.find_body(link);
+      for (const Body& link : s.bodies) {
+        if (link.semantic_class != classes::arm) continue;
+        const int b = link.id;
         const Pose p = body_pose(s, b, f);
         const double L = s.bodies[b].shape.size.x(), r = s.bodies[b].shape.size.y();
         const int n = static_cast<int>(L / 0.001);
