@@ -46,7 +46,11 @@ Dataset make_dataset(const DatasetConfig& config, smg::ParallelOptions parallel)
   }
 
   t0 = std::chrono::steady_clock::now();
-  d.priors = make_priors(d.scene, d.train, config.priors, parallel);
+  const PriorConfig priors =
+      config.tracker_failures == TrackerFailures::scene
+          ? config.priors
+          : tracker_failures(config.priors, static_cast<double>(static_cast<int>(config.tracker_failures) - 1));
+  d.priors = make_priors(d.scene, d.train, priors, parallel);
   d.seconds.priors = seconds_since(t0);
   d.seconds.total = seconds_since(start);
   return d;

@@ -22,9 +22,19 @@
 
 namespace trainer {
 
+// Which tracker failures the priors get (priors.hpp, tracker_failures): the layout's own
+// priors (apply_scene_layout; what every published figure used), none, the typical rates of
+// TAPIR-class trackers, or twice those.
+enum class TrackerFailures { scene, off, typical, twice };
+inline const std::vector<std::string>& tracker_failure_names() {
+  static const std::vector<std::string> names = {"scene", "off", "typical", "double"};
+  return names;
+}
+
 struct DatasetConfig {
   SceneConfig scene;
   PriorConfig priors;
+  TrackerFailures tracker_failures = TrackerFailures::scene;  // applied on top of `priors`
   int supersample = 2;           // k x k colour rays per pixel for every ground-truth image
   bool covisibility = true;      // compute test_covisible (needs surface points of test renders)
   int covisible_min_frames = 1;  // see covisibility_mask

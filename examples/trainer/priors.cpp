@@ -22,6 +22,8 @@ enum : std::uint64_t {
   kStreamDepth = 103,
   kStreamQueries = 104,
   kStreamTrack = 105,
+  kStreamFailure = 106,  // stick and switch draws: a stream of their own, so that with both
+                         // rates 0 every other draw (and every published run) is unchanged
 };
 
 std::uint64_t prior_seed(const Scene& s, const PriorConfig& c) { return mix64(s.config.seed) ^ mix64(c.seed + 0x5EEDull); }
@@ -214,12 +216,51 @@ void sample_queries(const Scene& scene, const std::vector<RenderOutput>& train, 
   }
 }
 
-void follow_tracks(const Scene& scene, const PriorConfig& cfg, std::uint64_t seed, Tracks* tr,
-                   smg::ParallelOptions parallel) {
+// The body and body-frame point seen at pixel position uv of the training camera at frame t
+// (the nearest surface along the ray); false if the ray hits nothing.
+bool surface_at(const Scene& scene, int t, const Eigen::Vector2d& uv, int* body, Eigen::Vector3d* local) {
+  Hit hit;
+  if (!intersect_scene(scene, t, scene.train_cameras[sz(t)].ray(uv), 0.0, std::numeric_limits<double>::infinity(),
+                       &hit) || hit.body < 0)
+    return false;
+  *body = hit.body;
+  *local = hit.local;
+  return true;
+}
+
+// Where an identity switch lands: the pixel nearest to uv (within radius_px, in the training
+// render of frame t) whose body is neither `body` nor empty, scanned ring by ring in a fixed
+// order; false if there is none.
+bool switch_target(const Scene& scene, const RenderOutput& r, int t, const Eigen::Vector2d& uv, int body,
+                   double radius_px, int* other, Eigen::Vector3d* local) {
+  const int W = r.width, H = r.height;
+  const int cx = static_cast<int>(std::floor(uv.x())), cy = static_cast<int>(std::floor(uv.y()));
+  const int R = static_cast<int>(std::ceil(radius_px));
+  double best = std::numeric_limits<double>::infinity();
+  Eigen::Vector2d pick = Eigen::Vector2d::Zero();
+  for (int y = cy - R; y <= cy + R; ++y)
+    for (int x = cx - R; x <= cx + R; ++x) {
+      if (x < 0 || y < 0 || x >= W || y >= H) continue;
+      const int b = r.body[sz(y) * W + x];
+      if (b < 0 || b == body) continue;
+      const Eigen::Vector2d c(x + 0.5, y + 0.5);
+      const double d = (c - uv).norm();
+      if (d <= radius_px && d < best) {
+        best = d;
+        pick = c;
+      }
+    }
+  return best < std::numeric_limits<double>::infinity() && surface_at(scene, t, pick, other, local);
+}
+
+void follow_tracks(const Scene& scene, const std::vector<RenderOutput>& train, const PriorConfig& cfg,
+                   std::uint64_t seed, Tracks* tr, smg::ParallelOptions parallel) {
   const int T = tr->frames, N = tr->count;
   tr->uv_true.assign(sz(T) * N * 2, 0.0);
   tr->depth_true.assign(sz(T) * N, 0.0);
   tr->visible_true.assign(sz(T) * N, 0);
+  tr->in_image_true.assign(sz(T) * N, 0);
+  tr->occluder_true.assign(sz(T) * N, -1);
   tr->positions_true.assign(sz(T) * N * 3, 0.0);
   tr->rotations_true.assign(sz(T) * N * 4, 0.0);
   tr->uv.assign(sz(T) * N * 2, -1.0);
@@ -242,6 +283,17 @@ void follow_tracks(const Scene& scene, const PriorConfig& cfg, std::uint64_t see
             lost_begin = start;
             lost_end = std::min(T, start + run);
           }
+          // Failures (their own stream): a sticking track follows the occluder's surface point
+          // seen where its own point went hidden, for as long as its point stays hidden in the
+          // image; a switching track follows a neighbouring body's point for frames
+          // [switch_begin, switch_end), from the pixel nearest its true position.
+          Random frng(derive_seed(seed, kStreamFailure, sz(i)));
+          const bool sticks = frng.uniform() < cfg.stick_rate;
+          const bool switches = frng.uniform() < cfg.switch_rate;
+          const int switch_begin = static_cast<int>(frng.below(T));
+          const int switch_end = std::min(T, switch_begin + 2 + static_cast<int>(frng.below(std::max(1, T / 4 - 1))));
+          int stuck_body = -1, switch_body = -1;
+          Eigen::Vector3d stuck_local = Eigen::Vector3d::Zero(), switch_local = Eigen::Vector3d::Zero();
           for (int t = 0; t < T; ++t) {
             const std::size_t s = sz(t) * N + i;
             const Pose& P = scene.poses[sz(t)][sz(b)];
@@ -258,6 +310,7 @@ void follow_tracks(const Scene& scene, const PriorConfig& cfg, std::uint64_t see
             const bool in_image = z > 1e-6 && cam.contains(uv);
             const bool vis = t == q || point_visible(scene, t, cam, w);
             tr->visible_true[s] = vis ? 1 : 0;
+            tr->in_image_true[s] = in_image ? 1 : 0;
             // Fixed number of draws per sample (see depth_maps).
             const double u_drop = rng.uniform(), u_out = rng.uniform(), u_occ = rng.uniform();
             const double jx = rng.normal(), jy = rng.normal();
@@ -282,6 +335,50 @@ void follow_tracks(const Scene& scene, const PriorConfig& cfg, std::uint64_t see
                        !(t >= lost_begin && t < lost_end)) {
               k = SampleKind::occluded_reported;
             }
+            // The body in front of a point hidden in the image (its own body when it turned away).
+            int occluder = -1;
+            Eigen::Vector3d occluder_local = Eigen::Vector3d::Zero();
+            if (!vis && in_image && surface_at(scene, t, uv, &occluder, &occluder_local) && occluder == b) occluder = -1;
+            tr->occluder_true[s] = occluder;
+            // Sticking: on the first frame the point is hidden behind another body, take that
+            // body's point at the true position; report it (projected, with jitter) while hidden.
+            if (sticks && t != q) {
+              if (!vis && in_image) {
+                if (stuck_body < 0 && occluder >= 0) {
+                  stuck_body = occluder;
+                  stuck_local = occluder_local;
+                }
+                if (stuck_body >= 0) {
+                  const Eigen::Vector3d o = world_point(scene, stuck_body, stuck_local, t);
+                  double zo;
+                  const Eigen::Vector2d uo = cam.project(o, &zo);
+                  if (zo > 1e-6 && cam.contains(uo) && point_visible(scene, t, cam, o)) {
+                    k = SampleKind::stuck;
+                    rep = uo + cfg.jitter_px * Eigen::Vector2d(jx, jy);
+                  } else if (k != SampleKind::occluded_reported) {
+                    k = SampleKind::hidden;
+                  }
+                }
+              } else {
+                stuck_body = -1;  // visible again (or out of the image): the next hiding starts afresh
+              }
+            }
+            // Switching: the first frame of the stretch picks the neighbouring body's point.
+            if (switches && t >= switch_begin && t < switch_end && t != q) {
+              if (t == switch_begin || switch_body < 0) {
+                if (!(in_image && switch_target(scene, train[sz(t)], t, uv, b, cfg.switch_radius_px, &switch_body,
+                                                &switch_local)))
+                  switch_body = -1;
+              }
+              if (switch_body >= 0) {
+                const Eigen::Vector3d o = world_point(scene, switch_body, switch_local, t);
+                double zo;
+                const Eigen::Vector2d uo = cam.project(o, &zo);
+                const bool seen = zo > 1e-6 && cam.contains(uo) && point_visible(scene, t, cam, o);
+                k = seen ? SampleKind::switched : SampleKind::hidden;
+                rep = uo + cfg.jitter_px * Eigen::Vector2d(jx, jy);
+              }
+            }
             tr->kind[s] = k;
             if (reported_visible(k)) {
               tr->visible[s] = 1;
@@ -304,11 +401,12 @@ smg::Status validate_prior_config(const PriorConfig& c) {
   if (!(c.jitter_px >= 0 && c.jitter_px <= 50)) return err("jitter_px must be in [0, 50]");
   if (!(c.outlier_min_px >= 0 && c.outlier_max_px >= c.outlier_min_px && c.outlier_max_px <= 1000))
     return err("outlier jump range must satisfy 0 <= min <= max <= 1000 px");
-  for (double r : {c.outlier_rate, c.drop_rate, c.lost_track_rate, c.occluded_reported_rate, c.depth_hole_rate,
-                   c.depth_edge_outlier_rate, c.depth_edge_hole_rate})
+  for (double r : {c.outlier_rate, c.drop_rate, c.lost_track_rate, c.occluded_reported_rate, c.stick_rate,
+                   c.switch_rate, c.depth_hole_rate, c.depth_edge_outlier_rate, c.depth_edge_hole_rate})
     if (!rate(r)) return err("every rate must be in [0, 1]");
   if (c.depth_edge_outlier_rate + c.depth_edge_hole_rate > 1)
     return err("depth_edge_outlier_rate + depth_edge_hole_rate must be <= 1");
+  if (!(c.switch_radius_px >= 1 && c.switch_radius_px <= 64)) return err("switch_radius_px must be in [1, 64]");
   if (!(c.depth_noise >= 0 && c.depth_noise <= 0.5)) return err("depth_noise must be in [0, 0.5]");
   if (!(c.moving_depth_factor >= 0 && c.moving_depth_factor <= 10))
     return err("moving_depth_factor must be in [0, 10]");
@@ -359,7 +457,7 @@ Priors make_priors(const Scene& scene, const std::vector<RenderOutput>& train, c
   p.tracks.frames = scene.frames();
   p.tracks.count = cfg.tracks;
   sample_queries(scene, train, cfg, seed, &p.tracks);
-  follow_tracks(scene, cfg, seed, &p.tracks, parallel);
+  follow_tracks(scene, train, cfg, seed, &p.tracks, parallel);
   return p;
 }
 
@@ -470,16 +568,36 @@ LiftedTracks lift_tracks(const Scene& scene, const Priors& p, const LiftOptions&
   return out;
 }
 
+PriorConfig tracker_failures(PriorConfig c, double scale) {
+  // Typical rates (docs/trainer.md, "Tracker failures", says where each comes from).
+  constexpr double kOccludedReported = 0.25, kStick = 0.3, kSwitch = 0.05, kMovingDepth = 2.0;
+  c.occluded_reported_rate = std::min(1.0, scale * kOccludedReported);
+  c.stick_rate = std::min(1.0, scale * kStick);
+  c.switch_rate = std::min(1.0, scale * kSwitch);
+  c.moving_depth_factor = 1.0 + scale * (kMovingDepth - 1.0);
+  return c;
+}
+
 TrackStats track_stats(const Tracks& tr) {
   TrackStats st;
   long long reported = 0, outliers = 0, truly_visible = 0, dropped = 0, occ = 0, clean = 0;
-  long long samples = 0;
+  long long samples = 0, occluded_in_image = 0, occluded_visible = 0;
+  const int N = tr.count;
+  std::vector<std::uint8_t> hides(sz(N), 0), stuck(sz(N), 0), switched(sz(N), 0);
   double sq = 0;
   for (std::size_t s = 0; s < tr.kind.size(); ++s) {
     // The query samples are given to the tracker, not tracked: leave them out.
     if (tr.query_frame[s % sz(tr.count)] == static_cast<int>(s / sz(tr.count))) continue;
     ++samples;
     const SampleKind k = tr.kind[s];
+    const std::size_t i = s % sz(N);
+    if (!tr.visible_true[s] && tr.in_image_true[s]) {
+      ++occluded_in_image;
+      if (tr.occluder_true[s] >= 0) hides[i] = 1;
+      occluded_visible += k == SampleKind::occluded_reported || k == SampleKind::stuck;
+    }
+    if (k == SampleKind::stuck) stuck[i] = 1;
+    if (k == SampleKind::switched) switched[i] = 1;
     if (reported_visible(k)) ++reported;
     if (tr.visible_true[s]) ++truly_visible;
     if (k == SampleKind::outlier) ++outliers;
@@ -497,6 +615,15 @@ TrackStats track_stats(const Tracks& tr) {
   st.dropped_fraction = frac(dropped, truly_visible);
   st.occluded_reported_fraction = frac(occ, reported);
   st.jitter_rms_px = clean > 0 ? std::sqrt(sq / (2.0 * clean)) : 0.0;  // per axis
+  st.occluded_visible_rate = frac(occluded_visible, occluded_in_image);
+  long long n_hides = 0, n_stuck = 0, n_switched = 0;
+  for (int i = 0; i < N; ++i) {
+    n_hides += hides[sz(i)];
+    n_stuck += stuck[sz(i)];
+    n_switched += switched[sz(i)];
+  }
+  st.stuck_track_rate = frac(n_stuck, n_hides);
+  st.switched_track_rate = frac(n_switched, N);
   return st;
 }
 

@@ -4,7 +4,8 @@
 // and thread-count-independent noise:
 //   * 2D tracks (a point tracker such as CoTracker/TAPIR): query points on visible surfaces,
 //     followed by their analytic motion, with pixel jitter, jump outliers, dropped samples, lost
-//     runs and occluded samples reported as visible;
+//     runs, occluded samples reported as visible, and (off by default: tracker_failures() below)
+//     tracks that stick to an occluder and identity switches to a neighbouring object;
 //   * depth maps (a depth estimator): multiplicative noise, a per-frame scale error, holes, and
 //     "flying pixels" and holes at depth edges;
 //   * semantic feature maps (DINO-like): per-body unit embeddings on a coarse patch grid,
@@ -37,6 +38,12 @@ struct PriorConfig {
   double drop_rate = 0.03;               // visible samples reported invisible
   double lost_track_rate = 0.15;         // tracks that lose a run of 2 .. T/3 frames
   double occluded_reported_rate = 0.1;   // occluded (in-image) samples reported visible
+  // Tracker failures of TAPIR-class trackers (docs/trainer.md, "Tracker failures"); 0 here so
+  // that the scenes' priors stay what every published figure used: tracker_failures() sets them.
+  double stick_rate = 0;                 // tracks that stay on the occluder while their point is
+                                         // hidden behind it (reported visible, on the occluder)
+  double switch_rate = 0;                // tracks that switch to a neighbouring body for a stretch
+  double switch_radius_px = 6;           // how far the other body may be from the true position
 
   // Depth.
   double depth_noise = 0.02;             // relative sigma per pixel
@@ -56,6 +63,12 @@ struct PriorConfig {
   int mask_dilate_px = 1;
 };
 
+// The tracker failures at `scale` times the typical rates of TAPIR-class trackers (scale 0: none;
+// 1: typical; 2: twice), set on top of `base`: occluded_reported_rate, stick_rate, switch_rate
+// and the depth prior's moving_depth_factor (1 + scale (typical − 1)). The typical rates and
+// where they come from: docs/trainer.md, "Tracker failures". Rates are clamped to 1.
+PriorConfig tracker_failures(PriorConfig base, double scale);
+
 // What a point tracker reports for one (frame, track) sample, and why.
 enum class SampleKind : std::uint8_t {
   hidden = 0,             // not visible and reported so (occluded or out of the image)
@@ -63,9 +76,12 @@ enum class SampleKind : std::uint8_t {
   outlier = 2,            // visible, reported at a wrong position (a jump)
   dropped = 3,            // visible but reported invisible (a drop or a lost run)
   occluded_reported = 4,  // occluded but reported visible at the true position + jitter
+  stuck = 5,              // occluded, reported visible on the occluder (the track stuck to it)
+  switched = 6,           // reported on a neighbouring body's point (an identity switch)
 };
 inline bool reported_visible(SampleKind k) {
-  return k == SampleKind::clean || k == SampleKind::outlier || k == SampleKind::occluded_reported;
+  return k == SampleKind::clean || k == SampleKind::outlier || k == SampleKind::occluded_reported ||
+         k == SampleKind::stuck || k == SampleKind::switched;
 }
 
 // 2D tracks of the training camera. Layouts: [T][N][...], row-major.
@@ -78,6 +94,9 @@ struct Tracks {
   std::vector<double> uv_true;        // [T][N][2] true projection (pixels, centre +0.5)
   std::vector<double> depth_true;     // [T][N] true depth z (<= 0 behind the camera)
   std::vector<std::uint8_t> visible_true;  // [T][N] in the image and unoccluded
+  std::vector<std::uint8_t> in_image_true;  // [T][N] in front of the camera and inside the image
+  std::vector<std::int32_t> occluder_true;  // [T][N] the other body in front of a point hidden in the
+                                           // image; -1 if visible, outside or hidden by its own body
   std::vector<double> positions_true;      // [T][N][3] world positions
   std::vector<double> rotations_true;      // [T][N][4] the body's rotation (w, x, y, z)
   // What the tracker reports.
@@ -165,6 +184,11 @@ struct TrackStats {
   double outlier_fraction = 0;   // outliers / reported-visible samples
   double dropped_fraction = 0;   // dropped / truly visible samples
   double occluded_reported_fraction = 0;  // occluded_reported / reported-visible samples
+  // The tracker-failure knobs as measured (rates per the knob's own denominator):
+  double occluded_visible_rate = 0;  // (occluded_reported + stuck) / occluded in-image samples
+  double stuck_track_rate = 0;       // tracks with a stuck sample / tracks whose point is hidden
+                                     // in the image behind another body at some tracked frame
+  double switched_track_rate = 0;    // tracks with a switched sample / tracks
   double jitter_rms_px = 0;      // per-axis RMS of (uv - uv_true) over clean samples
 };
 TrackStats track_stats(const Tracks& tracks);

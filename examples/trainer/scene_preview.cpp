@@ -8,6 +8,7 @@
 // darkened) and overview.png (all of them, a few frames each). Prints one JSON line with the
 // sizes, track statistics and timings. Bad flags or an unwritable DIR: one line on stderr, exit
 // code 2.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <exception>
@@ -30,10 +31,19 @@ namespace fs = std::filesystem;
 using trainer::flags::int_in;
 using trainer::Image;
 
+std::string names(const std::vector<std::string>& list) {
+  std::string s;
+  for (const auto& n : list) s += (s.empty() ? "" : " | ") + n;
+  return s;
+}
+
 std::vector<cli::FlagSpec> flags() {
   return {{"out", "scene_preview_out", "output folder (created if missing)"},
           {"seed", "0", "scene and prior seed"},
-          {"scene", "standard", "scene layout: standard | occluder"},
+          {"scene", "standard", "scene layout: " + names(trainer::scene_layout_names())},
+          {"tracker-failures", "scene",
+           "tracker failures of the priors: " + names(trainer::tracker_failure_names()) +
+               " (docs/trainer.md, \"Tracker failures\")"},
           {"frames", "32", "number of frames T"},
           {"width", "160", "image width (pixels)"},
           {"height", "120", "image height (pixels)"},
@@ -66,6 +76,12 @@ int main(int argc, char** argv) {
     trainer::SceneLayout layout = trainer::SceneLayout::standard;
     trainer::parse_scene_layout(args.get_choice("scene", trainer::scene_layout_names()), &layout);
     trainer::apply_scene_layout(layout, &cfg);
+    {
+      const auto& tf = trainer::tracker_failure_names();
+      const std::string name = args.get_choice("tracker-failures", tf);
+      cfg.tracker_failures =
+          static_cast<trainer::TrackerFailures>(std::find(tf.begin(), tf.end(), name) - tf.begin());
+    }
     cfg.scene.seed = static_cast<std::uint64_t>(int_in(args, "seed", 0, 2147483647));
     cfg.scene.frames = int_in(args, "frames", 2, 1000);
     cfg.scene.width = int_in(args, "width", 16, 4096);
@@ -188,6 +204,10 @@ int main(int argc, char** argv) {
         .add("dropped_fraction", st.dropped_fraction)
         .add("occluded_reported_fraction", st.occluded_reported_fraction)
         .add("jitter_rms_px", st.jitter_rms_px)
+        .add("tracker_failures", trainer::tracker_failure_names()[static_cast<std::size_t>(cfg.tracker_failures)])
+        .add("occluded_visible_rate", st.occluded_visible_rate)
+        .add("stuck_track_rate", st.stuck_track_rate)
+        .add("switched_track_rate", st.switched_track_rate)
         .add("extent", d.scene.extent)
         .add("min_gap", d.scene.min_gap)
         .add("covisible_fraction_test_right", covisible[0])

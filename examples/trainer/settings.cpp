@@ -56,6 +56,12 @@ const std::vector<Setting>& settings() {
       {"scene", K::choice, "generated scene of docs/trainer.md", 0, 0, &scene_layout_names,
        [](const C& c) { return static_cast<double>(c.dataset.scene.layout); },
        [](C& c, double v) { apply_scene_layout(static_cast<SceneLayout>(as_index(v)), &c.dataset); }, "", true},
+      {"tracker-failures", K::choice,
+       "tracker failures of the generated priors: the scene layout's own, none, TAPIR-class typical rates or "
+       "twice those (docs/trainer.md, \"Tracker failures\")",
+       0, 0, &tracker_failure_names,
+       [](const C& c) { return static_cast<double>(c.dataset.tracker_failures); },
+       [](C& c, double v) { c.dataset.tracker_failures = static_cast<TrackerFailures>(as_index(v)); }, "", true},
       {"seed", K::integer, "scene, prior and training seed", 0, 2147483647, nullptr,
        [](const C& c) { return static_cast<double>(c.dataset.scene.seed); },
        [](C& c, double v) { c.dataset.scene.seed = static_cast<std::uint64_t>(v); }, "", true},

@@ -444,7 +444,12 @@ int main(int argc, char** argv) {
     j.add("program", "smg_trainer")
         .add("variant", trainer::to_string(cfg.variant.variant))
         .add("scene", trainer::to_string(cfg.dataset.scene.layout))
-        .add("seed", static_cast<long long>(cfg.dataset.scene.seed))
+        .add("seed", static_cast<long long>(cfg.dataset.scene.seed));
+    // Only when set: the default run's metrics.json keeps its keys.
+    if (cfg.dataset.tracker_failures != trainer::TrackerFailures::scene)
+      j.add("tracker_failures",
+            trainer::tracker_failure_names()[static_cast<std::size_t>(cfg.dataset.tracker_failures)]);
+    j
         .add("T", r.data.scene.frames())
         .add("width", r.data.scene.width())
         .add("height", r.data.scene.height())

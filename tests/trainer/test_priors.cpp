@@ -536,3 +536,66 @@ TEST_CASE("bending layout: tracks and lifted tracks cover the arm's links, with 
   for (int b : l.body) arm += d.scene.bodies[static_cast<std::size_t>(b)].semantic_class == classes::arm;
   CHECK(arm >= 20);
 }
+
+TEST_CASE("tracker failures: each knob measured on the generated priors (off, typical, double)") {
+  DatasetConfig cfg = test::small_config(4);
+  cfg.scene.frames = 16;
+  cfg.scene.width = 96;
+  cfg.scene.height = 72;
+  cfg.priors.tracks = 1000;
+  const PriorConfig typical = tracker_failures(cfg.priors, 1.0), twice = tracker_failures(cfg.priors, 2.0);
+  CHECK(typical.stick_rate == 0.3);
+  CHECK(twice.switch_rate == 0.1);
+  CHECK(twice.moving_depth_factor == 3.0);
+  CHECK(tracker_failures(cfg.priors, 0.0).occluded_reported_rate == 0.0);
+  CHECK(tracker_failures(cfg.priors, 5.0).stick_rate == 1.0);  // clamped
+  std::vector<TrackStats> st;
+  std::vector<Dataset> ds;
+  for (const TrackerFailures tf : {TrackerFailures::off, TrackerFailures::typical, TrackerFailures::twice}) {
+    cfg.tracker_failures = tf;
+    ds.push_back(make_dataset(cfg));
+    st.push_back(track_stats(ds.back().priors.tracks));
+  }
+  // Off: no failure of these kinds at all.
+  CHECK(st[0].occluded_visible_rate == 0.0);
+  CHECK(st[0].stuck_track_rate == 0.0);
+  CHECK(st[0].switched_track_rate == 0.0);
+  // Typical and double: the measured rates follow the knobs (binomial noise over a few hundred
+  // tracks; switches need another body within switch_radius_px, so they fall a little short).
+  MESSAGE("typical: occluded visible " << st[1].occluded_visible_rate << ", stuck " << st[1].stuck_track_rate
+                                       << ", switched " << st[1].switched_track_rate);
+  MESSAGE("double: occluded visible " << st[2].occluded_visible_rate << ", stuck " << st[2].stuck_track_rate
+                                      << ", switched " << st[2].switched_track_rate);
+  CHECK(st[1].occluded_visible_rate > 0.2);
+  CHECK(st[1].occluded_visible_rate < 0.4);
+  CHECK(st[1].stuck_track_rate == doctest::Approx(0.3).epsilon(0.4));
+  CHECK(st[2].stuck_track_rate == doctest::Approx(0.6).epsilon(0.25));
+  CHECK(st[1].switched_track_rate > 0.02);
+  CHECK(st[1].switched_track_rate < 0.08);
+  CHECK(st[2].switched_track_rate > st[1].switched_track_rate);
+  CHECK(st[2].occluded_visible_rate > 1.6 * st[1].occluded_visible_rate);
+  // Failures change what is reported, never the truth; and a stuck or switched sample lies on a
+  // body other than the track's own (up to the jitter at a silhouette).
+  const Tracks& tr = ds[2].priors.tracks;
+  CHECK(tr.positions_true == ds[0].priors.tracks.positions_true);
+  CHECK(tr.visible_true == ds[0].priors.tracks.visible_true);
+  // Where: without jitter a failed sample is the exact projection of the other body's visible
+  // point, so the pixel holding it shows that body unless a silhouette crosses the pixel.
+  cfg.priors.jitter_px = 0;
+  const Dataset exact = make_dataset(cfg);
+  const Tracks& tx = exact.priors.tracks;
+  long long failed = 0, elsewhere = 0;
+  const int W = exact.scene.width(), H = exact.scene.height();
+  for (std::size_t s = 0; s < tx.kind.size(); ++s) {
+    if (tx.kind[s] != SampleKind::stuck && tx.kind[s] != SampleKind::switched) continue;
+    CHECK(tx.visible[s] == 1);
+    const int t = static_cast<int>(s / static_cast<std::size_t>(tx.count));
+    const int x = static_cast<int>(std::floor(tx.uv[s * 2])), y = static_cast<int>(std::floor(tx.uv[s * 2 + 1]));
+    ++failed;
+    REQUIRE((x >= 0 && y >= 0 && x < W && y < H));
+    const int b = exact.train[static_cast<std::size_t>(t)].body[static_cast<std::size_t>(y) * W + x];
+    elsewhere += b != tx.body[s % static_cast<std::size_t>(tx.count)];
+  }
+  REQUIRE(failed > 50);
+  CHECK(static_cast<double>(elsewhere) / failed > 0.9);
+}
