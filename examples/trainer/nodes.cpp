@@ -272,6 +272,41 @@ ConfidenceDiagnostics confidence_diagnostics(const Nodes& n, const std::vector<d
     }
   }
   d.low_fraction = static_cast<double>(low) / (static_cast<double>(T) * N);
+  if (n.failed_report.size() == n.visible.size()) {
+    double f = 0, g = 0;
+    long long nf = 0, ng = 0;
+    for (std::size_t s = 0; s < n.visible.size(); ++s) {
+      if (!n.visible[s]) continue;
+      if (n.failed_report[s]) {
+        f += c[s];
+        ++nf;
+      } else {
+        g += c[s];
+        ++ng;
+      }
+    }
+    d.failed_observed = nf ? f / static_cast<double>(nf) : 0;
+    d.clean_observed = ng ? g / static_cast<double>(ng) : 0;
+    d.count_failed_observed = nf;
+  }
+  if (n.semantic_class.size() == sz(N) && n.body.size() == sz(N)) {
+    double bend = 0, rigid = 0;
+    long long nb = 0, nr = 0;
+    for (int i = 0; i < N; ++i)
+      for (int k = 0; k < K; ++k) {
+        const int j = n.graph.indices[sz(i) * K + k];
+        if (j < 0) break;
+        const bool same_body = n.body[sz(i)] == n.body[sz(j)];
+        if (!same_body && n.semantic_class[sz(i)] != n.semantic_class[sz(j)]) continue;
+        double sum = 0;
+        for (int t = 0; t < T; ++t) sum += c[sz(t) * N + j];
+        (same_body ? rigid : bend) += sum;
+        (same_body ? nr : nb) += T;
+      }
+    d.edge_bending = nb ? bend / static_cast<double>(nb) : 0;
+    d.edge_rigid = nr ? rigid / static_cast<double>(nr) : 0;
+    d.count_edge_bending = nb / std::max(1, T);
+  }
   d.symmetric_low = cnt[0] ? sym[0] / cnt[0] : 0;
   d.symmetric_high = cnt[1] ? sym[1] / cnt[1] : 0;
   d.directed_low = cnt[0] ? dir[0] / cnt[0] : 0;

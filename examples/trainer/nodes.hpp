@@ -65,6 +65,11 @@ struct Nodes {
   std::vector<double> observed;       // [T][N][3] lifted observations (valid where visible)
   std::vector<double> truth;          // [T][N][3] ground truth (evaluation only)
   std::vector<int> body;              // [N] ground-truth body (diagnostics only)
+  // Procedural scenes (diagnostics only; empty from disk): the node's semantic class, and per
+  // sample whether the tracker's report there is a failure (priors.hpp: outlier, occluded
+  // reported visible, stuck, switched).
+  std::vector<int> semantic_class;           // [N]
+  std::vector<std::uint8_t> failed_report;   // [T][N]
   std::vector<double> descriptors;    // [N][C]
   NodeGraph graph;                    // the variant's graph
   smg::NodeSelectionStats<double> selection;
@@ -186,6 +191,14 @@ struct ConfidenceDiagnostics {
   double mean_observed = 0, low_observed = 0, mean_observed_truth = 0, low_observed_truth = 0;
   double low_fraction = 0;  // samples with c < 0.3 (all samples)
   double symmetric_low = 0, symmetric_high = 0, directed_low = 0, directed_high = 0;
+  // With Nodes::failed_report: mean c over observed samples whose report is a tracker failure,
+  // and over the others. With Nodes::semantic_class: mean c_j^t (the confidence that weights edge
+  // i-j in E7) over edges joining two different bodies of one class (bending edges: the
+  // bending scene's arm links, the two-link arm's elbow) and over edges inside one body (rigid).
+  double failed_observed = 0, clean_observed = 0;
+  long long count_failed_observed = 0;
+  double edge_bending = 0, edge_rigid = 0;
+  long long count_edge_bending = 0;
 };
 ConfidenceDiagnostics confidence_diagnostics(const Nodes& nodes, const std::vector<double>& positions,
                                              const smg::ConfidenceOptions& options, double alpha,

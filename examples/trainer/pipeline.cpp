@@ -9,6 +9,7 @@
 
 #include "cli_args.hpp"  // cli::escape_line: the scene path is echoed, control characters escaped
 #include "trainer/frames.hpp"
+#include "trainer/util.hpp"
 
 namespace trainer {
 
@@ -121,6 +122,22 @@ TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Pro
     }
   }
   init_rotations(r.nodes);
+  if (r.data.has_truth) {
+    // Diagnostics of the confidences (confidence_diagnostics): classes and failed reports.
+    const Tracks& tr = r.data.priors.tracks;
+    const int T = r.nodes.frames, N = r.nodes.count;
+    r.nodes.semantic_class.resize(sz(N));
+    r.nodes.failed_report.assign(sz(T) * N, 0);
+    for (int i = 0; i < N; ++i) {
+      r.nodes.semantic_class[sz(i)] = scene.bodies[sz(r.nodes.body[sz(i)])].semantic_class;
+      const int track = r.lifted.track[sz(r.nodes.track[sz(i)])];
+      for (int t = 0; t < T; ++t) {
+        const SampleKind k = tr.kind[sz(t) * tr.count + track];
+        r.nodes.failed_report[sz(t) * N + i] = k == SampleKind::outlier || k == SampleKind::occluded_reported ||
+                                               k == SampleKind::stuck || k == SampleKind::switched;
+      }
+    }
+  }
   r.seconds_stage0 = seconds_since(t0);
   {
     const smg::GraphStats& gs = r.nodes.graph.stats;

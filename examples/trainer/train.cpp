@@ -89,7 +89,13 @@ void add_confidence(cli::JsonLine& j, const std::string& suffix, const trainer::
       .add("conf_weight_symmetric_low" + suffix, d.symmetric_low)
       .add("conf_weight_symmetric_high" + suffix, d.symmetric_high)
       .add("conf_weight_directed_low" + suffix, d.directed_low)
-      .add("conf_weight_directed_high" + suffix, d.directed_high);
+      .add("conf_weight_directed_high" + suffix, d.directed_high)
+      .add("conf_failed_observed" + suffix, d.failed_observed)
+      .add("conf_clean_observed" + suffix, d.clean_observed)
+      .add("conf_failed_observed_count" + suffix, d.count_failed_observed)
+      .add("conf_edge_bending" + suffix, d.edge_bending)
+      .add("conf_edge_rigid" + suffix, d.edge_rigid)
+      .add("conf_edge_bending_count" + suffix, d.count_edge_bending);
 }
 
 void add_tracks(cli::JsonLine& j, const std::string& suffix, const trainer::TrackMetrics& m) {

@@ -256,4 +256,32 @@ TEST_CASE("confidence diagnostics: rank correlations, bins and the weight ratios
   CHECK(e.low_observed == e.low_observed_truth);
   CHECK(e.mean_observed > 0.0);
   CHECK(e.mean_observed < 1.0);
+  // Failed reports and bending edges: absent inputs give zeros; with every observed sample
+  // marked failed the failed mean is the observed mean; with one class, every edge between two
+  // bodies counts as bending and the two edge means, weighted by their counts, give the mean of
+  // c_j over all edges.
+  CHECK(d.count_failed_observed == 0);
+  CHECK(d.count_edge_bending == 0);
+  trainer::Nodes marked = nodes;
+  marked.failed_report.assign(marked.visible.size(), 1);
+  marked.semantic_class.assign(static_cast<std::size_t>(marked.count), 0);
+  const trainer::ConfidenceDiagnostics m =
+      trainer::confidence_diagnostics(marked, marked.positions, c.node_loss.confidence, 0.6, par);
+  CHECK(m.count_failed_observed == observed);
+  CHECK(m.failed_observed == doctest::Approx(d.mean_observed).epsilon(1e-12));
+  CHECK(m.clean_observed == 0.0);
+  long long edges = 0, between = 0;
+  const int K = marked.graph.k;
+  for (int i = 0; i < marked.count; ++i)
+    for (int k = 0; k < K; ++k) {
+      const int j = marked.graph.indices[static_cast<std::size_t>(i) * K + k];
+      if (j < 0) break;
+      ++edges;
+      between += marked.body[static_cast<std::size_t>(i)] != marked.body[static_cast<std::size_t>(j)];
+    }
+  REQUIRE(between > 0);
+  CHECK(m.count_edge_bending == between);
+  CHECK(m.edge_bending > 0.0);
+  CHECK(m.edge_rigid > 0.0);
+  CHECK(m.edge_bending <= 1.0);
 }
