@@ -14,7 +14,6 @@ Usage: scripts/carap_study.py [--seeds "0 1 2 3 4"] [--jobs 2] [--out build/cara
 Without --trainer it first builds the trainer into build/release (scripts/build_trainer.sh, as
 scripts/ladder.sh does); with --trainer it runs that binary as it is.
 A run whose metrics.json exists is not repeated (delete OUT to start over)."""
-import argparse
 import concurrent.futures
 import datetime
 import json
@@ -24,7 +23,7 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from ladder_report import fmt, mean_ci, write_section  # noqa: E402
+from ladder_report import fmt, mean_ci, study_arguments, write_section  # noqa: E402
 
 # (name, variant, extra flags, what it tests)
 CONFIGS = [
@@ -79,19 +78,7 @@ def run(trainer, out, scene, seed, name, variant, extra):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--seeds", default="0 1 2 3 4")
-    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--out", default="build/carap_study")
-    ap.add_argument("--doc", default="docs/results.md")
-    ap.add_argument("--trainer", default=None,
-                    help="the smg_trainer to run (default: build it into build/release first)")
-    a = ap.parse_args()
-    if a.trainer is None:
-        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-        subprocess.run([os.path.join(root, "scripts", "build_trainer.sh")], check=True)
-        a.trainer = os.path.join(root, os.environ.get("SMG_BUILD_DIR") or "build/release",
-                                 "examples", "smg_trainer")
+    a = study_arguments("build/carap_study")
     seeds = a.seeds.split()
     os.makedirs(a.out, exist_ok=True)
     jobs = [(s, sd, c) for s in SCENES for sd in seeds for c in CONFIGS]

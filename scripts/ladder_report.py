@@ -62,6 +62,27 @@ def fmt(mu, half, nd):
     return f"{mu:.{nd}f}" if math.isnan(half) else f"{mu:.{nd}f} ± {half:.{nd}f}"
 
 
+def study_arguments(default_out):
+    """The command line the stage-1 studies share (scripts/carap_study.py, scripts/failure_study.py):
+    parses it and returns it, with --trainer resolved: without it the trainer is first built into
+    build/release (scripts/build_trainer.sh, as scripts/ladder.sh does) and that binary is used."""
+    import subprocess
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", default="0 1 2 3 4")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--out", default=default_out)
+    ap.add_argument("--doc", default="docs/results.md")
+    ap.add_argument("--trainer", default=None,
+                    help="the smg_trainer to run (default: build it into build/release first)")
+    a = ap.parse_args()
+    if a.trainer is None:
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        subprocess.run([os.path.join(root, "scripts", "build_trainer.sh")], check=True)
+        a.trainer = os.path.join(root, os.environ.get("SMG_BUILD_DIR") or "build/release",
+                                 "examples", "smg_trainer")
+    return a
+
+
 def write_section(doc, section, text):
     """Replaces the lines from <!-- ladder:SECTION --> to <!-- /ladder:SECTION --> of `doc` by
     `text` (which carries both markers), or appends `text` when the markers are missing."""
