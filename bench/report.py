@@ -31,6 +31,9 @@ import re
 import sys
 
 ORDER = ["core", "graph", "energy", "skin", "splat", "executor", "torch"]
+# bench/notes/<name>.md printed after the modules' sections, with no result file of their own
+# (derivations rather than measurements).
+NOTES_ONLY = ["roofline"]
 HERE = os.path.dirname(os.path.abspath(__file__))
 LOAD_COUNTERS = ("others_cpus", "loadavg_1m")
 
@@ -171,6 +174,8 @@ def header(res, module, raw):
         load.append(f"load average before {res.load['loadavg_before']}")
     if "loadavg_after" in res.load:
         load.append(f"after {res.load['loadavg_after']}")
+    elif "loadavg_after" in c:
+        load.append(f"after {c['loadavg_after']}")
     others = [b.get("others_cpus") for b in res.rows if isinstance(b.get("others_cpus"), (int, float))]
     if others:
         load.append(f"other processes kept {fmt(min(others))}–{fmt(max(others))} of the "
@@ -358,6 +363,15 @@ def summary_torch(res):
         elif "pytorch_ms" in b:
             s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}; "
                      f"no PyTorch reference at this size.")
+        if isinstance(b.get("compile_speedup"), (int, float)) and math.isfinite(b["compile_speedup"]):
+            s[-1] = s[-1][:-1] + (f"; torch.compile {fmt(b['compile_ms'])} ms after "
+                                  f"{fmt(b['compile_time_s'])} s of compiling — {fmt(b['compile_speedup'])}× faster.")
+        # why a peer has no number (torch.compile missing, a size skipped): the scripts' notes
+        label = {"smg_note": "smg_torch", "pytorch_note": "PyTorch autograd", "compile_note": "torch.compile"}
+        notes = [v if v.startswith(label.get(k, k)) else f"{label.get(k, k)} {v}"
+                 for k, v in b.items() if k.endswith("_note") and isinstance(v, str)]
+        if notes:
+            s.append(f"{b['name']}: " + "; ".join(notes) + ".")
     return s
 
 
@@ -826,6 +840,9 @@ def main():
     for m in modules:
         files = sorted(by_module[m], key=lambda n: (n != m, n))
         parts.append(section(m, files, d))
+    for m in NOTES_ONLY:  # sections with no result file of their own
+        with open(os.path.join(HERE, "notes", m + ".md")) as f:
+            parts.append(f.read().rstrip() + "\n")
     sys.stdout.write("\n".join(parts))
     return 0
 

@@ -302,13 +302,21 @@ def tensor_bytes(*tensors):
     return sum(t.numel() * t.element_size() for t in tensors)
 
 
+try:
+    import ctypes
+    _libc = ctypes.CDLL("libc.so.6")
+    _libc.malloc_trim  # glibc only
+except (OSError, AttributeError):
+    _libc = None
+
+
 class RssPeak:
     """Peak resident-set growth of this process over some calls (CPU). reset() sets the kernel's
     peak (VmHWM) to the current resident set by writing 5 to /proc/self/clear_refs (Linux >= 4.0)
     and notes the resident set; peak() is VmHWM minus that. It counts pages touched: tensors,
-    autograd's saved tensors, smg's scratch, allocator slack; it misses memory reused from the
-    allocator's free lists (glibc keeps freed chunks under its mmap threshold, at most 32 MiB
-    each, for reuse), so it is not the sum of the allocations. Where clear_refs cannot be written
+    autograd's saved tensors, smg's scratch, allocator slack; the allocator's free memory is
+    returned to the system (malloc_trim) before, but memory freed and reused within the calls is
+    counted once, so it is the peak of live memory in pages, not the sum of the allocations. Where clear_refs cannot be written
     (ok = False) it is the growth of the process's lifetime peak, which hides a call smaller than
     an earlier one."""
 
@@ -328,6 +336,11 @@ class RssPeak:
 
     def reset(self):
         gc.collect()
+        # Return the allocator's free memory to the system first: glibc raises its mmap threshold
+        # (up to 32 MiB) after large frees, so an earlier peer's freed tensors would otherwise stay
+        # resident and hide this one's (smg's gradients showed 0 MiB at 20k x 100 without it).
+        if _libc is not None:
+            _libc.malloc_trim(0)
         if self.ok:
             with open("/proc/self/clear_refs", "w") as f:
                 f.write("5")
