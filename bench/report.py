@@ -361,8 +361,8 @@ def summary_torch(res):
             s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}, "
                      f"PyTorch autograd {fmt(b.get('pytorch_ms'))} ms — {fmt(b['speedup'])}× faster.")
         elif "pytorch_ms" in b:
-            s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}; "
-                     f"no PyTorch reference at this size.")
+            s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}"
+                     + ("." if "pytorch_note" in b else "; no PyTorch reference at this size."))
         if isinstance(b.get("compile_speedup"), (int, float)) and math.isfinite(b["compile_speedup"]):
             s[-1] = s[-1][:-1] + (f"; torch.compile {fmt(b['compile_ms'])} ms after "
                                   f"{fmt(b['compile_time_s'])} s of compiling — {fmt(b['compile_speedup'])}× faster.")

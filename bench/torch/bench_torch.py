@@ -496,9 +496,9 @@ def cpu_scaling(args):
     rows = scaling_table(SCALING_QUICK if args.quick else SCALING_SIZES, 16, peers, args.skip_seconds,
                          limit_bytes)
     load1 = " ".join(f"{v:.2f}" for v in os.getloadavg())
-    memory = ("resident-set growth over the calls (VmHWM after, reset through /proc/self/clear_refs, "
-              "minus VmRSS before; pages touched, not the sum of allocations: memory reused from "
-              "glibc's free lists is not counted)" if rss.ok else
+    memory = ("resident-set growth over the calls (malloc_trim, then VmHWM reset through "
+              "/proc/self/clear_refs; VmHWM after minus VmRSS before): the peak of live memory in "
+              "pages, inputs excluded; memory freed and reused within a call counts once" if rss.ok else
               "growth of the process's peak resident set (ru_maxrss-like; a call smaller than an "
               "earlier one shows 0)")
     print_scaling(rows, f"Scaling, CPU, {torch.get_num_threads()} threads, best of {args.repeat} "
@@ -508,7 +508,7 @@ def cpu_scaling(args):
     if args.json:
         write_json(args.json, scaling_json(rows, 2), args.repeat,
                    {"smg_params": f"--scaling --repeat {args.repeat}, 2 threads",
-                    "loadavg_after": load1, "peak_memory": memory,
+                    "loadavg_start": load0, "loadavg_after": load1, "peak_memory": memory,
                     "skip_limits": f"{args.skip_seconds:.0f} s per call, {limit_bytes / 2**30:.1f} GiB"})
 
 
@@ -607,7 +607,7 @@ def main():
             bench.append({"name": "overhead: " + name, "run_type": "iteration", "iterations": max(args.repeat, 5),
                           "real_time": a * 1e3, "cpu_time": a * 1e3, "time_unit": "ms",
                           "library_ms": b * 1e3, "overhead_percent": 100 * (a / b - 1)})
-        write_json(args.json, bench, args.repeat, {"loadavg_after": load1})
+        write_json(args.json, bench, args.repeat, {"loadavg_start": load0, "loadavg_after": load1})
     return 0
 
 
