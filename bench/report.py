@@ -181,6 +181,8 @@ def header(res, module, raw):
         load.append(f"other processes kept {fmt(min(others))}–{fmt(max(others))} of the "
                     f"{cpus} CPUs busy while the rows ran (column `others`)")
     out.append("*Load:* " + ("; ".join(load) if load else "not recorded") + ".")
+    if c.get("note"):  # a caveat recorded with the run (bench_torch.py --note)
+        out.append(f"*Note:* {c['note']}")
     if module == "torch":
         cpu = "bench_torch.py measures wall time only (no CPU column)"
     elif "smg_cpu_time" in c:
@@ -681,6 +683,8 @@ def hl_torch(d):
                             f"{fmt_ms(b['pytorch_ms'])} | {fmt(b['speedup'])}× |")
     if not rows:
         return []
+    note = cpu.context.get("note") if cpu else None
+    rows += ["", f"CPU: {note}"] if note else []
     return ["**smg_torch against pure-PyTorch autograd** (forward + backward of the same equations; "
             "`bench/results/torch.json`" + (", `bench/results/gpu/torch_cuda_h100.json`" if device else "")
             + "; best time; [docs/torch.md](docs/torch.md), [docs/cuda.md](docs/cuda.md)):", "",

@@ -350,10 +350,10 @@ class RssPeak:
         return max(0, self._bytes("VmHWM") - self.base)
 
 
-def scaling_table(sizes, K, peers, limit_s, limit_bytes, scene=None):
+def scaling_table(sizes, K, peers, limit_s, limit_bytes, scene=None, skippable=("eager", "compile")):
     """One dict per (N, T) of sizes: N, T, K, terms (carap_terms), inputs_bytes (x, q, graph) and,
     for each (name, measure) of peers, measure(x, q, idx, w) -> {"seconds": per call, "peak_bytes"
-    [, "compile_s"]} or {"note": why there is no number}. A peer is not run where the linear
+    [, "compile_s"]} or {"note": why there is no number}. A skippable peer is not run where the linear
     extrapolation (per term) of its time and peak from the last size it ran at exceeds limit_s
     per call or limit_bytes: its note gives the prediction. The scene is scaling_scene's unless
     scene(N, T, K) is given."""
@@ -363,7 +363,7 @@ def scaling_table(sizes, K, peers, limit_s, limit_bytes, scene=None):
         terms = carap_terms(idx, T)
         row = {"N": N, "T": T, "K": K, "terms": terms, "inputs_bytes": tensor_bytes(x, q, idx, w)}
         for name, measure in peers:
-            if name in per_term:
+            if name in per_term and name in skippable:
                 (s0, b0, at) = per_term[name]
                 ps, pb = s0 * terms, b0 * terms
                 if ps > limit_s or pb > limit_bytes:
@@ -508,7 +508,7 @@ def cpu_scaling(args):
     if args.json:
         write_json(args.json, scaling_json(rows, 2), args.repeat,
                    {"smg_params": f"--scaling --repeat {args.repeat}, 2 threads",
-                    "loadavg_start": load0, "loadavg_after": load1, "peak_memory": memory,
+                    "loadavg_start": load0, "loadavg_after": load1, **({"note": args.note} if args.note else {}), "peak_memory": memory,
                     "skip_limits": f"{args.skip_seconds:.0f} s per call, {limit_bytes / 2**30:.1f} GiB"})
 
 
@@ -521,6 +521,8 @@ def main():
                     help="only the binding-overhead rows (smg_torch against the bare C++ call)")
     ap.add_argument("--scaling", action="store_true",
                     help="only the scaling table (SCALING_SIZES; tiny sizes with --quick), 2 threads")
+    ap.add_argument("--note", default=None,
+                    help="--json: a caveat about this run's machine, stored in the context (report.py prints it)")
     ap.add_argument("--skip-seconds", type=float, default=120.0,
                     help="--scaling: skip a PyTorch peer whose predicted time per call exceeds this")
     args = ap.parse_args()
@@ -607,7 +609,8 @@ def main():
             bench.append({"name": "overhead: " + name, "run_type": "iteration", "iterations": max(args.repeat, 5),
                           "real_time": a * 1e3, "cpu_time": a * 1e3, "time_unit": "ms",
                           "library_ms": b * 1e3, "overhead_percent": 100 * (a / b - 1)})
-        write_json(args.json, bench, args.repeat, {"loadavg_start": load0, "loadavg_after": load1})
+        write_json(args.json, bench, args.repeat, dict({"loadavg_start": load0, "loadavg_after": load1},
+                                                       **({"note": args.note} if args.note else {})))
     return 0
 
 
