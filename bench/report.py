@@ -31,6 +31,9 @@ import re
 import sys
 
 ORDER = ["core", "graph", "energy", "skin", "splat", "executor", "torch"]
+# bench/notes/<name>.md printed after the modules' sections, with no result file of their own
+# (derivations rather than measurements).
+NOTES_ONLY = ["roofline"]
 HERE = os.path.dirname(os.path.abspath(__file__))
 LOAD_COUNTERS = ("others_cpus", "loadavg_1m")
 
@@ -171,11 +174,15 @@ def header(res, module, raw):
         load.append(f"load average before {res.load['loadavg_before']}")
     if "loadavg_after" in res.load:
         load.append(f"after {res.load['loadavg_after']}")
+    elif "loadavg_after" in c:
+        load.append(f"after {c['loadavg_after']}")
     others = [b.get("others_cpus") for b in res.rows if isinstance(b.get("others_cpus"), (int, float))]
     if others:
         load.append(f"other processes kept {fmt(min(others))}–{fmt(max(others))} of the "
                     f"{cpus} CPUs busy while the rows ran (column `others`)")
     out.append("*Load:* " + ("; ".join(load) if load else "not recorded") + ".")
+    if c.get("note"):  # a caveat recorded with the run (bench_torch.py --note)
+        out.append(f"*Note:* {c['note']}")
     if module == "torch":
         cpu = "bench_torch.py measures wall time only (no CPU column)"
     elif "smg_cpu_time" in c:
@@ -356,8 +363,17 @@ def summary_torch(res):
             s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}, "
                      f"PyTorch autograd {fmt(b.get('pytorch_ms'))} ms — {fmt(b['speedup'])}× faster.")
         elif "pytorch_ms" in b:
-            s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}; "
-                     f"no PyTorch reference at this size.")
+            s.append(f"{b['name']}: smg_torch {fmt(b['real_time'])} {b.get('time_unit', 'ms')}"
+                     + ("." if "pytorch_note" in b else "; no PyTorch reference at this size."))
+        if isinstance(b.get("compile_speedup"), (int, float)) and math.isfinite(b["compile_speedup"]):
+            s[-1] = s[-1][:-1] + (f"; torch.compile {fmt(b['compile_ms'])} ms after "
+                                  f"{fmt(b['compile_time_s'])} s of compiling — {fmt(b['compile_speedup'])}× faster.")
+        # why a peer has no number (torch.compile missing, a size skipped): the scripts' notes
+        label = {"smg_note": "smg_torch", "pytorch_note": "PyTorch autograd", "compile_note": "torch.compile"}
+        notes = [v if v.startswith(label.get(k, k)) else f"{label.get(k, k)} {v}"
+                 for k, v in b.items() if k.endswith("_note") and isinstance(v, str)]
+        if notes:
+            s.append(f"{b['name']}: " + "; ".join(notes) + ".")
     return s
 
 
@@ -667,6 +683,8 @@ def hl_torch(d):
                             f"{fmt_ms(b['pytorch_ms'])} | {fmt(b['speedup'])}× |")
     if not rows:
         return []
+    note = cpu.context.get("note") if cpu else None
+    rows += ["", f"CPU: {note}"] if note else []
     return ["**smg_torch against pure-PyTorch autograd** (forward + backward of the same equations; "
             "`bench/results/torch.json`" + (", `bench/results/gpu/torch_cuda_h100.json`" if device else "")
             + "; best time; [docs/torch.md](docs/torch.md), [docs/cuda.md](docs/cuda.md)):", "",
@@ -826,6 +844,9 @@ def main():
     for m in modules:
         files = sorted(by_module[m], key=lambda n: (n != m, n))
         parts.append(section(m, files, d))
+    for m in NOTES_ONLY:  # sections with no result file of their own
+        with open(os.path.join(HERE, "notes", m + ".md")) as f:
+            parts.append(f.read().rstrip() + "\n")
     sys.stdout.write("\n".join(parts))
     return 0
 

@@ -4,6 +4,7 @@ CUDA-event timing, best and median of --repeat runs after a warm-up.
 
 usage: PYTHONPATH=<smg_torch built with CUDA> python3 bench/torch/bench_cuda.py [--repeat 20]
            [--json out.json] [--quick]
+       ... bench_cuda.py --scaling [--repeat 20] [--json out.json] [--quick]
 
 Energies: the scene of bench_torch.py (N = 5000 nodes, T = 100 frames, K = 16, gaps 1,2,4,
 float32), loss = C-ARAP + LRM + ARAP with node confidences computed first, backward to the
@@ -11,10 +12,18 @@ positions and raw quaternions; each operator is also timed alone. Every energy s
 CUDA is included (smg_torch._C lists them: cuda_carap, cuda_arap, cuda_lrm, ...); one it lacks
 is left out of both sides and named in the output. The PyTorch baseline is
 tests/torch/torch_reference.py (vectorised autograd implementations of docs/math/energy.md)
-on the same device. DQB: 32768 points x 17 drivers when smg_torch has cuda_dqb.
+on the same device, run eagerly and through torch.compile (timed after its first call, which
+compiles and is reported on its own; without torch.compile, torch 1.x, the row says so).
+DQB: 32768 points x 17 drivers when smg_torch has cuda_dqb.
+Scaling (--scaling): the energies at bench_torch.SCALING_SIZES (5k x 100 ... 200k x 100, 50k x
+400) for smg, eager and compile: best time, ns per (edge, frame, gap) term and peak memory
+(torch.cuda.max_memory_allocated after a reset, minus what was allocated before: the inputs);
+a peer whose extrapolated peak exceeds 90 % of the device's memory is skipped, one that runs out
+of memory is reported so.
 Prints a markdown table with the device name; --json writes the rows.
 """
 import argparse
+import functools
 import json
 import os
 import statistics
@@ -29,7 +38,9 @@ sys.path.insert(0, HERE)
 
 import smg_torch as smg  # noqa: E402
 import torch_reference as ref  # noqa: E402
-from bench_torch import energy_scene, skin_scene  # noqa: E402
+from bench_torch import (SCALING_QUICK, SCALING_SIZES, compiled_peer, energy_ref, energy_scene,  # noqa: E402
+                         energy_smg, fwd_bwd, print_scaling, scaling_json, scaling_scene,
+                         scaling_table, skin_scene)
 
 
 def timed(fn, repeat):
@@ -47,6 +58,63 @@ def timed(fn, repeat):
     return min(times), statistics.median(times)
 
 
+def best(fn, repeat):
+    return timed(fn, repeat)[0]
+
+
+def cuda_scaling(args, dev, name, has_lrm):
+    """--scaling on the GPU: smg, eager and compile at SCALING_SIZES (SCALING_QUICK with --quick);
+    the graph is built on the CPU (bench_torch.scaling_scene), then moved."""
+    def e_smg(xs, qs, idx, w):
+        return energy_smg(xs, qs, idx, w, lrm=has_lrm)
+
+    def e_ref(xs, qs, idx, w):  # a plain function for torch.compile to trace
+        return energy_ref(xs, qs, idx, w, lrm=has_lrm)
+
+    def measure(energy, x, q, idx, w):
+        torch.cuda.synchronize()
+        base = torch.cuda.memory_allocated()
+        torch.cuda.reset_peak_memory_stats()
+        t = best(lambda: fwd_bwd(energy, x, q, idx, w), args.repeat)
+        return {"seconds": t, "peak_bytes": torch.cuda.max_memory_allocated() - base}
+
+    def peer_compile(x, q, idx, w):
+        torch.cuda.synchronize()
+        base = torch.cuda.memory_allocated()
+        torch.cuda.reset_peak_memory_stats()
+        r = compiled_peer(e_ref, lambda fn: fwd_bwd(fn, x, q, idx, w), args.repeat, best,
+                          torch.cuda.synchronize)
+        if "seconds" in r:
+            r["peak_bytes"] = torch.cuda.max_memory_allocated() - base
+        return r
+
+    def on_device(f):
+        def run(x, q, idx, w):
+            try:
+                return f(x.to(dev), q.to(dev), idx.to(dev), w.to(dev))
+            finally:
+                torch.cuda.empty_cache()
+        return run
+
+    peers = [("smg", on_device(functools.partial(measure, e_smg))),
+             ("eager", on_device(functools.partial(measure, e_ref))),
+             ("compile", on_device(peer_compile))]
+    limit = 0.9 * torch.cuda.get_device_properties(dev).total_memory
+    rows = scaling_table(SCALING_QUICK if args.quick else SCALING_SIZES, 16, peers, 600.0, limit,
+                         scaling_scene)
+    terms = "conf + C-ARAP + ARAP" + (" + LRM" if has_lrm else "")
+    print_scaling(rows, f"Scaling ({terms}, fwd+bwd, float32) on {name}, CUDA events, best of {args.repeat} "
+                        f"after 2 warm-ups, torch {torch.__version__}",
+                  "torch.cuda.max_memory_allocated() over the calls after reset_peak_memory_stats(), "
+                  "minus memory_allocated() before (the inputs)")
+    if args.json:
+        out = {"context": {"device": name, "torch": torch.__version__, "repeat": args.repeat,
+                           "terms": terms, "peak_memory": "max_memory_allocated - inputs"},
+               "benchmarks": [dict(b, device=name) for b in scaling_json(rows, "GPU")]}
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=1)
+
+
 def rel(a, b):
     return float((a.double() - b.double()).norm() / b.double().norm().clamp_min(1e-300))
 
@@ -58,15 +126,20 @@ def main():
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--profile", action="store_true",
                     help="print the CUDA kernel times of one smg_torch energies call (torch.profiler)")
+    ap.add_argument("--scaling", action="store_true",
+                    help="only the scaling table (bench_torch.SCALING_SIZES; tiny sizes with --quick)")
     args = ap.parse_args()
     if not (torch.cuda.is_available() and smg.has_cuda):
         print("bench_cuda: skipped (no CUDA device, or smg_torch built without CUDA)")
         return 0
     dev = torch.device("cuda")
     name = torch.cuda.get_device_name(dev)
+    has = {op: hasattr(smg._C, "cuda_" + op) for op in ("carap", "arap", "lrm", "dqb_forward")}
+    if args.scaling:
+        cuda_scaling(args, dev, name, has["lrm"])
+        return 0
     N, T, K, P = (500, 20, 16, 2048) if args.quick else (5000, 100, 16, 32768)
     x, q, idx, w = (t.to(dev) for t in energy_scene(N, T, K))
-    has = {op: hasattr(smg._C, "cuda_" + op) for op in ("carap", "arap", "lrm", "dqb_forward")}
     ref_only = ["dqb"] if not has["dqb_forward"] else []
     g = (idx, w)
 
@@ -89,6 +162,11 @@ def main():
     t_smg = timed(lambda: run(smg), args.repeat)
     t_ref = timed(lambda: run(ref), args.repeat)
     rows.append((f"energies fwd+bwd ({terms}), N={N} T={T} K={K} float32", t_smg, t_ref))
+    # torch.compile of the same PyTorch code (energy_ref is loss(ref, ...) as a function of leaves)
+    def e_ref(xs, qs, idx, w):  # a plain function for torch.compile to trace
+        return energy_ref(xs, qs, idx, w, lrm=has["lrm"])
+    t_cmp = compiled_peer(e_ref, lambda fn: fwd_bwd(fn, x, q, idx, w), args.repeat, timed,
+                          torch.cuda.synchronize)
     e1, gx1, gq1 = run(smg)
     e2, gx2, gq2 = run(ref)
     agree = (f"float32, smg CUDA vs PyTorch autograd CUDA: energy {abs(float(e1 - e2)) / abs(float(e2)):.1e}, "
@@ -171,6 +249,13 @@ def main():
     for rname, a, b in rows:
         print(f"| {rname} | {a[0] * 1e3:.3f} ms ({a[1] * 1e3:.3f}) | {b[0] * 1e3:.3f} ms ({b[1] * 1e3:.3f}) | "
               f"{b[0] / a[0]:.1f}x |")
+    if "seconds" in t_cmp:
+        b, m = t_cmp["seconds"]
+        print(f"\ntorch.compile of the same PyTorch code, energies fwd+bwd ({terms}): {b * 1e3:.3f} ms "
+              f"({m * 1e3:.3f}) after compiling in {t_cmp['compile_s']:.1f} s (first call); "
+              f"{b / rows[0][1][0]:.1f}x smg_torch")
+    else:
+        print(f"\n{t_cmp['note']}")
     print(f"\n{agree}\n{agree64}")
     if missing:
         print(f"not measured (no CUDA operator in this build): {', '.join(missing)}")
@@ -181,6 +266,12 @@ def main():
                                "speedup": b[0] / a[0], "time_unit": "ms", "device": name}
                               for r, a, b in rows],
                "agreement": [agree, agree64]}
+        e = out["benchmarks"][0]
+        if "seconds" in t_cmp:
+            e.update(compile_ms=t_cmp["seconds"][0] * 1e3, compile_median_ms=t_cmp["seconds"][1] * 1e3,
+                     compile_time_s=t_cmp["compile_s"], compile_speedup=t_cmp["seconds"][0] / rows[0][1][0])
+        else:
+            e["compile_note"] = t_cmp["note"]  # no number where torch has no torch.compile
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1)
     return 0
