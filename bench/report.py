@@ -683,11 +683,12 @@ def hl_torch(d):
                             f"{fmt_ms(b['pytorch_ms'])} | {fmt(b['speedup'])}× |")
     if not rows:
         return []
+    # A caveat recorded with the CPU run goes before the table, where a reader of the speed-ups sees it.
     note = cpu.context.get("note") if cpu else None
-    rows += ["", f"CPU: {note}"] if note else []
+    caveat = [f"**CPU caveat:** {note}", ""] if note else []
     return ["**smg_torch against pure-PyTorch autograd** (forward + backward of the same equations; "
             "`bench/results/torch.json`" + (", `bench/results/gpu/torch_cuda_h100.json`" if device else "")
-            + "; best time; [docs/torch.md](docs/torch.md), [docs/cuda.md](docs/cuda.md)):", "",
+            + "; best time; [docs/torch.md](docs/torch.md), [docs/cuda.md](docs/cuda.md)):", ""] + caveat + [
             "| device | operation | smg_torch | PyTorch autograd | speed-up |",
             "|---|---|---:|---:|---:|"] + rows + [""]
 
