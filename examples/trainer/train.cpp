@@ -37,12 +37,11 @@
 #include <string>
 #include <vector>
 
-#include <sys/resource.h>
-
 #include "json_line.hpp"
 #include "npy.hpp"
 #include "trainer/data_scene.hpp"
 #include "trainer/layouts.hpp"
+#include "trainer/metrics_json.hpp"
 #include "trainer/dycheck.hpp"
 #include "trainer/flags.hpp"
 #include "trainer/image_io.hpp"
@@ -54,60 +53,6 @@
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string view_json(const trainer::ViewMetrics& v) {
-  cli::JsonLine j;
-  j.add("psnr", v.psnr)
-      .add("ssim", v.ssim)
-      .add("psnr_masked", v.psnr_masked)
-      .add("ssim_masked", v.ssim_masked)
-      .add("psnr_box", v.psnr_box)
-      .add("psnr_objects", v.psnr_objects);
-  return j.str();
-}
-
-// The C-ARAP settings (docs/trainer.md, "C-ARAP options"), in both metrics.json layouts.
-void add_carap_settings(cli::JsonLine& j, const trainer::NodeLossOptions& nl) {
-  j.add("alpha", nl.alpha)
-      .add("carap_reading", trainer::carap_reading_names()[static_cast<std::size_t>(nl.carap_reading)])
-      .add("confidence_from", trainer::confidence_source_names()[static_cast<std::size_t>(nl.confidence_source)])
-      .add("confidence_visibility", nl.confidence_visibility);
-}
-
-void add_confidence(cli::JsonLine& j, const std::string& suffix, const trainer::ConfidenceDiagnostics& d) {
-  j.add("conf_spearman_error" + suffix, d.spearman_error)
-      .add("conf_spearman_observation" + suffix, d.spearman_observation)
-      .add("conf_obs_err_below_3cm" + suffix, d.mean_by_observation_error[0])
-      .add("conf_obs_err_3_10cm" + suffix, d.mean_by_observation_error[1])
-      .add("conf_obs_err_10_30cm" + suffix, d.mean_by_observation_error[2])
-      .add("conf_obs_err_above_30cm" + suffix, d.mean_by_observation_error[3])
-      .add("conf_low_fraction" + suffix, d.low_fraction)
-      .add("conf_mean_observed" + suffix, d.mean_observed)
-      .add("conf_low_observed" + suffix, d.low_observed)
-      .add("conf_mean_observed_truth" + suffix, d.mean_observed_truth)
-      .add("conf_low_observed_truth" + suffix, d.low_observed_truth)
-      .add("conf_weight_symmetric_low" + suffix, d.symmetric_low)
-      .add("conf_weight_symmetric_high" + suffix, d.symmetric_high)
-      .add("conf_weight_directed_low" + suffix, d.directed_low)
-      .add("conf_weight_directed_high" + suffix, d.directed_high)
-      .add("conf_failed_observed" + suffix, d.failed_observed)
-      .add("conf_clean_observed" + suffix, d.clean_observed)
-      .add("conf_failed_observed_count" + suffix, d.count_failed_observed)
-      .add("conf_edge_bending" + suffix, d.edge_bending)
-      .add("conf_edge_rigid" + suffix, d.edge_rigid)
-      .add("conf_edge_bending_count" + suffix, d.count_edge_bending);
-}
-
-void add_tracks(cli::JsonLine& j, const std::string& suffix, const trainer::TrackMetrics& m) {
-  j.add("epe" + suffix, m.all.epe)
-      .add("delta_5" + suffix, m.all.within_5)
-      .add("delta_10" + suffix, m.all.within_10)
-      .add("epe_box" + suffix, m.box.epe)
-      .add("epe_arm" + suffix, m.arm.epe)
-      .add("epe_ball" + suffix, m.ball.epe)
-      .add("epe_hidden" + suffix, m.hidden.epe)
-      .add("epe_box_hidden" + suffix, m.box_hidden.epe);
-}
 
 // The variant's stage-1 problem, as run_trainer hands it to fit_nodes (docs/trainer.md).
 std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, const trainer::TrainerResult& r) {
@@ -177,25 +122,6 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
 }
 
 
-// The graph and model statistics of a run, shared by both metrics.json layouts.
-void add_model_stats(cli::JsonLine& j, const trainer::TrainerResult& r) {
-  j.add("nodes", r.nodes.count)
-      .add("edges", static_cast<long long>(r.nodes.graph.stats.edges))
-      .add("gate_removed_edges", static_cast<long long>(r.nodes.graph.stats.gate_removed_edges))
-      .add("gaussians", r.model.count())
-      .add("gaussians_static", r.model.fixed)
-      .add("gaussians_dynamic", r.model.dynamic())
-      .add("pruned", r.stage2.pruned)
-      .add("stage1_iterations", r.stage1.iterations)
-      .add("stage2_iterations", r.stage2.iterations);
-}
-
-double peak_memory_mib() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return static_cast<double>(u.ru_maxrss) / 1024.0;  // Linux: KiB
-}
-
 // --data: trains on a scene from disk and writes renders, tracks3d.npy and metrics.json. OUT is
 // created after stage 0, which can still refuse the scene (DataError).
 int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const char* layout, double seconds_read,
@@ -228,64 +154,27 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const cha
   fs::create_directories(out / "renders");
   for (std::size_t v = 0; v < r.eval_renders.size(); ++v)
     trainer::write_png((out / "renders" / (r.data.eval[v].name + ".png")).string(), r.eval_renders[v]);
-  cli::JsonLine j;
-  j.add("program", "smg_trainer")
-      .add("scene", r.data.source)
-      .add("variant", trainer::to_string(cfg.variant.variant))
-      .add("T", r.data.scene.frames())
-      .add("width", r.data.scene.width())
-      .add("height", r.data.scene.height())
-      .add("threads", cfg.threads > 0 ? cfg.threads : smg::num_threads());
-  add_carap_settings(j, cfg.node_loss);
-  j.add("semantic_graph", r.config.variant.semantic_graph);
-  const trainer::DataEvaluation& e = r.data_evaluation;
-  j.add("val_frames", static_cast<long long>(e.frames.size()))
-      .add("mpsnr", e.mean.mpsnr)
-      .add("mssim", e.mean.mssim)
-      .add("mssim_covisible", e.mean.mssim_covisible)
-      .add("psnr", e.mean.psnr)
-      .add("ssim", e.mean.ssim);
-  std::string frames = "[";
-  for (const trainer::FrameScore& f : e.frames) {
-    cli::JsonLine fj;
-    fj.add("frame", f.name).add("mpsnr", f.mpsnr).add("mssim", f.mssim).add("mssim_covisible", f.mssim_covisible)
-        .add("psnr", f.psnr).add("ssim", f.ssim);
-    frames += (frames.size() > 1 ? "," : "") + fj.str();
-  }
-  j.add_raw("per_frame", frames + "]");
   std::vector<float> tracks;
+  trainer::QueryTrackError te;
   if (queries) {
     tracks = trainer::carry_queries(*queries, r.data, r.nodes, r.model);
     npy::write((out / "tracks3d.npy").string(), tracks.data(),
                {queries->count(), r.data.scene.frames(), 3});
-    j.add("queries", queries->count());
     if (truth) {
-      const trainer::QueryTrackError te = trainer::query_track_error(tracks, *truth);
-      j.add("epe", te.epe).add("delta_5cm", te.within_5cm).add("delta_10cm", te.within_10cm);
+      te = trainer::query_track_error(tracks, *truth);
       progress.line("eval", trainer::format("%d query tracks: EPE %.4f m, within 5 cm %.3f, within 10 cm %.3f",
                                             queries->count(), te.epe, te.within_5cm, te.within_10cm));
     }
   }
-  j.add("extent", r.data.scene.extent)
-      .add("length_factor", r.length_factor)
-      .add("unit", r.nodes.unit)
-      .add("lifted_tracks", r.lifted.count);
-  add_model_stats(j, r);
-  j.add("seconds_read", seconds_read)
-      .add("seconds_stage0", r.seconds_stage0)
-      .add("seconds_stage1", r.stage1.seconds)
-      .add("seconds_stage2", r.stage2.seconds)
-      .add("seconds_eval", e.seconds)
-      .add("seconds_write", trainer::seconds_since(t0))
-      .add("seconds_total", seconds_read + r.seconds_total + trainer::seconds_since(t0))
-      .add("peak_memory_mib", peak_memory_mib())
-      .add("out", out.string());
-  const std::string line = j.str();
-  {
-    std::ofstream f(out / "metrics.json");
-    f << line << "\n";
-    if (!f) throw std::runtime_error("cannot write " + (out / "metrics.json").string());
-  }
+  trainer::RunRecord rec;
+  rec.config = &cfg;
+  rec.out = out.string();
+  rec.seconds_read = seconds_read;
+  rec.seconds_write = trainer::seconds_since(t0);
+  rec.queries = queries ? queries->count() : 0;
+  rec.query_error = queries && truth ? &te : nullptr;
+  const std::string line = trainer::metrics_json(r, rec);
+  trainer::write_metrics_json(out.string(), line);
   if (view) {
     trainer::ViewInputs vi;
     vi.metrics_json = line;
@@ -444,53 +333,11 @@ int main(int argc, char** argv) {
     const trainer::TrainerResult r = trainer::run_trainer(cfg, progress);
     std::vector<std::string> written;
     if (pictures) written = trainer::write_pictures(out.string(), r);
-    const trainer::Evaluation& e = r.evaluation;
-
-    cli::JsonLine j;
-    j.add("program", "smg_trainer")
-        .add("variant", trainer::to_string(cfg.variant.variant))
-        .add("scene", trainer::to_string(cfg.dataset.scene.layout))
-        .add("seed", static_cast<long long>(cfg.dataset.scene.seed));
-    // Only when set: the default run's metrics.json keeps its keys.
-    if (cfg.dataset.tracker_failures != trainer::TrackerFailures::scene)
-      j.add("tracker_failures",
-            trainer::tracker_failure_names()[static_cast<std::size_t>(cfg.dataset.tracker_failures)]);
-    j
-        .add("T", r.data.scene.frames())
-        .add("width", r.data.scene.width())
-        .add("height", r.data.scene.height())
-        .add("threads", cfg.threads > 0 ? cfg.threads : smg::num_threads())
-        .add("test_psnr", e.mean.psnr)
-        .add("test_ssim", e.mean.ssim)
-        .add("test_psnr_masked", e.mean.psnr_masked)
-        .add("test_ssim_masked", e.mean.ssim_masked)
-        .add("test_psnr_box", e.mean.psnr_box)
-        .add("test_psnr_objects", e.mean.psnr_objects)
-        .add("train_psnr", e.train_psnr);
-    std::string views = "{";
-    for (const auto& v : e.views) views += (views.size() > 1 ? "," : "") + cli::JsonLine::quote(v.name) + ":" + view_json(v);
-    j.add_raw("views", views + "}");
-    add_tracks(j, "", e.tracks);
-    add_tracks(j, "_stage1", r.tracks_stage1);
-    add_tracks(j, "_lifted", r.tracks_lifted);
-    add_carap_settings(j, cfg.node_loss);
-    add_confidence(j, "", r.confidence_stage1);
-    add_confidence(j, "_lifted", r.confidence_lifted);
-    j.add("extent", r.data.scene.extent);
-    add_model_stats(j, r);
-    j.add("seconds_dataset", r.seconds_dataset)
-        .add("seconds_stage0", r.seconds_stage0)
-        .add("seconds_stage1", r.stage1.seconds)
-        .add("seconds_stage2", r.stage2.seconds)
-        .add("seconds_eval", e.seconds)
-        .add("seconds_total", r.seconds_total)
-        .add("out", out.string());
-    const std::string line = j.str();
-    {
-      std::ofstream f(out / "metrics.json");
-      f << line << "\n";
-      if (!f) throw std::runtime_error("cannot write " + (out / "metrics.json").string());
-    }
+    trainer::RunRecord rec;
+    rec.config = &cfg;
+    rec.out = out.string();
+    const std::string line = trainer::metrics_json(r, rec);
+    trainer::write_metrics_json(out.string(), line);
     if (view) {
       trainer::ViewInputs vi;
       vi.metrics_json = line;

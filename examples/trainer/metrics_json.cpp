@@ -1,0 +1,176 @@
+// examples/trainer/metrics_json.cpp — smg_trainer's metrics.json (metrics_json.hpp).
+#include "trainer/metrics_json.hpp"
+
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+
+#include <sys/resource.h>
+
+#include "json_line.hpp"
+#include "smg/core/parallel.hpp"
+
+namespace trainer {
+
+namespace {
+
+std::string view_json(const ViewMetrics& v) {
+  cli::JsonLine j;
+  j.add("psnr", v.psnr)
+      .add("ssim", v.ssim)
+      .add("psnr_masked", v.psnr_masked)
+      .add("ssim_masked", v.ssim_masked)
+      .add("psnr_box", v.psnr_box)
+      .add("psnr_objects", v.psnr_objects);
+  return j.str();
+}
+
+// The C-ARAP settings (docs/trainer.md, "C-ARAP options").
+void add_carap_settings(cli::JsonLine& j, const NodeLossOptions& nl) {
+  j.add("alpha", nl.alpha)
+      .add("carap_reading", carap_reading_names()[static_cast<std::size_t>(nl.carap_reading)])
+      .add("confidence_from", confidence_source_names()[static_cast<std::size_t>(nl.confidence_source)])
+      .add("confidence_visibility", nl.confidence_visibility);
+}
+
+void add_confidence(cli::JsonLine& j, const std::string& suffix, const ConfidenceDiagnostics& d) {
+  j.add("conf_spearman_error" + suffix, d.spearman_error)
+      .add("conf_spearman_observation" + suffix, d.spearman_observation)
+      .add("conf_obs_err_below_3cm" + suffix, d.mean_by_observation_error[0])
+      .add("conf_obs_err_3_10cm" + suffix, d.mean_by_observation_error[1])
+      .add("conf_obs_err_10_30cm" + suffix, d.mean_by_observation_error[2])
+      .add("conf_obs_err_above_30cm" + suffix, d.mean_by_observation_error[3])
+      .add("conf_low_fraction" + suffix, d.low_fraction)
+      .add("conf_mean_observed" + suffix, d.mean_observed)
+      .add("conf_low_observed" + suffix, d.low_observed)
+      .add("conf_mean_observed_truth" + suffix, d.mean_observed_truth)
+      .add("conf_low_observed_truth" + suffix, d.low_observed_truth)
+      .add("conf_weight_symmetric_low" + suffix, d.symmetric_low)
+      .add("conf_weight_symmetric_high" + suffix, d.symmetric_high)
+      .add("conf_weight_directed_low" + suffix, d.directed_low)
+      .add("conf_weight_directed_high" + suffix, d.directed_high)
+      .add("conf_failed_observed" + suffix, d.failed_observed)
+      .add("conf_clean_observed" + suffix, d.clean_observed)
+      .add("conf_failed_observed_count" + suffix, d.count_failed_observed)
+      .add("conf_edge_bending" + suffix, d.edge_bending)
+      .add("conf_edge_rigid" + suffix, d.edge_rigid)
+      .add("conf_edge_bending_count" + suffix, d.count_edge_bending);
+}
+
+void add_tracks(cli::JsonLine& j, const std::string& suffix, const TrackMetrics& m) {
+  j.add("epe" + suffix, m.all.epe)
+      .add("delta_5" + suffix, m.all.within_5)
+      .add("delta_10" + suffix, m.all.within_10)
+      .add("epe_box" + suffix, m.box.epe)
+      .add("epe_arm" + suffix, m.arm.epe)
+      .add("epe_ball" + suffix, m.ball.epe)
+      .add("epe_hidden" + suffix, m.hidden.epe)
+      .add("epe_box_hidden" + suffix, m.box_hidden.epe);
+}
+
+double peak_memory_mib() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return static_cast<double>(u.ru_maxrss) / 1024.0;  // Linux: KiB
+}
+
+}  // namespace
+
+std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
+  const TrainerConfig& cfg = *run.config;
+  const bool truth = r.data.has_truth;
+  cli::JsonLine j;
+  j.add("program", "smg_trainer").add("variant", to_string(cfg.variant.variant));
+  if (truth) {
+    j.add("scene", to_string(cfg.dataset.scene.layout)).add("seed", static_cast<long long>(cfg.dataset.scene.seed));
+    if (cfg.dataset.tracker_failures != TrackerFailures::scene)  // only when set: the default keys stay
+      j.add("tracker_failures", tracker_failure_names()[static_cast<std::size_t>(cfg.dataset.tracker_failures)]);
+  } else {
+    j.add("scene", r.data.source);
+  }
+  j.add("T", r.data.scene.frames())
+      .add("width", r.data.scene.width())
+      .add("height", r.data.scene.height())
+      .add("threads", cfg.threads > 0 ? cfg.threads : smg::num_threads());
+  if (truth) {
+    const Evaluation& e = r.evaluation;
+    j.add("test_psnr", e.mean.psnr)
+        .add("test_ssim", e.mean.ssim)
+        .add("test_psnr_masked", e.mean.psnr_masked)
+        .add("test_ssim_masked", e.mean.ssim_masked)
+        .add("test_psnr_box", e.mean.psnr_box)
+        .add("test_psnr_objects", e.mean.psnr_objects)
+        .add("train_psnr", e.train_psnr);
+    std::string views = "{";
+    for (const auto& v : e.views) views += (views.size() > 1 ? "," : "") + cli::JsonLine::quote(v.name) + ":" + view_json(v);
+    j.add_raw("views", views + "}");
+    add_tracks(j, "", e.tracks);
+    add_tracks(j, "_stage1", r.tracks_stage1);
+    add_tracks(j, "_lifted", r.tracks_lifted);
+  }
+  add_carap_settings(j, cfg.node_loss);
+  if (truth) {
+    add_confidence(j, "", r.confidence_stage1);
+    add_confidence(j, "_lifted", r.confidence_lifted);
+  } else {
+    const DataEvaluation& e = r.data_evaluation;
+    j.add("semantic_graph", r.config.variant.semantic_graph)
+        .add("val_frames", static_cast<long long>(e.frames.size()))
+        .add("mpsnr", e.mean.mpsnr)
+        .add("mssim", e.mean.mssim)
+        .add("mssim_covisible", e.mean.mssim_covisible)
+        .add("psnr", e.mean.psnr)
+        .add("ssim", e.mean.ssim);
+    std::string frames = "[";
+    for (const FrameScore& f : e.frames) {
+      cli::JsonLine fj;
+      fj.add("frame", f.name).add("mpsnr", f.mpsnr).add("mssim", f.mssim).add("mssim_covisible", f.mssim_covisible)
+          .add("psnr", f.psnr).add("ssim", f.ssim);
+      frames += (frames.size() > 1 ? "," : "") + fj.str();
+    }
+    j.add_raw("per_frame", frames + "]");
+    if (run.queries > 0) j.add("queries", run.queries);
+    if (run.query_error)
+      j.add("epe", run.query_error->epe)
+          .add("delta_5cm", run.query_error->within_5cm)
+          .add("delta_10cm", run.query_error->within_10cm);
+  }
+  j.add("extent", r.data.scene.extent);
+  if (!truth) j.add("length_factor", r.length_factor).add("unit", r.nodes.unit).add("lifted_tracks", r.lifted.count);
+  j.add("nodes", r.nodes.count)
+      .add("edges", static_cast<long long>(r.nodes.graph.stats.edges))
+      .add("gate_removed_edges", static_cast<long long>(r.nodes.graph.stats.gate_removed_edges))
+      .add("gaussians", r.model.count())
+      .add("gaussians_static", r.model.fixed)
+      .add("gaussians_dynamic", r.model.dynamic())
+      .add("pruned", r.stage2.pruned)
+      .add("stage1_iterations", r.stage1.iterations)
+      .add("stage2_iterations", r.stage2.iterations);
+  const double seconds_eval = truth ? r.evaluation.seconds : r.data_evaluation.seconds;
+  if (truth)
+    j.add("seconds_dataset", r.seconds_dataset);
+  else
+    j.add("seconds_read", run.seconds_read);
+  j.add("seconds_stage0", r.seconds_stage0)
+      .add("seconds_stage1", r.stage1.seconds)
+      .add("seconds_stage2", r.stage2.seconds)
+      .add("seconds_eval", seconds_eval);
+  if (truth) {
+    j.add("seconds_total", r.seconds_total);
+  } else {
+    j.add("seconds_write", run.seconds_write)
+        .add("seconds_total", run.seconds_read + r.seconds_total + run.seconds_write)
+        .add("peak_memory_mib", peak_memory_mib());
+  }
+  j.add("out", run.out);
+  return j.str();
+}
+
+void write_metrics_json(const std::string& out_dir, const std::string& line) {
+  const std::string path = (std::filesystem::path(out_dir) / "metrics.json").string();
+  std::ofstream f(path);
+  f << line << "\n";
+  if (!f) throw std::runtime_error("cannot write " + path);
+}
+
+}  // namespace trainer
