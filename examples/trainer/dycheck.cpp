@@ -35,6 +35,12 @@
 
 namespace trainer {
 
+std::string dycheck_frame_name(int camera, int time) {
+  char b[48];
+  std::snprintf(b, sizeof b, "%d_%05d", camera, time);
+  return b;
+}
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -48,13 +54,6 @@ std::string fmt(double v) {
 }
 std::string size_str(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 std::string pixel_str(std::size_t x, std::size_t y) { return "(" + std::to_string(x) + ", " + std::to_string(y) + ")"; }
-
-// "{camera}_{time:05d}"
-std::string frame_name(int camera, int time) {
-  char b[48];
-  std::snprintf(b, sizeof b, "%d_%05d", camera, time);
-  return b;
-}
 
 // The helpers of file_formats.hpp and npy.hpp throw std::runtime_error("<label>: ..."), already
 // labelled with the relative file name: turn those into DataError.
@@ -224,7 +223,7 @@ std::vector<DycheckFrame> read_split(const SceneReader& in, const std::string& r
     frames[i].camera = static_cast<int>(cams[i]);
     frames[i].time = static_cast<int>(times[i]);
     frames[i].name = names[i];
-    const std::string expected = frame_name(frames[i].camera, frames[i].time);
+    const std::string expected = dycheck_frame_name(frames[i].camera, frames[i].time);
     if (names[i] != expected)
       fail(rel, "frame_names" + at + " is '" + names[i] + "', expected '" + expected + "' for camera_ids" + at + " = " +
                     std::to_string(cams[i]) + ", time_ids" + at + " = " + std::to_string(times[i]));

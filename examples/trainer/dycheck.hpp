@@ -31,6 +31,9 @@ class DataError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// A frame's name in the split files: "{camera}_{time:05d}".
+std::string dycheck_frame_name(int camera, int time);
+
 struct DycheckFrame {
   std::string name;  // "{camera}_{time:05d}", as listed in the split file
   int camera = 0;    // camera_ids entry of the split

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "trainer/data_scene.hpp"
+#include "trainer/data_queries.hpp"
 #include "trainer/pipeline.hpp"
 
 namespace trainer {

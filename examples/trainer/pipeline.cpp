@@ -7,7 +7,6 @@
 #include <stdexcept>
 #include <utility>
 
-#include "cli_args.hpp"  // cli::escape_line: the scene path is echoed, control characters escaped
 #include "trainer/frames.hpp"
 #include "trainer/util.hpp"
 
@@ -104,7 +103,7 @@ TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Pro
     r.length_factor = extent / kReferenceExtent;
     scale_lengths(config, r.length_factor);
     progress.line("data", format("%s: T=%d %dx%d, %d tracks, %d validation frames, extent %.3f m (lengths x %.3f)",
-                                 cli::escape_line(r.data.source).c_str(), r.data.scene.frames(), r.data.scene.width(),
+                                 r.data.source.c_str(), r.data.scene.frames(), r.data.scene.width(),
                                  r.data.scene.height(), r.data.priors.tracks.count,
                                  static_cast<int>(r.data.eval.size()), extent, r.length_factor));
   }

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "trainer/data_evaluate.hpp"
 #include "trainer/data_scene.hpp"
 #include "trainer/dataset.hpp"
 #include "trainer/evaluate.hpp"

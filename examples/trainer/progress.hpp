@@ -2,12 +2,16 @@
 //
 // One line per report on the given stream (stderr by default, so that stdout keeps only the
 // final metrics JSON line), prefixed by the elapsed wall time since the Progress was made.
-// quiet = true suppresses everything (tests).
+// quiet = true suppresses everything (tests). Every line is one line: control characters in the
+// text (a scene path or frame name from disk, an exception message) are escaped here, so no
+// caller has to remember to.
 #pragma once
 
 #include <chrono>
 #include <cstdio>
 #include <string>
+
+#include "cli_args.hpp"  // cli::escape_line
 
 namespace trainer {
 
@@ -28,7 +32,7 @@ class Progress {
   std::chrono::steady_clock::time_point start() const { return start_; }
   void line(const std::string& stage, const std::string& text) const {
     if (quiet_ || !stream_) return;
-    std::fprintf(stream_, "[%7.1fs] %-7s %s\n", elapsed(), stage.c_str(), text.c_str());
+    std::fprintf(stream_, "[%7.1fs] %-7s %s\n", elapsed(), stage.c_str(), cli::escape_line(text).c_str());
     std::fflush(stream_);
   }
   bool quiet() const { return quiet_; }

@@ -39,6 +39,8 @@
 
 #include "json_line.hpp"
 #include "npy.hpp"
+#include "trainer/data_export.hpp"
+#include "trainer/data_queries.hpp"
 #include "trainer/data_scene.hpp"
 #include "trainer/layouts.hpp"
 #include "trainer/metrics_json.hpp"
@@ -133,7 +135,7 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const cha
   const trainer::Progress early(held.get(), quiet);
   early.line("data", std::string("layout: ") + layout);
   early.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", scene " +
-                          cli::escape_line(data.source) + ", output " + cli::escape_line(out.string()));
+                          data.source + ", output " + out.string());
   trainer::TrainerResult stage0 = trainer::run_stage0(cfg, std::move(data), early);
   if (held) {
     std::rewind(held.get());
@@ -183,7 +185,7 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const cha
       vi.truth = truth;
       vi.queries = queries->count();
     }
-    progress.line("done", "page of the run: " + cli::escape_line(trainer::write_view_html(out.string(), r, vi)));
+    progress.line("done", "page of the run: " + trainer::write_view_html(out.string(), r, vi));
   }
   progress.line("done", std::to_string(r.eval_renders.size()) + " renders and metrics.json in " + out.string() + "/");
   std::cout << line << std::endl;

@@ -15,6 +15,9 @@
 
 #include "npy.hpp"
 #include "support/run_program.hpp"
+#include "trainer/data_evaluate.hpp"
+#include "trainer/data_export.hpp"
+#include "trainer/data_queries.hpp"
 #include "trainer/data_scene.hpp"
 #include "trainer/dycheck.hpp"
 #include "trainer/pipeline.hpp"

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -16,6 +17,7 @@
 
 #include "npy.hpp"
 #include "support/run_program.hpp"
+#include "trainer/progress.hpp"
 
 namespace fs = std::filesystem;
 
@@ -164,3 +166,17 @@ TEST_CASE("smg_trainer: skipped (the examples are not built)") {
   MESSAGE("SMG_TRAINER_PATH is not defined: the smg_trainer tests are skipped");
 }
 #endif
+
+TEST_CASE("progress lines: one line each, control characters escaped") {
+  std::FILE* f = std::tmpfile();
+  REQUIRE(f != nullptr);
+  const trainer::Progress p(f, false);
+  p.line("data", "scene /tmp/a\x1b[31m\nb\tc");
+  std::rewind(f);
+  std::string got;
+  for (int ch; (ch = std::fgetc(f)) != EOF;) got += static_cast<char>(ch);
+  std::fclose(f);
+  CHECK(got.find("scene /tmp/a\\x1b[31m\\nb\\tc\n") != std::string::npos);
+  CHECK(std::count(got.begin(), got.end(), '\n') == 1);
+  CHECK(got.find('\x1b') == std::string::npos);
+}
