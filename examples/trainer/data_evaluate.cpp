@@ -2,7 +2,6 @@
 #include "trainer/data_evaluate.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <utility>
 
@@ -12,14 +11,14 @@
 
 namespace trainer {
 
-DataEvaluation evaluate_frames(const Dataset& d, const Nodes& nodes, const GaussianModel<float>& model,
-                               smg::ParallelOptions parallel, std::vector<Image>* renders) {
-  const auto t0 = std::chrono::steady_clock::now();
-  DataEvaluation ev;
+void evaluate_frames(const Dataset& d, const Nodes& nodes, const GaussianModel<float>& model,
+                     smg::ParallelOptions parallel, bool keep_renders, Evaluation* e) {
+  Evaluation& ev = *e;
   NodeState<float> ns;
   ns.assign(nodes);
   ModelRenderer<float> renderer;
-  if (renders) renders->clear();
+  ev.frames.clear();
+  ev.frame_renders.clear();
   for (const EvalFrame& f : d.eval) {
     Image img(f.camera.width, f.camera.height, 3);
     renderer.render(model, ns, f.frame, splat_camera<float>(f.camera), img.data(), nullptr, nullptr, parallel);
@@ -33,25 +32,23 @@ DataEvaluation evaluate_frames(const Dataset& d, const Nodes& nodes, const Gauss
     s.psnr = m.psnr;
     s.ssim = m.ssim;
     ev.frames.push_back(s);
-    if (renders) renders->push_back(std::move(img));
+    if (keep_renders) ev.frame_renders.push_back(std::move(img));
   }
   const double V = std::max<double>(1.0, static_cast<double>(ev.frames.size()));
-  ev.mean.name = "mean";
+  ev.frames_mean.name = "mean";
   int covisible_frames = 0;
   for (const FrameScore& s : ev.frames) {
-    ev.mean.mpsnr += s.mpsnr / V;
-    ev.mean.mssim += s.mssim / V;
-    ev.mean.psnr += s.psnr / V;
-    ev.mean.ssim += s.ssim / V;
+    ev.frames_mean.mpsnr += s.mpsnr / V;
+    ev.frames_mean.mssim += s.mssim / V;
+    ev.frames_mean.psnr += s.psnr / V;
+    ev.frames_mean.ssim += s.ssim / V;
     // NaN where a frame has no covisible pixel: left out of that mean only.
     if (std::isfinite(s.mssim_covisible)) {
-      ev.mean.mssim_covisible += s.mssim_covisible;
+      ev.frames_mean.mssim_covisible += s.mssim_covisible;
       ++covisible_frames;
     }
   }
-  ev.mean.mssim_covisible = covisible_frames > 0 ? ev.mean.mssim_covisible / covisible_frames : 0.0;
-  ev.seconds = seconds_since(t0);
-  return ev;
+  ev.frames_mean.mssim_covisible = covisible_frames > 0 ? ev.frames_mean.mssim_covisible / covisible_frames : 0.0;
 }
 
 }  // namespace trainer

@@ -9,10 +9,12 @@
 namespace trainer {
 
 DycheckScene to_dycheck(const Dataset& d, int val_gap, int cell) {
-  const Scene& sc = d.scene;
-  const int T = sc.frames(), W = sc.width(), H = sc.height();
-  if (!d.has_truth || d.test.size() != sc.test_cameras.size() || d.test_covisible.size() != d.test.size())
+  if (!d.truth || d.truth->test.size() != d.truth->scene.test_cameras.size() ||
+      d.truth->test_covisible.size() != d.truth->test.size())
     throw std::invalid_argument("to_dycheck: needs the procedural dataset with test views and covisibility");
+  const GroundTruth& g = *d.truth;
+  const Scene& sc = g.scene;
+  const int T = d.frames(), W = d.width, H = d.height;
   if (cell < 1 || W % cell != 0 || H % cell != 0)
     throw std::invalid_argument("to_dycheck: feature_cell must divide the image size");
   DycheckScene s;
@@ -21,17 +23,17 @@ DycheckScene to_dycheck(const Dataset& d, int val_gap, int cell) {
   const std::size_t plane = sz(W) * H;
   for (int t = 0; t < T; ++t) {
     s.train.push_back({dycheck_frame_name(0, t), 0, t});
-    s.train_cameras.push_back(sc.train_cameras[sz(t)]);
-    s.train_rgb.push_back(d.train[sz(t)].rgb);
+    s.train_cameras.push_back(d.cameras[sz(t)]);
+    s.train_rgb.push_back(d.images[sz(t)]);
   }
   s.depth = d.priors.depth;
-  for (int v = 0; v < static_cast<int>(d.test.size()); ++v)
+  for (int v = 0; v < static_cast<int>(g.test.size()); ++v)
     for (int t = 0; t < T; ++t) {
       if (val_gap > 0 && t % val_gap == val_gap - 1) continue;
       s.val.push_back({dycheck_frame_name(v + 1, t), v + 1, t});
       s.val_cameras.push_back(sc.test_cameras[sz(v)]);
-      s.val_rgb.push_back(d.test[sz(v)][sz(t)].rgb);
-      const std::uint8_t* m = d.test_covisible[sz(v)].data() + sz(t) * plane;
+      s.val_rgb.push_back(g.test[sz(v)][sz(t)].rgb);
+      const std::uint8_t* m = g.test_covisible[sz(v)].data() + sz(t) * plane;
       s.val_covisible.emplace_back(m, m + plane);
     }
   const Tracks& tr = d.priors.tracks;
@@ -60,13 +62,14 @@ DycheckScene to_dycheck(const Dataset& d, int val_gap, int cell) {
 }
 
 void export_queries(const Dataset& d, int count, TrackQueries* q, std::vector<float>* truth) {
+  if (!d.truth) throw std::invalid_argument("export_queries: needs the procedural dataset (true tracks)");
   const Tracks& tr = d.priors.tracks;
   const int T = tr.frames, N = tr.count;
   std::vector<int> picked;
   for (int i = 0; i < N; ++i) {
     const int b = tr.body[sz(i)];
     // Any object track truly visible at frame 0 (its true pixel there is the query).
-    if (!tr.visible_true[sz(i)] || b < 0 || !d.scene.bodies[sz(b)].foreground) continue;
+    if (!tr.visible_true[sz(i)] || b < 0 || !d.truth->scene.bodies[sz(b)].foreground) continue;
     picked.push_back(i);
   }
   // Spread the choice over the candidates (they are in track order).

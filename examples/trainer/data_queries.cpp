@@ -41,7 +41,7 @@ TrackQueries read_track_queries(const std::string& path, const Dataset& d) {
   const auto it = std::find(d.frame_names.begin(), d.frame_names.end(), q.frame);
   if (it == d.frame_names.end()) throw DataError(path + ": frame '" + q.frame + "' is not a training frame");
   if (q.count() == 0) throw DataError(path + ": xy_2x is empty");
-  const int W = d.scene.width(), H = d.scene.height();
+  const int W = d.width, H = d.height;
   for (int i = 0; i < q.count(); ++i) {
     const double x = q.xy[sz(i) * 2], y = q.xy[sz(i) * 2 + 1];
     if (!(x >= 0 && x < W && y >= 0 && y < H))
@@ -65,10 +65,10 @@ void write_track_queries(const std::string& path, const TrackQueries& q) {
 
 std::vector<float> carry_queries(const TrackQueries& q, const Dataset& d, const Nodes& nodes,
                                  const GaussianModel<float>& model, smg::ParallelOptions parallel) {
-  const int T = d.scene.frames(), W = d.scene.width(), H = d.scene.height(), M = q.count(), N = nodes.count;
+  const int T = d.frames(), W = d.width, H = d.height, M = q.count(), N = nodes.count;
   const int t = static_cast<int>(std::find(d.frame_names.begin(), d.frame_names.end(), q.frame) - d.frame_names.begin());
   if (t >= T) throw DataError("queries: frame '" + q.frame + "' is not a training frame");
-  const Camera& cam = d.scene.train_cameras[sz(t)];
+  const Camera& cam = d.cameras[sz(t)];
   NodeState<float> ns;
   ns.assign(nodes);
   // The model's depth at the query frame, for queries where the sensor has none.

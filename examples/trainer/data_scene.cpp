@@ -14,23 +14,15 @@ Dataset dataset_from_dycheck(DycheckScene&& s) {
   const int T = s.frames(), W = s.width, H = s.height;
   if (T < 2) throw DataError("splits/train.json: at least 2 training frames are needed, got " + std::to_string(T));
   Dataset d;
-  d.has_truth = false;
   d.source = s.root;
-  d.scene.config.frames = T;
-  d.scene.config.width = W;
-  d.scene.config.height = H;
-  d.scene.train_cameras = std::move(s.train_cameras);
+  d.width = W;
+  d.height = H;
+  d.cameras = std::move(s.train_cameras);
   for (const DycheckFrame& f : s.train) {
     d.time_ids.push_back(f.time);
     d.frame_names.push_back(f.name);
   }
-  d.train.resize(sz(T));
-  for (int t = 0; t < T; ++t) {
-    RenderOutput& o = d.train[sz(t)];
-    o.width = W;
-    o.height = H;
-    o.rgb = std::move(s.train_rgb[sz(t)]);
-  }
+  d.images = std::move(s.train_rgb);
 
   Priors& p = d.priors;
   p.frames = T;

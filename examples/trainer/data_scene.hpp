@@ -4,7 +4,7 @@
 // and the exporter that writes the procedural scene in that layout data_export.hpp.
 //
 // How a scene from disk enters the pipeline (docs/data.md section 5):
-//   training frames  -> Dataset::train[t].rgb, Scene::train_cameras[t] (sorted by time id)
+//   training frames  -> Dataset::images[t], Dataset::cameras[t] (sorted by time id)
 //   sensor depth     -> Priors::depth (lifting, Gaussian initialisation, depth loss)
 //   priors/masks     -> Priors::object_mask (dynamic Gaussians and node tracks inside, static
 //                       Gaussians outside); frames without a mask seed no Gaussians

@@ -4,7 +4,9 @@
 #include <chrono>
 #include <stdexcept>
 
+#include "trainer/dycheck.hpp"
 #include "trainer/progress.hpp"
+#include "trainer/util.hpp"
 
 namespace trainer {
 
@@ -23,25 +25,26 @@ Dataset make_dataset(const DatasetConfig& config, smg::ParallelOptions parallel)
   if (config.covisible_min_frames < 1) throw std::invalid_argument("dataset: covisible_min_frames must be >= 1");
   const auto start = std::chrono::steady_clock::now();
   Dataset d;
+  GroundTruth& g = d.truth.emplace();
   auto t0 = std::chrono::steady_clock::now();
-  d.scene = make_scene(config.scene);
+  g.scene = make_scene(config.scene);
   d.seconds.scene = seconds_since(t0);
 
   RenderOptions ro;
   ro.supersample = config.supersample;
   ro.parallel = parallel;
   t0 = std::chrono::steady_clock::now();
-  d.train = render_training_view(d.scene, ro);
+  g.train = render_training_view(g.scene, ro);
   d.seconds.render_train = seconds_since(t0);
 
   ro.surface_points = config.covisibility;
   t0 = std::chrono::steady_clock::now();
-  for (int v = 0; v < static_cast<int>(d.scene.test_cameras.size()); ++v) d.test.push_back(render_test_view(d.scene, v, ro));
+  for (int v = 0; v < static_cast<int>(g.scene.test_cameras.size()); ++v) g.test.push_back(render_test_view(g.scene, v, ro));
   d.seconds.render_test = seconds_since(t0);
 
   if (config.covisibility) {
     t0 = std::chrono::steady_clock::now();
-    for (const auto& view : d.test) d.test_covisible.push_back(covisibility_mask(d.scene, view, config.covisible_min_frames, parallel));
+    for (const auto& view : g.test) g.test_covisible.push_back(covisibility_mask(g.scene, view, config.covisible_min_frames, parallel));
     d.seconds.covisibility = seconds_since(t0);
   }
 
@@ -50,8 +53,21 @@ Dataset make_dataset(const DatasetConfig& config, smg::ParallelOptions parallel)
       config.tracker_failures == TrackerFailures::scene
           ? config.priors
           : tracker_failures(config.priors, static_cast<double>(static_cast<int>(config.tracker_failures) - 1));
-  d.priors = make_priors(d.scene, d.train, priors, parallel);
+  d.priors = make_priors(g.scene, g.train, priors, parallel);
   d.seconds.priors = seconds_since(t0);
+
+  // The sequence every stage reads: the training camera's views and images (copies of the
+  // truth renders' colour), the scene's extent and seed.
+  d.width = g.scene.width();
+  d.height = g.scene.height();
+  d.cameras = g.scene.train_cameras;
+  for (int t = 0; t < g.scene.frames(); ++t) {
+    d.images.push_back(g.train[sz(t)].rgb);
+    d.time_ids.push_back(t);
+    d.frame_names.push_back(dycheck_frame_name(0, t));
+  }
+  d.extent = g.scene.extent;
+  d.seed = g.scene.config.seed;
   d.seconds.total = seconds_since(start);
   return d;
 }

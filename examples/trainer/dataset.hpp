@@ -1,17 +1,16 @@
-// examples/trainer/dataset.hpp — everything the trainer reads, generated in one call.
+// examples/trainer/dataset.hpp — the sequence the trainer reads (Dataset), from the procedural
+// scene (make_dataset, here) or from disk (dataset_from_dycheck, data_scene.hpp).
 //
-// A Dataset is the scene (scene.hpp), the ground-truth renders of the training camera and of the
-// test cameras (raycast.hpp), the test views' co-visibility masks and the priors
-// (priors.hpp). The pipeline's stages consume it as follows:
-//   stage 1 (nodes)     lift_tracks(dataset.scene, dataset.priors) -> positions/visibility/
-//                       feature samples in smg's view layouts; truth for the 3D tracking error
-//   stage 2 (Gaussians) train[t].rgb (target images), priors.depth, priors.object_mask,
-//                       scene.train_cameras[t]
-//   evaluation          test[v][t].rgb against renders of scene.test_cameras[v], masked by
-//                       test_covisible[v]; tracking_error against LiftedTracks::positions_true
+// The stages read the sequence, never the truth:
+//   stage 0/1 (nodes)   lift_tracks(cameras, priors) -> positions/visibility/feature samples in
+//                       smg's view layouts
+//   stage 2 (Gaussians) images[t] (targets), priors.depth, priors.object_mask, cameras[t]
+//   evaluation          the procedural test views (truth->test, masked by truth->test_covisible)
+//                       or the validation frames (eval); 3D tracking error against the truth
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -55,23 +54,40 @@ struct EvalFrame {
   std::vector<std::uint8_t> covisible;  // [H][W] 0/1
 };
 
-// The procedural scene (make_dataset) fills scene, train, test, test_covisible and priors, with
-// ground truth everywhere. A scene read from disk (dataset_from_dycheck) fills scene with the
-// training cameras, image size and frame count only (no bodies), train[t].rgb, priors (tracks
-// without truth), and eval; has_truth is false and test / test_covisible are empty.
-struct Dataset {
+// The procedural scene's ground truth (make_dataset only): the generator's scene (bodies,
+// motions, test cameras), its renders of the training camera (colour, depth, body ids, surface
+// points) and of the test cameras, and the test views' co-visibility masks. Everything that
+// reports an error against the truth reads it from here; no stage reads it to train.
+struct GroundTruth {
   Scene scene;
   std::vector<RenderOutput> train;                          // [T]
   std::vector<std::vector<RenderOutput>> test;              // [views][T] (with surface points)
   std::vector<std::vector<std::uint8_t>> test_covisible;    // [views] [T][H][W] (if requested)
-  Priors priors;
-  DatasetTiming seconds;
+};
 
-  bool has_truth = true;                 // analytic ground truth available (procedural scene)
+// The sequence the trainer reads, from any source: training cameras and images, priors,
+// validation frames, and optional ground truth. Two adapters fill it: make_dataset (the
+// procedural scene: scene, ray caster, priors; truth everywhere) and dataset_from_dycheck
+// (data_scene.hpp; every on-disk layout is read into a DycheckScene by its own reader,
+// layouts.hpp). The stages read only the fields above `truth`.
+struct Dataset {
   std::string source = "procedural";     // or the scene folder it was read from
+  int width = 0, height = 0;             // training images (pixels; 2x for a Dycheck scene)
+  std::vector<Camera> cameras;           // [T] training cameras
+  std::vector<Image> images;             // [T] training images [H][W][3]
   std::vector<int> time_ids;             // [T] time id of each training frame (procedural: t)
   std::vector<std::string> frame_names;  // [T] training frame names (procedural: "0_{t:05d}")
-  std::vector<EvalFrame> eval;           // validation frames of a scene from disk
+  Priors priors;
+  std::vector<EvalFrame> eval;           // validation frames (a scene from disk)
+  // Diagonal (metres) that scales the tracking thresholds and, for a scene from disk, every
+  // length of the configuration: the procedural scene's object bounds; for a scene from disk,
+  // the lifted tracks' extent, set by run_stage0 (pipeline.hpp).
+  double extent = 0;
+  std::uint64_t seed = 0;                // the procedural scene's seed (0 from disk): seeds stage 2
+  DatasetTiming seconds;
+  std::optional<GroundTruth> truth;      // the procedural scene only
+
+  int frames() const { return static_cast<int>(cameras.size()); }
 };
 
 // Selects a scene layout and the priors that go with it: the occluder layout's depth prior is

@@ -1,10 +1,12 @@
-// examples/trainer/evaluate.cpp — test-view image metrics and node tracking error.
+// examples/trainer/evaluate.cpp — the evaluation of a run: test-view image metrics and node tracking error (the
+// validation frames are data_evaluate.cpp).
 #include "trainer/evaluate.hpp"
 
 #include <chrono>
 #include <cmath>
 #include <cstdint>
 
+#include "trainer/data_evaluate.hpp"
 #include "trainer/progress.hpp"
 #include "trainer/util.hpp"
 
@@ -55,15 +57,18 @@ TrackMetrics track_metrics(const Scene& scene, const Nodes& n) {
   return m;
 }
 
-Evaluation evaluate(const Dataset& d, const Nodes& nodes, const GaussianModel<float>& model,
-                    smg::ParallelOptions parallel, std::vector<std::vector<Image>>* renders) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const Scene& scene = d.scene;
-  const int T = scene.frames(), W = scene.width(), H = scene.height();
+namespace {
+
+// The test-view part of evaluate(): both test views and the training view against the truth.
+void evaluate_views(const Dataset& d, const Nodes& nodes, const GaussianModel<float>& model,
+                    smg::ParallelOptions parallel, bool keep_renders, Evaluation& e) {
+  const GroundTruth& g = *d.truth;
+  const Scene& scene = g.scene;
+  const int T = d.frames(), W = d.width, H = d.height;
   const std::size_t plane = sz(W) * H;
   const int V = static_cast<int>(scene.test_cameras.size());
   const int box = scene.find_body("box");
-  Evaluation e;
+  std::vector<std::vector<Image>>* renders = keep_renders ? &e.renders : nullptr;
   NodeState<float> ns;
   ns.assign(nodes);
   ModelRenderer<float> renderer;
@@ -75,15 +80,15 @@ Evaluation evaluate(const Dataset& d, const Nodes& nodes, const GaussianModel<fl
     vm.name = train ? "train" : scene.test_views[sz(v)].name;
     std::vector<double> psnr, ssim, psnr_m, ssim_m, psnr_obj;
     for (int t = 0; t < T; ++t) {
-      const Camera& cam = train ? scene.train_cameras[sz(t)] : scene.test_cameras[sz(v)];
+      const Camera& cam = train ? d.cameras[sz(t)] : scene.test_cameras[sz(v)];
       renderer.render(model, ns, t, splat_camera<float>(cam), rgb.data(), nullptr, nullptr, parallel);
       const Image im = to_image(rgb, W, H);
-      const RenderOutput& gt = train ? d.train[sz(t)] : d.test[sz(v)][sz(t)];
+      const RenderOutput& gt = train ? g.train[sz(t)] : g.test[sz(v)][sz(t)];
       psnr.push_back(trainer::psnr(im, gt.rgb));
       if (!train) {
         ssim.push_back(trainer::ssim(im, gt.rgb));
-        if (!d.test_covisible.empty()) {
-          const std::uint8_t* cm = d.test_covisible[sz(v)].data() + sz(t) * plane;
+        if (!g.test_covisible.empty()) {
+          const std::uint8_t* cm = g.test_covisible[sz(v)].data() + sz(t) * plane;
           psnr_m.push_back(trainer::psnr(im, gt.rgb, cm));
           ssim_m.push_back(trainer::ssim(im, gt.rgb, cm));
         }
@@ -124,6 +129,16 @@ Evaluation evaluate(const Dataset& d, const Nodes& nodes, const GaussianModel<fl
     e.mean.psnr_objects += vm.psnr_objects / V;
   }
   e.tracks = track_metrics(scene, nodes);
+}
+
+}  // namespace
+
+Evaluation evaluate(const Dataset& d, const Nodes& nodes, const GaussianModel<float>& model,
+                    smg::ParallelOptions parallel, bool keep_renders) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Evaluation e;
+  if (d.truth) evaluate_views(d, nodes, model, parallel, keep_renders, e);
+  if (!d.eval.empty()) evaluate_frames(d, nodes, model, parallel, keep_renders, &e);
   e.seconds = seconds_since(t0);
   return e;
 }

@@ -1,6 +1,7 @@
-// examples/trainer/evaluate.hpp — held-out views and 3D tracking error.
+// examples/trainer/evaluate.hpp — the evaluation of a run: held-out views and 3D tracking error
+// (procedural scene), or the validation frames (a scene from disk; data_evaluate.hpp).
 //
-// Image metrics (metrics.hpp) on the two fixed test cameras at every frame, averaged over frames
+// Procedural scene: image metrics (metrics.hpp) on the two fixed test cameras at every frame, averaged over frames
 // (Dycheck's mPSNR / mSSIM are per-frame means):
 //   psnr, ssim                  the whole image
 //   psnr_masked, ssim_masked    co-visible pixels only (Dycheck's protocol; dataset.hpp)
@@ -36,20 +37,37 @@ struct TrackMetrics {
   TrackingError all, box, arm, ball, hidden, box_hidden;
 };
 
+// Image metrics of one validation frame (Dycheck's definitions, dycheck_metrics.hpp).
+struct FrameScore {
+  std::string name;
+  double mpsnr = 0, mssim = 0, mssim_covisible = 0, psnr = 0, ssim = 0;
+};
+
+// The evaluation of a run: the procedural scene's test views (with truth) and the validation
+// frames of a scene from disk (Dycheck's protocol). A dataset has one or the other; each part
+// is empty where its data is.
 struct Evaluation {
+  // Test views (Dataset::truth).
   std::vector<ViewMetrics> views;
   ViewMetrics mean;        // the mean over the test views
   double train_psnr = 0;   // training view, all frames
   TrackMetrics tracks;
+  std::vector<std::vector<Image>> renders;  // [test views + 1][T], the training view last (if asked)
+  // Validation frames (Dataset::eval).
+  std::vector<FrameScore> frames;           // [V] in Dataset::eval order
+  FrameScore frames_mean;                   // the mean over every validation frame of every camera
+  std::vector<Image> frame_renders;         // [V] (if asked)
   double seconds = 0;
 };
 
 // 3D tracking error of the nodes.
 TrackMetrics track_metrics(const Scene& scene, const Nodes& nodes);
 
-// Renders both test views (and the training view) at every frame and computes every metric.
-// renders (optional, out): [views + 1][T] images, test views first, the training view last.
+// Renders what the dataset has to evaluate against and scores it: with truth, both test views and
+// the training view at every frame, and the nodes' tracking error; the validation frames, each
+// at its training frame (EvalFrame::frame) through its own camera. With `keep_renders` the
+// rendered images are kept in the result.
 Evaluation evaluate(const Dataset& data, const Nodes& nodes, const GaussianModel<float>& model,
-                    smg::ParallelOptions parallel = {}, std::vector<std::vector<Image>>* renders = nullptr);
+                    smg::ParallelOptions parallel = {}, bool keep_renders = false);
 
 }  // namespace trainer

@@ -98,8 +98,7 @@ smg::splat::Camera<S> splat_camera(const Camera& c) {
 
 template <class S>
 GaussianModel<S> init_model(const Dataset& d, const Nodes& nodes, const InitOptions& o, smg::ParallelOptions parallel) {
-  const Scene& scene = d.scene;
-  const int W = scene.width(), H = scene.height(), T = scene.frames();
+  const int W = d.width, H = d.height, T = d.frames();
   const std::size_t plane = sz(W) * H;
   GaussianModel<S> m;
   GaussianTable<S>& g = m.table;
@@ -118,13 +117,13 @@ GaussianModel<S> init_model(const Dataset& d, const Nodes& nodes, const InitOpti
     const int s = std::max(1, stride);
     for (int t : frames) {
       if (t < 0 || t >= T) continue;
-      const Camera& cam = scene.train_cameras[sz(t)];
+      const Camera& cam = d.cameras[sz(t)];
       for (int y = s / 2; y < H; y += s)
         for (int x = s / 2; x < W; x += s) {
           const std::size_t pix = sz(y) * W + x;
           const float z = d.priors.depth[sz(t) * plane + pix];
           if (z <= 0 || (d.priors.object_mask[sz(t) * plane + pix] != 0) != object) continue;
-          visit(t, cam.unproject(Eigen::Vector2d(x + 0.5, y + 0.5), z), &d.train[sz(t)].rgb.pixels[pix * 3],
+          visit(t, cam.unproject(Eigen::Vector2d(x + 0.5, y + 0.5), z), &d.images[sz(t)].pixels[pix * 3],
                 o.scale * s * z / cam.fx);
         }
     }

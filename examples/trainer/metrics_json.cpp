@@ -78,7 +78,7 @@ double peak_memory_mib() {
 
 std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
   const TrainerConfig& cfg = *run.config;
-  const bool truth = r.data.has_truth;
+  const bool truth = r.data.truth.has_value();
   cli::JsonLine j;
   j.add("program", "smg_trainer").add("variant", to_string(cfg.variant.variant));
   if (truth) {
@@ -88,9 +88,9 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
   } else {
     j.add("scene", r.data.source);
   }
-  j.add("T", r.data.scene.frames())
-      .add("width", r.data.scene.width())
-      .add("height", r.data.scene.height())
+  j.add("T", r.data.frames())
+      .add("width", r.data.width)
+      .add("height", r.data.height)
       .add("threads", cfg.threads > 0 ? cfg.threads : smg::num_threads());
   if (truth) {
     const Evaluation& e = r.evaluation;
@@ -113,14 +113,14 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
     add_confidence(j, "", r.confidence_stage1);
     add_confidence(j, "_lifted", r.confidence_lifted);
   } else {
-    const DataEvaluation& e = r.data_evaluation;
+    const Evaluation& e = r.evaluation;
     j.add("semantic_graph", r.config.variant.semantic_graph)
         .add("val_frames", static_cast<long long>(e.frames.size()))
-        .add("mpsnr", e.mean.mpsnr)
-        .add("mssim", e.mean.mssim)
-        .add("mssim_covisible", e.mean.mssim_covisible)
-        .add("psnr", e.mean.psnr)
-        .add("ssim", e.mean.ssim);
+        .add("mpsnr", e.frames_mean.mpsnr)
+        .add("mssim", e.frames_mean.mssim)
+        .add("mssim_covisible", e.frames_mean.mssim_covisible)
+        .add("psnr", e.frames_mean.psnr)
+        .add("ssim", e.frames_mean.ssim);
     std::string frames = "[";
     for (const FrameScore& f : e.frames) {
       cli::JsonLine fj;
@@ -135,7 +135,7 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
           .add("delta_5cm", run.query_error->within_5cm)
           .add("delta_10cm", run.query_error->within_10cm);
   }
-  j.add("extent", r.data.scene.extent);
+  j.add("extent", r.data.extent);
   if (!truth) j.add("length_factor", r.length_factor).add("unit", r.nodes.unit).add("lifted_tracks", r.lifted.count);
   j.add("nodes", r.nodes.count)
       .add("edges", static_cast<long long>(r.nodes.graph.stats.edges))
@@ -146,7 +146,6 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
       .add("pruned", r.stage2.pruned)
       .add("stage1_iterations", r.stage1.iterations)
       .add("stage2_iterations", r.stage2.iterations);
-  const double seconds_eval = truth ? r.evaluation.seconds : r.data_evaluation.seconds;
   if (truth)
     j.add("seconds_dataset", r.seconds_dataset);
   else
@@ -154,7 +153,7 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
   j.add("seconds_stage0", r.seconds_stage0)
       .add("seconds_stage1", r.stage1.seconds)
       .add("seconds_stage2", r.stage2.seconds)
-      .add("seconds_eval", seconds_eval);
+      .add("seconds_eval", r.evaluation.seconds);
   if (truth) {
     j.add("seconds_total", r.seconds_total);
   } else {

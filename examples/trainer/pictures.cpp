@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <stdexcept>
 
 #include "trainer/frames.hpp"
 #include "trainer/image_io.hpp"
@@ -28,7 +29,7 @@ Image node_overlay(const TrainerResult& r, const Camera& cam, const Image& gt, i
   Image im = gt;
   for (float& p : im.pixels) p *= 0.45f;
   const Nodes& n = r.nodes;
-  const double extent = r.data.scene.extent;
+  const double extent = r.data.extent;
   for (int i = 0; i < n.count; ++i) {
     const std::size_t s = sz(t) * n.count + i;
     const Eigen::Vector3d x = Eigen::Map<const Eigen::Vector3d>(n.positions.data() + 3 * s);
@@ -51,8 +52,11 @@ Image node_overlay(const TrainerResult& r, const Camera& cam, const Image& gt, i
 
 std::vector<std::string> write_pictures(const std::string& dir, const TrainerResult& r, int shown) {
   namespace fs = std::filesystem;
-  const Scene& scene = r.data.scene;
-  const int T = scene.frames(), V = static_cast<int>(scene.test_cameras.size());
+  if (!r.data.truth) throw std::invalid_argument("write_pictures: needs the procedural scene's test views");
+  const GroundTruth& g = *r.data.truth;
+  const Scene& scene = g.scene;
+  const int T = r.data.frames(), V = static_cast<int>(scene.test_cameras.size());
+  const std::vector<std::vector<Image>>& renders = r.evaluation.renders;
   const std::vector<int> frames = spread_frames(T, shown);
   std::vector<std::string> written;
   auto save = [&](const std::string& name, const Image& im) {
@@ -64,8 +68,8 @@ std::vector<std::string> write_pictures(const std::string& dir, const TrainerRes
   for (int v = 0; v < V; ++v) {
     std::vector<Image> rows;
     for (int t : frames) {
-      const Image& gt = r.data.test[sz(v)][sz(t)].rgb;
-      const Image& im = r.renders[sz(v)][sz(t)];
+      const Image& gt = g.test[sz(v)][sz(t)].rgb;
+      const Image& im = renders[sz(v)][sz(t)];
       rows.push_back(hstack({labelled(gt, "truth t=" + std::to_string(t)), labelled(im, "render"),
                              labelled(abs_error(im, gt, 4.0f), "|error| x4")}));
     }
@@ -82,12 +86,12 @@ std::vector<std::string> write_pictures(const std::string& dir, const TrainerRes
         cells.push_back(labelled(get(t), (cells.empty() ? label + " " : std::string()) + "t=" + std::to_string(t)));
       rows.push_back(hstack(cells));
     };
-    row("train truth", [&](int t) { return r.data.train[sz(t)].rgb; });
-    row("train render", [&](int t) { return r.renders[sz(V)][sz(t)]; });
+    row("train truth", [&](int t) { return r.data.images[sz(t)]; });
+    row("train render", [&](int t) { return renders[sz(V)][sz(t)]; });
     for (int v = 0; v < V; ++v) {
       const std::string& name = scene.test_views[sz(v)].name;
-      row(name + " truth", [&](int t) { return r.data.test[sz(v)][sz(t)].rgb; });
-      row(name + " render", [&](int t) { return r.renders[sz(v)][sz(t)]; });
+      row(name + " truth", [&](int t) { return g.test[sz(v)][sz(t)].rgb; });
+      row(name + " render", [&](int t) { return renders[sz(v)][sz(t)]; });
     }
     save("contact_sheet.png", vstack(rows, 3));
   }
@@ -97,7 +101,7 @@ std::vector<std::string> write_pictures(const std::string& dir, const TrainerRes
     for (int v = 0; v < V; ++v) {
       std::vector<Image> cells;
       for (int t : spread_frames(T, 4))
-        cells.push_back(labelled(upscale(node_overlay(r, scene.test_cameras[sz(v)], r.data.test[sz(v)][sz(t)].rgb, t), 2),
+        cells.push_back(labelled(upscale(node_overlay(r, scene.test_cameras[sz(v)], g.test[sz(v)][sz(t)].rgb, t), 2),
                                  scene.test_views[sz(v)].name + " nodes t=" + std::to_string(t)));
       rows.push_back(hstack(cells));
     }

@@ -30,11 +30,7 @@ TrainerConfig default_config(bool quick) {
   return c;
 }
 
-void resolve_frames(TrainerConfig& c) {
-  const int T = c.dataset.scene.frames;
-  if (c.init.static_frames.empty()) c.init.static_frames = spread_frames(T, 4);
-  if (c.init.dynamic_frames.empty()) c.init.dynamic_frames = spread_frames(T, 8);
-}
+void resolve_frames(TrainerConfig& c) { resolve_frames(c, c.dataset.scene.frames, {}); }
 
 void resolve_frames(TrainerConfig& c, int T, const std::vector<std::uint8_t>& has_mask) {
   std::vector<int> masked;
@@ -67,76 +63,78 @@ TrainerResult run_stage0(const TrainerConfig& config, const Progress& progress) 
   const auto t0 = std::chrono::steady_clock::now();
   Dataset data = make_dataset(config.dataset, smg::ParallelOptions{config.threads, 0});
   const double seconds = seconds_since(t0);
-  const Scene& scene = data.scene;
   progress.line("data", format("scene seed %llu: T=%d %dx%d, %d tracks, extent %.3f m (%.1fs)",
-                               static_cast<unsigned long long>(scene.config.seed), scene.frames(), scene.width(),
-                               scene.height(), data.priors.tracks.count, scene.extent, seconds));
+                               static_cast<unsigned long long>(data.seed), data.frames(), data.width, data.height,
+                               data.priors.tracks.count, data.extent, seconds));
   TrainerResult r = run_stage0(config, std::move(data), progress);
   r.seconds_dataset = seconds;
   return r;
 }
+
+namespace {
+
+// What only the procedural scene's truth can say, for the confidence diagnostics
+// (confidence_diagnostics): each node's semantic class and which of its samples are failed
+// tracker reports.
+void label_nodes_from_truth(const Dataset& d, const LiftedTracks& lifted, Nodes& nodes) {
+  const Scene& scene = d.truth->scene;
+  const Tracks& tr = d.priors.tracks;
+  const int T = nodes.frames, N = nodes.count;
+  nodes.semantic_class.resize(sz(N));
+  nodes.failed_report.assign(sz(T) * N, 0);
+  for (int i = 0; i < N; ++i) {
+    nodes.semantic_class[sz(i)] = scene.bodies[sz(nodes.body[sz(i)])].semantic_class;
+    const int track = lifted.track[sz(nodes.track[sz(i)])];
+    for (int t = 0; t < T; ++t) {
+      const SampleKind k = tr.kind[sz(t) * tr.count + track];
+      nodes.failed_report[sz(t) * N + i] = k == SampleKind::outlier || k == SampleKind::occluded_reported ||
+                                           k == SampleKind::stuck || k == SampleKind::switched;
+    }
+  }
+}
+
+}  // namespace
 
 TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Progress& progress) {
   TrainerResult r;
   r.config = config_in;
   TrainerConfig& config = r.config;
   r.data = std::move(data);
+  Dataset& d = r.data;
+  const bool truth = d.truth.has_value();
   const smg::ParallelOptions par{config.threads, 0};
   auto t0 = std::chrono::steady_clock::now();
-  if (r.data.has_truth) {
-    resolve_frames(config);
-  } else {
-    // A scene from disk: its scale decides every length (docs/data.md section 5).
-    resolve_frames(config, r.data.scene.frames(), r.data.priors.has_mask);
-    // Lifting depends on no length of the configuration, so this lifting is stage 0's too.
-    r.lifted = lift_tracks(r.data.scene, r.data.priors, config.lift);
-    // Too little usable data is a problem of the scene's files (exit 2 in smg_trainer), named by
-    // the files that decide it.
+  // Stage 0: lifting, nodes, graph, rotations. Lifting depends on no length of the configuration.
+  resolve_frames(config, d.frames(), d.priors.has_mask);
+  r.lifted = lift_tracks(d.cameras, d.priors, config.lift);
+  // Without feature maps there are no descriptors: the graph is geometric (train.cpp says so).
+  if (d.priors.feature_dim == 0) config.variant.semantic_graph = false;
+  if (!truth) {
+    // A scene from disk: its scale decides every length (docs/data.md section 5). Too little
+    // usable data is a problem of the scene's files (exit 2 in smg_trainer), named by the files
+    // that decide it.
     const double extent = lifted_extent(r.lifted);
     if (!(extent > 0))
       throw DataError("priors/tracks.npz, priors/masks, depth/2x: too few lifted object tracks to measure the "
                       "scene's extent (fewer than 16 visible samples with depth > 0 of tracks whose query pixel "
                       "is in a dynamic mask)");
-    // Without feature files there are no descriptors: the graph is geometric (train.cpp says so).
-    if (r.data.priors.feature_dim == 0) config.variant.semantic_graph = false;
-    r.data.scene.extent = extent;
+    d.extent = extent;
     r.length_factor = extent / kReferenceExtent;
     scale_lengths(config, r.length_factor);
     progress.line("data", format("%s: T=%d %dx%d, %d tracks, %d validation frames, extent %.3f m (lengths x %.3f)",
-                                 r.data.source.c_str(), r.data.scene.frames(), r.data.scene.width(),
-                                 r.data.scene.height(), r.data.priors.tracks.count,
-                                 static_cast<int>(r.data.eval.size()), extent, r.length_factor));
+                                 d.source.c_str(), d.frames(), d.width, d.height, d.priors.tracks.count,
+                                 static_cast<int>(d.eval.size()), extent, r.length_factor));
   }
-  const Scene& scene = r.data.scene;
-  // Stage 0: lifting, nodes, graph, rotations.
-  if (r.data.has_truth) {
-    r.lifted = lift_tracks(scene, r.data.priors, config.lift);
+  try {
     r.nodes = make_nodes(r.lifted, config.nodes, config.variant.semantic_graph, par);
-  } else {
-    try {
-      r.nodes = make_nodes(r.lifted, config.nodes, config.variant.semantic_graph, par);
-    } catch (const std::runtime_error& e) {
-      // No node (no track visible in enough frames) is the scene's problem, not the program's.
-      throw DataError("priors/tracks.npz: " + std::string(e.what()));
-    }
+  } catch (const std::runtime_error& e) {
+    // No node (no track visible in enough frames): on disk that is the scene's problem, not the
+    // program's.
+    if (truth) throw;
+    throw DataError("priors/tracks.npz: " + std::string(e.what()));
   }
   init_rotations(r.nodes);
-  if (r.data.has_truth) {
-    // Diagnostics of the confidences (confidence_diagnostics): classes and failed reports.
-    const Tracks& tr = r.data.priors.tracks;
-    const int T = r.nodes.frames, N = r.nodes.count;
-    r.nodes.semantic_class.resize(sz(N));
-    r.nodes.failed_report.assign(sz(T) * N, 0);
-    for (int i = 0; i < N; ++i) {
-      r.nodes.semantic_class[sz(i)] = scene.bodies[sz(r.nodes.body[sz(i)])].semantic_class;
-      const int track = r.lifted.track[sz(r.nodes.track[sz(i)])];
-      for (int t = 0; t < T; ++t) {
-        const SampleKind k = tr.kind[sz(t) * tr.count + track];
-        r.nodes.failed_report[sz(t) * N + i] = k == SampleKind::outlier || k == SampleKind::occluded_reported ||
-                                               k == SampleKind::stuck || k == SampleKind::switched;
-      }
-    }
-  }
+  if (truth) label_nodes_from_truth(d, r.lifted, r.nodes);
   r.seconds_stage0 = seconds_since(t0);
   {
     const smg::GraphStats& gs = r.nodes.graph.stats;
@@ -148,7 +146,7 @@ TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Pro
                                    static_cast<long long>(gs.gate_removed_edges),
                                    static_cast<long long>(gs.isolated_nodes), r.seconds_stage0));
   }
-  if (r.data.has_truth) r.tracks_lifted = track_metrics(scene, r.nodes);
+  if (truth) r.tracks_lifted = track_metrics(d.truth->scene, r.nodes);
   return r;
 }
 
@@ -158,25 +156,23 @@ namespace {
 TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point start, const Progress& progress) {
   const TrainerConfig& config = r.config;
   const smg::ParallelOptions par{config.threads, 0};
-  const Scene& scene = r.data.scene;
-  const bool truth = r.data.has_truth;
+  const GroundTruth* truth = r.data.truth ? &*r.data.truth : nullptr;
 
-  // Stage 1.
+  // Stage 1, with what the confidences measure before and after it where the truth can tell.
   NodeObjective objective(config.variant, config.node_loss, par);
-  if (truth)
-    r.confidence_lifted = confidence_diagnostics(r.nodes, r.nodes.positions, config.node_loss.confidence,
-                                                 config.node_loss.alpha, par);
+  const auto diagnose = [&] {
+    return confidence_diagnostics(r.nodes, r.nodes.positions, config.node_loss.confidence, config.node_loss.alpha, par);
+  };
+  if (truth) r.confidence_lifted = diagnose();
   r.stage1 = fit_nodes(r.nodes, objective, config.stage1, progress);
-  if (truth)
-    r.confidence_stage1 = confidence_diagnostics(r.nodes, r.nodes.positions, config.node_loss.confidence,
-                                                 config.node_loss.alpha, par);
-  if (!truth) {
-    progress.line("stage1", format("done in %.1fs", r.stage1.seconds));
-  } else {
-    r.tracks_stage1 = track_metrics(scene, r.nodes);
+  if (truth) {
+    r.confidence_stage1 = diagnose();
+    r.tracks_stage1 = track_metrics(truth->scene, r.nodes);
     progress.line("stage1", format("done in %.1fs: node EPE %.4f m (lifted %.4f), box %.4f, hidden %.4f",
-                                 r.stage1.seconds, r.tracks_stage1.all.epe, r.tracks_lifted.all.epe,
-                                 r.tracks_stage1.box.epe, r.tracks_stage1.hidden.epe));
+                                   r.stage1.seconds, r.tracks_stage1.all.epe, r.tracks_lifted.all.epe,
+                                   r.tracks_stage1.box.epe, r.tracks_stage1.hidden.epe));
+  } else {
+    progress.line("stage1", format("done in %.1fs", r.stage1.seconds));
   }
 
   // Stage 2.
@@ -185,27 +181,25 @@ TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point 
   progress.line("stage2", format("init: %d Gaussians (%d static, %d dynamic, %d drivers each) in %.2fs", r.model.count(),
                                  r.model.fixed, r.model.dynamic(), r.model.skin.width, seconds_since(t0)));
   Stage2Options s2 = config.stage2;
-  s2.seed = scene.config.seed;
+  s2.seed = r.data.seed;
   r.stage2 = train_gaussians(r.data, r.nodes, objective, r.model, s2, progress, par);
   progress.line("stage2", format("done in %.1fs (%.1f ms per iteration)", r.stage2.seconds,
                                  1e3 * r.stage2.seconds / std::max(1, r.stage2.iterations)));
 
   // Evaluation.
-  if (!truth) {
-    r.data_evaluation = evaluate_frames(r.data, r.nodes, r.model, par, &r.eval_renders);
-    const FrameScore& m = r.data_evaluation.mean;
-    progress.line("eval", format("%d validation frames: mPSNR %.2f dB, mSSIM %.4f (covisible %.4f), PSNR %.2f dB (%.1fs)",
-                                 static_cast<int>(r.data_evaluation.frames.size()), m.mpsnr, m.mssim,
-                                 m.mssim_covisible, m.psnr, r.data_evaluation.seconds));
-    r.seconds_total = seconds_since(start);
-    return r;
-  }
-  r.evaluation = evaluate(r.data, r.nodes, r.model, par, &r.renders);
+  r.evaluation = evaluate(r.data, r.nodes, r.model, par, /*keep_renders=*/true);
   const Evaluation& e = r.evaluation;
-  progress.line("eval", format("test PSNR %.2f dB (masked %.2f), SSIM %.4f, box PSNR %.2f; node EPE %.4f m, "
-                               "d5 %.3f, d10 %.3f, box EPE %.4f (%.1fs)",
-                               e.mean.psnr, e.mean.psnr_masked, e.mean.ssim, e.mean.psnr_box, e.tracks.all.epe,
-                               e.tracks.all.within_5, e.tracks.all.within_10, e.tracks.box.epe, e.seconds));
+  if (!e.frames.empty()) {
+    const FrameScore& m = e.frames_mean;
+    progress.line("eval", format("%d validation frames: mPSNR %.2f dB, mSSIM %.4f (covisible %.4f), PSNR %.2f dB (%.1fs)",
+                                 static_cast<int>(e.frames.size()), m.mpsnr, m.mssim, m.mssim_covisible, m.psnr,
+                                 e.seconds));
+  }
+  if (truth)
+    progress.line("eval", format("test PSNR %.2f dB (masked %.2f), SSIM %.4f, box PSNR %.2f; node EPE %.4f m, "
+                                 "d5 %.3f, d10 %.3f, box EPE %.4f (%.1fs)",
+                                 e.mean.psnr, e.mean.psnr_masked, e.mean.ssim, e.mean.psnr_box, e.tracks.all.epe,
+                                 e.tracks.all.within_5, e.tracks.all.within_10, e.tracks.box.epe, e.seconds));
   r.seconds_total = seconds_since(start);
   return r;
 }

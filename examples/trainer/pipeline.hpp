@@ -9,7 +9,6 @@
 #include <string>
 #include <vector>
 
-#include "trainer/data_evaluate.hpp"
 #include "trainer/data_scene.hpp"
 #include "trainer/dataset.hpp"
 #include "trainer/evaluate.hpp"
@@ -39,7 +38,7 @@ TrainerConfig default_config(bool quick = false);
 
 // Fills empty InitOptions frame lists from the frame count: static Gaussians from 4 frames
 // spread over the training orbit, dynamic ones from 8 reference frames. With `has_mask` ([T],
-// a scene from disk) the frames are spread over the frames that have a mask.
+// a scene from disk; empty: every frame) the frames are spread over the frames that have a mask.
 void resolve_frames(TrainerConfig& config);
 void resolve_frames(TrainerConfig& config, int frames, const std::vector<std::uint8_t>& has_mask);
 
@@ -60,18 +59,13 @@ struct TrainerResult {
   // What the confidences (E6) measure (procedural scenes only): of the lifted trajectories stage 1
   // starts from, and of its result (nodes.hpp, confidence_diagnostics).
   ConfidenceDiagnostics confidence_lifted, confidence_stage1;
-  Evaluation evaluation;       // after stage 2
-  std::vector<std::vector<Image>> renders;  // [test views + 1][T], the training view last
+  Evaluation evaluation;       // after stage 2, with the renders: test views or validation frames
   double seconds_dataset = 0, seconds_stage0 = 0, seconds_total = 0;
 
   // The configuration the stages ran with (frame lists resolved; lengths scaled for a scene from
   // disk by length_factor = extent / kReferenceExtent, 1 for the procedural scene).
   TrainerConfig config;
   double length_factor = 1.0;
-  // A scene from disk: the validation frames' scores and renders (evaluation/renders above stay
-  // empty; there is no ground truth to track against).
-  DataEvaluation data_evaluation;
-  std::vector<Image> eval_renders;
 };
 
 // The dataset and stage 0 only (lifting, node selection, graph, initial rotations): fills
@@ -88,8 +82,8 @@ TrainerResult run_stage0(const TrainerConfig& config, Dataset data, const Progre
 // Runs everything. Throws std::invalid_argument on a bad configuration (the dataset's
 // validation), std::runtime_error if the optimisation fails.
 TrainerResult run_trainer(const TrainerConfig& config, const Progress& progress);
-// The same on a given dataset; a dataset without truth is evaluated on its validation frames
-// (evaluate_frames) instead of the procedural test views.
+// The same on a given dataset (evaluate() scores the test views where the dataset has truth and
+// the validation frames where it has them).
 TrainerResult run_trainer(const TrainerConfig& config, Dataset data, const Progress& progress);
 // Stages 1 and 2 and the evaluation on the result of run_stage0 (its config and data): what
 // run_trainer does after stage 0, for a caller that checks stage 0 first (smg_trainer --data

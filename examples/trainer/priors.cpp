@@ -487,7 +487,7 @@ void sample_features(const Priors& p, int t, double u, double v, double* out) {
   for (int k = 0; k < C; ++k) out[k] = n > 0 ? out[k] / n : 0.0;
 }
 
-LiftedTracks lift_tracks(const Scene& scene, const Priors& p, const LiftOptions& options) {
+LiftedTracks lift_tracks(const std::vector<Camera>& cameras, const Priors& p, const LiftOptions& options) {
   const Tracks& tr = p.tracks;
   const int T = tr.frames, N0 = tr.count, W = p.width, H = p.height, C = p.feature_dim;
   // Lift every sample first, then keep the tracks that qualify.
@@ -499,7 +499,7 @@ LiftedTracks lift_tracks(const Scene& scene, const Priors& p, const LiftOptions&
       const std::size_t s = sz(t) * N0 + i;
       if (!tr.visible[s]) continue;
       const Eigen::Vector2d uv(tr.uv[s * 2], tr.uv[s * 2 + 1]);
-      const Camera& cam = scene.train_cameras[sz(t)];
+      const Camera& cam = cameras[sz(t)];
       if (!cam.contains(uv)) continue;
       const int x = static_cast<int>(uv.x()), y = static_cast<int>(uv.y());
       const double z = p.depth[(sz(t) * H + y) * W + x];

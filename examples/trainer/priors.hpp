@@ -171,7 +171,8 @@ struct LiftedTracks {
   }
 };
 
-LiftedTracks lift_tracks(const Scene& scene, const Priors& priors, const LiftOptions& options = {});
+// Lifts the tracks through the training cameras ([T], Dataset::cameras) with the depth prior.
+LiftedTracks lift_tracks(const std::vector<Camera>& cameras, const Priors& priors, const LiftOptions& options = {});
 
 // Feature map sample at a continuous pixel position (bilinear between cell centres, clamped at
 // the border), renormalised; writes C values (zeros where the frame has no feature map).

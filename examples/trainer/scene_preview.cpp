@@ -100,16 +100,17 @@ int main(int argc, char** argv) {
 
     const auto t0 = std::chrono::steady_clock::now();
     const trainer::Dataset d = trainer::make_dataset(cfg, smg::ParallelOptions{threads, 0});
-    const trainer::LiftedTracks lifted = trainer::lift_tracks(d.scene, d.priors);
+    const trainer::GroundTruth& g = *d.truth;  // make_dataset always fills it
+    const trainer::LiftedTracks lifted = trainer::lift_tracks(d.cameras, d.priors);
     const double seconds_lift = trainer::seconds_since(t0) - d.seconds.total;
 
     // Pictures.
-    const int T = d.scene.frames(), W = d.scene.width(), H = d.scene.height(), C = d.priors.feature_dim;
+    const int T = g.scene.frames(), W = g.scene.width(), H = g.scene.height(), C = d.priors.feature_dim;
     const std::vector<int> frames = trainer::spread_frames(T, show);
     const int columns = std::min<int>(static_cast<int>(frames.size()), 4);
     const auto fp = trainer::fit_feature_projection(d.priors.features.data(), d.priors.features.size() / C, C);
     double zmin = 1e30, zmax = 0;
-    for (const auto& r : d.train)
+    for (const auto& r : g.train)
       for (float z : r.depth)
         if (z > 0) {
           zmin = std::min<double>(zmin, z);
@@ -118,12 +119,12 @@ int main(int argc, char** argv) {
     const int track_stride = std::max(1, d.priors.tracks.count / 300);
     enum Panel { kTrain, kTracks, kDepth, kFeatures, kTest0, kTest1, kCovis0, kCovis1, kPanels };
     const std::string panel_names[kPanels] = {"training view", "reported tracks", "depth prior", "features (PCA)",
-                                              d.scene.test_views[0].name, d.scene.test_views[1].name,
-                                              "covisible " + d.scene.test_views[0].name,
-                                              "covisible " + d.scene.test_views[1].name};
+                                              g.scene.test_views[0].name, g.scene.test_views[1].name,
+                                              "covisible " + g.scene.test_views[0].name,
+                                              "covisible " + g.scene.test_views[1].name};
     auto panel = [&](int kind, int t) {
       const std::size_t ts = static_cast<std::size_t>(t), plane = static_cast<std::size_t>(W) * H;
-      const trainer::RenderOutput& r = d.train[ts];
+      const trainer::RenderOutput& r = g.train[ts];
       switch (kind) {
         case kTrain: return r.rgb;
         case kTracks: {
@@ -135,11 +136,11 @@ int main(int argc, char** argv) {
         case kDepth: return trainer::colorize_depth(d.priors.depth.data() + ts * plane, W, H, zmin, zmax);
         case kFeatures: return trainer::colorize_features(d.priors.features.data() + ts * plane * C, W, H, C, fp);
         case kTest0:
-        case kTest1: return d.test[static_cast<std::size_t>(kind - kTest0)][ts].rgb;
+        case kTest1: return g.test[static_cast<std::size_t>(kind - kTest0)][ts].rgb;
         default: {  // test view with the parts the training camera never saw tinted red
           const std::size_t v = static_cast<std::size_t>(kind - kCovis0);
-          Image im = d.test[v][ts].rgb;
-          const std::uint8_t* m = d.test_covisible[v].data() + ts * plane;
+          Image im = g.test[v][ts].rgb;
+          const std::uint8_t* m = g.test_covisible[v].data() + ts * plane;
           for (int y = 0; y < H; ++y)
             for (int x = 0; x < W; ++x)
               if (!m[static_cast<std::size_t>(y) * W + x]) {
@@ -161,8 +162,8 @@ int main(int argc, char** argv) {
     trainer::write_png((out / "tracks.png").string(), sheet(kTracks));
     trainer::write_png((out / "depth.png").string(), sheet(kDepth));
     trainer::write_png((out / "features.png").string(), sheet(kFeatures));
-    trainer::write_png((out / (d.scene.test_views[0].name + ".png")).string(), sheet(kTest0));
-    trainer::write_png((out / (d.scene.test_views[1].name + ".png")).string(), sheet(kTest1));
+    trainer::write_png((out / (g.scene.test_views[0].name + ".png")).string(), sheet(kTest0));
+    trainer::write_png((out / (g.scene.test_views[1].name + ".png")).string(), sheet(kTest1));
     trainer::write_png((out / "covisible.png").string(), trainer::vstack({sheet(kCovis0), sheet(kCovis1)}, 4));
     // Overview: one row per modality over at most 6 frames, the row's name on its first cell.
     {
@@ -181,10 +182,10 @@ int main(int argc, char** argv) {
     const trainer::TrackStats st = trainer::track_stats(d.priors.tracks);
     double covisible[2] = {0, 0};
     for (int v = 0; v < 2; ++v) {
-      const auto& m = d.test_covisible[static_cast<std::size_t>(v)];
+      const auto& m = g.test_covisible[static_cast<std::size_t>(v)];
       long long n = 0, hit = 0;
       for (std::size_t i = 0; i < m.size(); ++i) {
-        if (d.test[static_cast<std::size_t>(v)][i / (static_cast<std::size_t>(W) * H)].body[i % (static_cast<std::size_t>(W) * H)] < 0) continue;
+        if (g.test[static_cast<std::size_t>(v)][i / (static_cast<std::size_t>(W) * H)].body[i % (static_cast<std::size_t>(W) * H)] < 0) continue;
         ++n;
         hit += m[i];
       }
@@ -208,8 +209,8 @@ int main(int argc, char** argv) {
         .add("occluded_visible_rate", st.occluded_visible_rate)
         .add("stuck_track_rate", st.stuck_track_rate)
         .add("switched_track_rate", st.switched_track_rate)
-        .add("extent", d.scene.extent)
-        .add("min_gap", d.scene.min_gap)
+        .add("extent", g.scene.extent)
+        .add("min_gap", g.scene.min_gap)
         .add("covisible_fraction_test_right", covisible[0])
         .add("covisible_fraction_test_left", covisible[1])
         .add("seconds_scene", d.seconds.scene)

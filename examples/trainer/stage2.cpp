@@ -50,12 +50,12 @@ template void photometric_loss<double>(const double*, const double*, const float
 Stage2Result train_gaussians(const Dataset& d, Nodes& nodes, NodeObjective& objective, GaussianModel<float>& m,
                              const Stage2Options& o, const Progress& progress, smg::ParallelOptions parallel) {
   const auto t0 = std::chrono::steady_clock::now();
-  const int T = d.scene.frames(), W = d.scene.width(), H = d.scene.height(), N = nodes.count;
+  const int T = d.frames(), W = d.width, H = d.height, N = nodes.count;
   const std::size_t plane = sz(W) * H;
   Stage2Result r;
 
   std::vector<smg::splat::Camera<float>> cams;
-  for (const Camera& c : d.scene.train_cameras) cams.push_back(splat_camera<float>(c));
+  for (const Camera& c : d.cameras) cams.push_back(splat_camera<float>(c));
   NodeState<float> ns;
   ns.assign(nodes);
   ModelRenderer<float> renderer;
@@ -95,7 +95,7 @@ Stage2Result train_gaussians(const Dataset& d, Nodes& nodes, NodeObjective& obje
     renderer.render(m, ns, t, cams[sz(t)], image.data(), nullptr, depth.data(), parallel);
     const auto c_loss = Clock::now();
     double l1 = 0, dl1 = 0;
-    photometric_loss<float>(image.data(), depth.data(), d.train[sz(t)].rgb.data(), d.priors.depth.data() + sz(t) * plane,
+    photometric_loss<float>(image.data(), depth.data(), d.images[sz(t)].data(), d.priors.depth.data() + sz(t) * plane,
                             W, H, o.lambda_depth, gimage.data(), gdepth.data(), &l1, &dl1);
     if (!std::isfinite(l1) || !std::isfinite(dl1))
       throw std::runtime_error("stage 2 diverged (non-finite loss at iteration " + std::to_string(it) + ")");

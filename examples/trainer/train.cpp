@@ -111,7 +111,7 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
       .add("lr_rotation", s.lr_rotation)
       .add("lr_rotation_final", s.lr_rotation_final)
       .add("confidence_every", s.confidence_every)
-      .add("extent", r.data.scene.extent)
+      .add("extent", r.data.extent)
       .add("unit", n.unit)
       .add("epe_lifted", r.tracks_lifted.all.epe)
       .add("edges", static_cast<long long>(n.graph.stats.edges))
@@ -154,14 +154,14 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const cha
   const trainer::TrainerResult r = trainer::run_trainer(std::move(stage0), progress);
   const auto t0 = std::chrono::steady_clock::now();
   fs::create_directories(out / "renders");
-  for (std::size_t v = 0; v < r.eval_renders.size(); ++v)
-    trainer::write_png((out / "renders" / (r.data.eval[v].name + ".png")).string(), r.eval_renders[v]);
+  for (std::size_t v = 0; v < r.evaluation.frame_renders.size(); ++v)
+    trainer::write_png((out / "renders" / (r.data.eval[v].name + ".png")).string(), r.evaluation.frame_renders[v]);
   std::vector<float> tracks;
   trainer::QueryTrackError te;
   if (queries) {
     tracks = trainer::carry_queries(*queries, r.data, r.nodes, r.model);
     npy::write((out / "tracks3d.npy").string(), tracks.data(),
-               {queries->count(), r.data.scene.frames(), 3});
+               {queries->count(), r.data.frames(), 3});
     if (truth) {
       te = trainer::query_track_error(tracks, *truth);
       progress.line("eval", trainer::format("%d query tracks: EPE %.4f m, within 5 cm %.3f, within 10 cm %.3f",
@@ -187,7 +187,7 @@ int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const cha
     }
     progress.line("done", "page of the run: " + trainer::write_view_html(out.string(), r, vi));
   }
-  progress.line("done", std::to_string(r.eval_renders.size()) + " renders and metrics.json in " + out.string() + "/");
+  progress.line("done", std::to_string(r.evaluation.frame_renders.size()) + " renders and metrics.json in " + out.string() + "/");
   std::cout << line << std::endl;
   return 0;
 }
@@ -208,10 +208,10 @@ int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, const
   std::vector<float> truth;
   trainer::export_queries(d, 256, &q, &truth);
   trainer::write_track_queries((dir / "queries.json").string(), q);
-  npy::write((dir / "queries_tracks3d.npy").string(), truth.data(), {q.count(), d.scene.frames(), 3});
+  npy::write((dir / "queries_tracks3d.npy").string(), truth.data(), {q.count(), d.frames(), 3});
   progress.line("done", trainer::format("scene seed %llu (T=%d %dx%d, %d tracks, %d queries) in %s/ (%.1fs)",
-                                        static_cast<unsigned long long>(cfg.dataset.scene.seed), d.scene.frames(),
-                                        d.scene.width(), d.scene.height(), d.priors.tracks.count, q.count(),
+                                        static_cast<unsigned long long>(d.seed), d.frames(),
+                                        d.width, d.height, d.priors.tracks.count, q.count(),
                                         dir.string().c_str(), trainer::seconds_since(t0)));
   return 0;
 }
@@ -294,7 +294,7 @@ int main(int argc, char** argv) {
         const std::string path = args.get("track-truth");
         try {
           const npy::Array a = npy::read(path);
-          const std::vector<std::int64_t> want{queries.count(), data.scene.frames(), 3};
+          const std::vector<std::int64_t> want{queries.count(), data.frames(), 3};
           if (a.shape != want)
             throw npy::Error("shape " + npy::shape_string(a.shape) + ", expected " + npy::shape_string(want));
           truth = a.as<float>(path);

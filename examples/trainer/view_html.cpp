@@ -221,40 +221,44 @@ std::vector<ViewPicture> view_pictures(const TrainerResult& r, ViewBlob& blob) {
     blob.add_bytes(name, encode_image(im, ImageCodec::jpeg, 85), "image/jpeg");
     return name;
   };
-  const bool train_renders = !r.renders.empty() && sz(T) <= r.renders.back().size();
-  for (int t = 0; t < T && sz(t) < d.train.size(); ++t) {
+  const Evaluation& ev = r.evaluation;
+  const bool train_renders = !ev.renders.empty() && sz(T) <= ev.renders.back().size();
+  for (int t = 0; t < T && sz(t) < d.images.size(); ++t) {
     ViewPicture p;
     p.frame = t;
     p.label = "training view";
-    p.truth = jpeg(d.train[sz(t)].rgb, "train_truth_" + std::to_string(t));
+    p.truth = jpeg(d.images[sz(t)], "train_truth_" + std::to_string(t));
     if (train_renders) {
-      const Image& render = r.renders.back()[sz(t)];
+      const Image& render = ev.renders.back()[sz(t)];
       p.render = jpeg(render, "train_render_" + std::to_string(t));
-      p.psnr = psnr(render, d.train[sz(t)].rgb);
+      p.psnr = psnr(render, d.images[sz(t)]);
     }
     pictures.push_back(p);
   }
   // Procedural test views: fixed cameras at every frame, scored on their covisible pixels.
-  for (std::size_t v = 0; v < d.test.size() && v + 1 < r.renders.size(); ++v)
-    for (int t = 0; t < T && sz(t) < d.test[v].size(); ++t) {
-      const std::string id = std::to_string(v) + "_" + std::to_string(t);
-      const RenderOutput& truth = d.test[v][sz(t)];
-      ViewPicture p;
-      p.frame = t;
-      p.label = v < d.scene.test_views.size() ? "test view " + d.scene.test_views[v].name : "test view";
-      p.truth = jpeg(truth.rgb, "test_truth_" + id);
-      p.render = jpeg(r.renders[v][sz(t)], "test_render_" + id);
-      const std::uint8_t* mask = nullptr;
-      if (v < d.test_covisible.size() && !d.test_covisible[v].empty()) {
-        mask = d.test_covisible[v].data() + sz(t) * sz(truth.width) * sz(truth.height);
-        blob.add_bytes("test_mask_" + id,
-                       encode_image(view_mask_image(mask, truth.width, truth.height), ImageCodec::png), "image/png");
-        p.mask = "test_mask_" + id;
+  if (d.truth) {
+    const GroundTruth& g = *d.truth;
+    for (std::size_t v = 0; v < g.test.size() && v + 1 < ev.renders.size(); ++v)
+      for (int t = 0; t < T && sz(t) < g.test[v].size(); ++t) {
+        const std::string id = std::to_string(v) + "_" + std::to_string(t);
+        const RenderOutput& truth = g.test[v][sz(t)];
+        ViewPicture p;
+        p.frame = t;
+        p.label = v < g.scene.test_views.size() ? "test view " + g.scene.test_views[v].name : "test view";
+        p.truth = jpeg(truth.rgb, "test_truth_" + id);
+        p.render = jpeg(ev.renders[v][sz(t)], "test_render_" + id);
+        const std::uint8_t* mask = nullptr;
+        if (v < g.test_covisible.size() && !g.test_covisible[v].empty()) {
+          mask = g.test_covisible[v].data() + sz(t) * sz(truth.width) * sz(truth.height);
+          blob.add_bytes("test_mask_" + id,
+                         encode_image(view_mask_image(mask, truth.width, truth.height), ImageCodec::png), "image/png");
+          p.mask = "test_mask_" + id;
+        }
+        p.psnr = psnr(ev.renders[v][sz(t)], truth.rgb, mask);
+        p.score_name = mask ? "mPSNR" : "PSNR";
+        pictures.push_back(p);
       }
-      p.psnr = psnr(r.renders[v][sz(t)], truth.rgb, mask);
-      p.score_name = mask ? "mPSNR" : "PSNR";
-      pictures.push_back(p);
-    }
+  }
   // A scene from disk: the validation frames, at the training frame they were rendered for.
   for (std::size_t v = 0; v < d.eval.size(); ++v) {
     const EvalFrame& e = d.eval[v];
@@ -262,15 +266,15 @@ std::vector<ViewPicture> view_pictures(const TrainerResult& r, ViewBlob& blob) {
     p.frame = e.frame;
     p.label = "validation " + e.name;
     p.truth = jpeg(e.rgb, "eval_truth_" + std::to_string(v));
-    if (v < r.eval_renders.size()) p.render = jpeg(r.eval_renders[v], "eval_render_" + std::to_string(v));
+    if (v < ev.frame_renders.size()) p.render = jpeg(ev.frame_renders[v], "eval_render_" + std::to_string(v));
     if (!e.covisible.empty()) {
       blob.add_bytes("eval_mask_" + std::to_string(v),
                      encode_image(view_mask_image(e.covisible.data(), e.rgb.width, e.rgb.height), ImageCodec::png),
                      "image/png");
       p.mask = "eval_mask_" + std::to_string(v);
     }
-    if (v < r.data_evaluation.frames.size()) {
-      p.psnr = r.data_evaluation.frames[v].mpsnr;
+    if (v < ev.frames.size()) {
+      p.psnr = ev.frames[v].mpsnr;
       p.score_name = "mPSNR";
     }
     pictures.push_back(p);
@@ -283,8 +287,8 @@ std::vector<ViewPicture> view_pictures(const TrainerResult& r, ViewBlob& blob) {
 std::vector<std::uint8_t> view_node_classes(const TrainerResult& r, std::vector<std::string>* names) {
   const Nodes& n = r.nodes;
   std::vector<std::uint8_t> cls(sz(n.count), 255);
-  const Scene& scene = r.data.scene;
-  if (r.data.has_truth && n.body.size() == sz(n.count) && !scene.class_names.empty()) {
+  if (r.data.truth && n.body.size() == sz(n.count) && !r.data.truth->scene.class_names.empty()) {
+    const Scene& scene = r.data.truth->scene;
     *names = scene.class_names;
     for (int i = 0; i < n.count; ++i) {
       const int b = n.body[sz(i)];
@@ -409,14 +413,16 @@ std::string write_view_html(const std::string& out_dir, const TrainerResult& r, 
   const std::vector<ViewPicture> pictures = view_pictures(r, blob);
 
   // Cameras: the training camera at every frame, and the test / validation cameras.
-  const Scene& scene = r.data.scene;
   std::string train_cams = "[", test_cams = "[";
-  for (std::size_t t = 0; t < scene.train_cameras.size(); ++t)
-    train_cams += (t ? "," : "") + view_camera_json(scene.train_cameras[t], "train " + std::to_string(t));
-  for (std::size_t v = 0; v < scene.test_cameras.size(); ++v)
-    test_cams += (v ? "," : "") + view_camera_json(scene.test_cameras[v], v < scene.test_views.size()
-                                                                                ? "test " + scene.test_views[v].name
-                                                                                : "test");
+  for (std::size_t t = 0; t < r.data.cameras.size(); ++t)
+    train_cams += (t ? "," : "") + view_camera_json(r.data.cameras[t], "train " + std::to_string(t));
+  if (r.data.truth) {
+    const Scene& scene = r.data.truth->scene;
+    for (std::size_t v = 0; v < scene.test_cameras.size(); ++v)
+      test_cams += (v ? "," : "") + view_camera_json(scene.test_cameras[v], v < scene.test_views.size()
+                                                                                  ? "test " + scene.test_views[v].name
+                                                                                  : "test");
+  }
   for (std::size_t v = 0; v < r.data.eval.size(); ++v)
     test_cams += (test_cams.size() > 1 ? "," : "") + view_camera_json(r.data.eval[v].camera, r.data.eval[v].name);
   std::string names = "[";
@@ -427,12 +433,12 @@ std::string write_view_html(const std::string& out_dir, const TrainerResult& r, 
       .add("T", T)
       .add("N", N)
       .add("K", n.graph.k)
-      .add("extent", scene.extent)
+      .add("extent", r.data.extent)
       .add("unit", n.unit)
       .add("source", r.data.source)
       .add("variant", to_string(r.config.variant.variant))
       .add("semantic_graph", r.config.variant.semantic_graph)
-      .add("has_truth", r.data.has_truth)
+      .add("has_truth", r.data.truth.has_value())
       .add_raw("quant", qz.json())
       .add_raw("class_names", names + "]")
       .add_raw("train_cameras", train_cams + "]")

@@ -67,22 +67,23 @@ TEST_CASE("to_dycheck + write_dycheck + read_dycheck: the exported scene reads b
   const Exported& e = exported();
   const trainer::Dataset& m = e.memory;
   const trainer::Dataset d = read_back(e.dir);
-  const int T = m.scene.frames(), W = m.scene.width(), H = m.scene.height();
-  CHECK_FALSE(d.has_truth);
-  REQUIRE(d.scene.frames() == T);
-  REQUIRE(d.scene.width() == W);
-  REQUIRE(d.scene.height() == H);
+  const int T = m.frames(), W = m.width, H = m.height;
+  CHECK(m.truth.has_value());
+  CHECK_FALSE(d.truth.has_value());
+  REQUIRE(d.frames() == T);
+  REQUIRE(d.width == W);
+  REQUIRE(d.height == H);
   for (int t = 0; t < T; ++t) {
     CAPTURE(t);
     CHECK(d.time_ids[sz(t)] == t);
-    const trainer::Camera &a = m.scene.train_cameras[sz(t)], &b = d.scene.train_cameras[sz(t)];
+    const trainer::Camera &a = m.cameras[sz(t)], &b = d.cameras[sz(t)];
     CHECK((a.world_to_camera - b.world_to_camera).cwiseAbs().maxCoeff() < 1e-6);
     CHECK(std::abs(a.fx - b.fx) < 1e-6 * a.fx);
     CHECK(std::abs(a.cy - b.cy) < 1e-6 * a.fx);
     // 8-bit images: within half a quantisation step.
     double worst = 0;
-    for (std::size_t k = 0; k < m.train[sz(t)].rgb.pixels.size(); ++k)
-      worst = std::max(worst, std::abs(double(m.train[sz(t)].rgb.pixels[k]) - d.train[sz(t)].rgb.pixels[k]));
+    for (std::size_t k = 0; k < m.images[sz(t)].pixels.size(); ++k)
+      worst = std::max(worst, std::abs(double(m.images[sz(t)].pixels[k]) - d.images[sz(t)].pixels[k]));
     CHECK(worst <= 0.5 / 255 + 1e-6);
   }
   CHECK(d.priors.depth == m.priors.depth);
@@ -121,13 +122,13 @@ TEST_CASE("a scene from disk: its scale comes from the data (x10 scene -> x10 le
   const Exported& e = exported();
   trainer::Dataset a = read_back(e.dir);
   trainer::Dataset b = read_back(e.dir);
-  for (trainer::Camera& c : b.scene.train_cameras) c.world_to_camera.topRightCorner<3, 1>() *= 10.0;
+  for (trainer::Camera& c : b.cameras) c.world_to_camera.topRightCorner<3, 1>() *= 10.0;
   for (float& z : b.priors.depth) z *= 10.0f;
   const trainer::TrainerResult ra = trainer::run_stage0(e.config, std::move(a), silent());
   const trainer::TrainerResult rb = trainer::run_stage0(e.config, std::move(b), silent());
-  MESSAGE("extent " << ra.data.scene.extent << " m, length factor " << ra.length_factor << ", nodes "
+  MESSAGE("extent " << ra.data.extent << " m, length factor " << ra.length_factor << ", nodes "
                     << ra.nodes.count);
-  CHECK(rb.data.scene.extent == doctest::Approx(10 * ra.data.scene.extent).epsilon(1e-5));
+  CHECK(rb.data.extent == doctest::Approx(10 * ra.data.extent).epsilon(1e-5));
   CHECK(rb.length_factor == doctest::Approx(10 * ra.length_factor).epsilon(1e-5));
   CHECK(rb.config.nodes.unit == doctest::Approx(10 * ra.config.nodes.unit).epsilon(1e-5));
   CHECK(rb.config.stage2.lr_means == doctest::Approx(10 * ra.config.stage2.lr_means).epsilon(1e-5));
@@ -152,8 +153,13 @@ TEST_CASE("round trip: a quick run on the exported scene agrees with the in-memo
   trainer::TrainerConfig scaled = e.config;
   trainer::scale_lengths(scaled, disk.length_factor);
   const trainer::TrainerResult mem = trainer::run_trainer(scaled, trainer::Dataset(e.memory), silent());
-  const trainer::DataEvaluation& de = disk.data_evaluation;
+  const trainer::Evaluation& de = disk.evaluation;
   REQUIRE(de.frames.size() == disk.data.eval.size());
+  // One evaluation: the disk run has only validation frames, the in-memory run only test views.
+  CHECK(de.views.empty());
+  CHECK(de.frame_renders.size() == de.frames.size());
+  CHECK(mem.evaluation.frames.empty());
+  CHECK(mem.evaluation.views.size() == 2);
   for (const trainer::FrameScore& f : de.frames) {
     CAPTURE(f.name);
     CHECK(std::isfinite(f.mpsnr));
@@ -163,10 +169,10 @@ TEST_CASE("round trip: a quick run on the exported scene agrees with the in-memo
   // The in-memory run is scored on every frame of the test views with the trainer's own metrics;
   // the disk run on 3 of every 4 frames with Dycheck's (8-bit). They must tell the same story.
   MESSAGE("in memory: masked PSNR " << mem.evaluation.mean.psnr_masked << " dB, " << mem.nodes.count << " nodes, "
-                                    << mem.model.count() << " Gaussians; from disk: mPSNR " << de.mean.mpsnr
-                                    << " dB, mSSIM " << de.mean.mssim << ", " << disk.nodes.count << " nodes, "
+                                    << mem.model.count() << " Gaussians; from disk: mPSNR " << de.frames_mean.mpsnr
+                                    << " dB, mSSIM " << de.frames_mean.mssim << ", " << disk.nodes.count << " nodes, "
                                     << disk.model.count() << " Gaussians, length factor " << disk.length_factor);
-  CHECK(std::abs(de.mean.mpsnr - mem.evaluation.mean.psnr_masked) < 0.5);
+  CHECK(std::abs(de.frames_mean.mpsnr - mem.evaluation.mean.psnr_masked) < 0.5);
   CHECK(std::abs(disk.nodes.count - mem.nodes.count) <= std::max(2, mem.nodes.count / 20));
   CHECK(std::abs(disk.model.count() - mem.model.count()) <= mem.model.count() / 33);
 
@@ -179,7 +185,7 @@ TEST_CASE("round trip: a quick run on the exported scene agrees with the in-memo
   REQUIRE(est.size() == truth.size());
   const trainer::QueryTrackError err = trainer::query_track_error(est, truth);
   // Against the queries held still at their lifted position: carrying them must help.
-  const int T = disk.data.scene.frames(), M = q.count();
+  const int T = disk.data.frames(), M = q.count();
   std::vector<float> still(est.size());
   for (int i = 0; i < M; ++i)
     for (int t = 0; t < T; ++t)

@@ -131,7 +131,7 @@ void equivalence_compare(const trainer::TrainerConfig& cfg, trainer::DycheckScen
   // that differ by float32 rounding; its chaotic growth stays far below these).
   const trainer::TrainerResult fa = trainer::run_trainer(std::move(ra), equivalence_silent());
   const trainer::TrainerResult fb = trainer::run_trainer(std::move(rb), equivalence_silent());
-  const trainer::FrameScore &ma = fa.data_evaluation.mean, &mb = fb.data_evaluation.mean;
+  const trainer::FrameScore &ma = fa.evaluation.frames_mean, &mb = fb.evaluation.frames_mean;
   MESSAGE(name << ": mPSNR " << ma.mpsnr << " vs " << mb.mpsnr << ", mSSIM " << ma.mssim << " vs " << mb.mssim);
   CHECK(std::abs(ma.mpsnr - mb.mpsnr) < 0.05);
   CHECK(std::abs(ma.mssim - mb.mssim) < 1e-3);

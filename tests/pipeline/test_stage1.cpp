@@ -29,7 +29,7 @@ const QuickStage0& quick() {
     s.config = trainer::default_config(true);
     trainer::resolve_frames(s.config);
     s.data = trainer::make_dataset(s.config.dataset, smg::ParallelOptions{2, 0});
-    s.lifted = trainer::lift_tracks(s.data.scene, s.data.priors, s.config.lift);
+    s.lifted = trainer::lift_tracks(s.data.cameras, s.data.priors, s.config.lift);
     return s;
   }();
   return q;
@@ -57,10 +57,10 @@ TEST_CASE("stage 1 (full variant, quick scene): node EPE below the lifted EPE") 
   const smg::ParallelOptions par{2, 0};
   trainer::Nodes nodes = initial_nodes(q, c.variant.semantic_graph, par);
   REQUIRE(nodes.count > 10);
-  const trainer::TrackMetrics lifted = trainer::track_metrics(q.data.scene, nodes);
+  const trainer::TrackMetrics lifted = trainer::track_metrics(q.data.truth->scene, nodes);
   trainer::NodeObjective objective(c.variant, c.node_loss, par);
   const trainer::Stage1Result r = trainer::fit_nodes(nodes, objective, c.stage1, stage1_silent());
-  const trainer::TrackMetrics fitted = trainer::track_metrics(q.data.scene, nodes);
+  const trainer::TrackMetrics fitted = trainer::track_metrics(q.data.truth->scene, nodes);
   CAPTURE(nodes.count);
   CAPTURE(lifted.all.epe);
   CAPTURE(fitted.all.epe);
@@ -96,7 +96,7 @@ TEST_CASE("stage 1 (base variant): observed samples stay at their lifted value")
   REQUIRE(trainer::parse_variant("base", &c.variant));
   const smg::ParallelOptions par{2, 0};
   trainer::Nodes nodes = initial_nodes(q, c.variant.semantic_graph, par);
-  const trainer::TrackMetrics lifted = trainer::track_metrics(q.data.scene, nodes);
+  const trainer::TrackMetrics lifted = trainer::track_metrics(q.data.truth->scene, nodes);
   const std::vector<double> start = nodes.positions;
   trainer::Stage1Options s1 = c.stage1;
   s1.iterations = 100;
@@ -114,7 +114,7 @@ TEST_CASE("stage 1 (base variant): observed samples stay at their lifted value")
   CAPTURE(worst);
   CHECK(observed > 0);
   CHECK(worst < 1e-9);
-  const trainer::TrackMetrics fitted = trainer::track_metrics(q.data.scene, nodes);
+  const trainer::TrackMetrics fitted = trainer::track_metrics(q.data.truth->scene, nodes);
   CHECK(fitted.all.epe == doctest::Approx(lifted.all.epe).epsilon(1e-9));
 }
 

@@ -51,7 +51,7 @@ bool is_query(const Tracks& tr, int t, int i) { return tr.query_frame[static_cas
 
 TEST_CASE("clean priors: reported tracks equal the truth, visibility equals ground-truth occlusion") {
   const Dataset& d = test::small_dataset();
-  const Priors p = make_priors(d.scene, d.train, clean_config());
+  const Priors p = make_priors(d.truth->scene, d.truth->train, clean_config());
   const Tracks& tr = p.tracks;
   CHECK(tr.visible == tr.visible_true);
   for (std::size_t s = 0; s < tr.visible.size(); ++s) {
@@ -71,20 +71,20 @@ TEST_CASE("clean priors: reported tracks equal the truth, visibility equals grou
     for (int i = 0; i < N; ++i) {
       const std::size_t s = static_cast<std::size_t>(t) * N + i;
       const Vector2d uv(tr.uv_true[s * 2], tr.uv_true[s * 2 + 1]);
-      if (!d.scene.train_cameras[t].contains(uv) || tr.depth_true[s] <= 0) {
+      if (!d.truth->scene.train_cameras[t].contains(uv) || tr.depth_true[s] <= 0) {
         CHECK(tr.visible_true[s] == 0);
         continue;
       }
       const std::size_t pix = static_cast<std::size_t>(uv.y()) * W + static_cast<std::size_t>(uv.x());
-      const int id = d.train[t].body[pix];
-      const Camera& cam = d.scene.train_cameras[t];
+      const int id = d.truth->train[t].body[pix];
+      const Camera& cam = d.truth->scene.train_cameras[t];
       const Vector3d w(tr.positions_true[s * 3], tr.positions_true[s * 3 + 1], tr.positions_true[s * 3 + 2]);
       Hit hit;
-      intersect_scene(d.scene, t, cam.ray(uv), 0.0, 1e9, &hit);
+      intersect_scene(d.truth->scene, t, cam.ray(uv), 0.0, 1e9, &hit);
       const double dist = (w - cam.center()).norm();
       const bool nearest_is_point = hit.body == tr.body[i] && std::abs(hit.distance - dist) < 1e-4 * dist;
       ray_disagree += nearest_is_point != (tr.visible_true[s] == 1);
-      const double z = d.train[t].depth[pix];
+      const double z = d.truth->train[t].depth[pix];
       if (tr.visible_true[s]) {
         ++vis;
         vis_ok += id == tr.body[i];
@@ -112,7 +112,7 @@ TEST_CASE("track statistics follow the configuration") {
   c.drop_rate = 0.06;
   c.lost_track_rate = 0;
   c.occluded_reported_rate = 0.25;
-  const Priors p = make_priors(d.scene, d.train, c);
+  const Priors p = make_priors(d.truth->scene, d.truth->train, c);
   const Tracks& tr = p.tracks;
   const int N = tr.count;
   long long clean = 0, reported = 0, outliers = 0, visible = 0, dropped = 0, occluded_in_image = 0, occ_rep = 0;
@@ -137,7 +137,7 @@ TEST_CASE("track statistics follow the configuration") {
       } else {
         CHECK((k == SampleKind::hidden || k == SampleKind::occluded_reported));
         const bool in_image = tr.depth_true[s] > 0 &&
-                              d.scene.train_cameras[t].contains(Vector2d(tr.uv_true[s * 2], tr.uv_true[s * 2 + 1]));
+                              d.truth->scene.train_cameras[t].contains(Vector2d(tr.uv_true[s * 2], tr.uv_true[s * 2 + 1]));
         if (in_image) {
           ++occluded_in_image;
           occ_rep += k == SampleKind::occluded_reported;
@@ -177,7 +177,7 @@ TEST_CASE("lost tracks lose one contiguous run, never at the query frame") {
   const Dataset& d = test::small_dataset();
   PriorConfig c = clean_config(300);
   c.lost_track_rate = 1.0;  // every track loses a run
-  const Priors p = make_priors(d.scene, d.train, c);
+  const Priors p = make_priors(d.truth->scene, d.truth->train, c);
   const Tracks& tr = p.tracks;
   int with_run = 0;
   for (int i = 0; i < tr.count; ++i) {
@@ -204,14 +204,14 @@ TEST_CASE("tracks start on the requested bodies; GT trajectories follow the anal
   int on_objects = 0;
   for (int i = 0; i < tr.count; ++i) {
     const int b = tr.body[i];
-    on_objects += d.scene.bodies[b].foreground;
+    on_objects += d.truth->scene.bodies[b].foreground;
     const Vector3d local(tr.local[i * 3], tr.local[i * 3 + 1], tr.local[i * 3 + 2]);
     for (int t = 0; t < tr.frames; t += 4) {
       const std::size_t s = static_cast<std::size_t>(t) * tr.count + i;
       const Vector3d w(tr.positions_true[s * 3], tr.positions_true[s * 3 + 1], tr.positions_true[s * 3 + 2]);
-      CHECK((w - world_point(d.scene, b, local, t)).norm() < 1e-12);
+      CHECK((w - world_point(d.truth->scene, b, local, t)).norm() < 1e-12);
       double z;
-      const Vector2d uv = d.scene.train_cameras[t].project(w, &z);
+      const Vector2d uv = d.truth->scene.train_cameras[t].project(w, &z);
       CHECK(uv.x() == doctest::Approx(tr.uv_true[s * 2]));
       CHECK(z == doctest::Approx(tr.depth_true[s]));
     }
@@ -221,13 +221,13 @@ TEST_CASE("tracks start on the requested bodies; GT trajectories follow the anal
     const double u = tr.uv_true[s * 2], v = tr.uv_true[s * 2 + 1];
     CHECK(u - std::floor(u) == doctest::Approx(0.5).epsilon(1e-6));
     CHECK(v - std::floor(v) == doctest::Approx(0.5).epsilon(1e-6));
-    CHECK(d.train[q].body[static_cast<std::size_t>(v) * d.scene.width() + static_cast<std::size_t>(u)] == b);
+    CHECK(d.truth->train[q].body[static_cast<std::size_t>(v) * d.truth->scene.width() + static_cast<std::size_t>(u)] == b);
   }
   CHECK(on_objects == static_cast<int>(std::lround(0.8 * tr.count)));
   // Both the static box and the moving bodies carry tracks.
   for (const char* name : {"upper_arm", "forearm", "box", "ball", "floor", "wall"}) {
     CAPTURE(name);
-    CHECK(std::count(tr.body.begin(), tr.body.end(), d.scene.find_body(name)) >= 5);
+    CHECK(std::count(tr.body.begin(), tr.body.end(), d.truth->scene.find_body(name)) >= 5);
   }
 }
 
@@ -238,8 +238,8 @@ TEST_CASE("depth prior: relative noise as configured, holes, edges") {
   c.depth_hole_rate = 0.05;
   c.depth_edge_hole_rate = 0.5;
   c.depth_edge_outlier_rate = 0.5;
-  const Priors p = make_priors(d.scene, d.train, c);
-  const Priors exact = make_priors(d.scene, d.train, clean_config(50));
+  const Priors p = make_priors(d.truth->scene, d.truth->train, c);
+  const Priors exact = make_priors(d.truth->scene, d.truth->train, clean_config(50));
   const int W = p.width, H = p.height;
   long long interior = 0, holes = 0, edge = 0, edge_hole = 0, between = 0;
   double s1 = 0, s2 = 0;
@@ -247,7 +247,7 @@ TEST_CASE("depth prior: relative noise as configured, holes, edges") {
     for (int y = 1; y < H - 1; ++y)
       for (int x = 1; x < W - 1; ++x) {
         const std::size_t pix = static_cast<std::size_t>(y) * W + x;
-        const double z = d.train[t].depth[pix];
+        const double z = d.truth->train[t].depth[pix];
         const double zn = p.depth[static_cast<std::size_t>(t) * W * H + pix];
         CHECK(exact.depth[static_cast<std::size_t>(t) * W * H + pix] == static_cast<float>(z));
         if (z <= 0) {
@@ -258,8 +258,8 @@ TEST_CASE("depth prior: relative noise as configured, holes, edges") {
         double lo = z, hi = z;
         for (auto [dx, dy] : {std::pair{-1, 0}, {1, 0}, {0, -1}, {0, 1}}) {
           const std::size_t q = static_cast<std::size_t>(y + dy) * W + x + dx;
-          const double zq = d.train[t].depth[q];
-          if (d.train[t].body[q] != d.train[t].body[pix] || std::abs(zq - z) > 0.05 * std::max(z, zq)) {
+          const double zq = d.truth->train[t].depth[q];
+          if (d.truth->train[t].body[q] != d.truth->train[t].body[pix] || std::abs(zq - z) > 0.05 * std::max(z, zq)) {
             is_edge = true;
             if (zq > 0) {
               lo = std::min(lo, zq);
@@ -302,7 +302,7 @@ TEST_CASE("depth prior: moving bodies get their own relative noise (the occluder
   PriorConfig c = clean_config(50);
   c.depth_noise = 0.01;
   c.moving_depth_factor = 5.0;
-  const Priors p = make_priors(d.scene, d.train, c);
+  const Priors p = make_priors(d.truth->scene, d.truth->train, c);
   const int W = p.width, H = p.height;
   double s2[2] = {0, 0};
   long long n[2] = {0, 0};
@@ -310,17 +310,17 @@ TEST_CASE("depth prior: moving bodies get their own relative noise (the occluder
     for (int y = 1; y < H - 1; ++y)
       for (int x = 1; x < W - 1; ++x) {
         const std::size_t pix = static_cast<std::size_t>(y) * W + x;
-        const double z = d.train[t].depth[pix];
+        const double z = d.truth->train[t].depth[pix];
         if (z <= 0) continue;
         bool interior = true;  // same body and depth as the 4 neighbours: no edge treatment
         for (auto [dx, dy] : {std::pair{-1, 0}, {1, 0}, {0, -1}, {0, 1}}) {
           const std::size_t q = static_cast<std::size_t>(y + dy) * W + x + dx;
-          interior = interior && d.train[t].body[q] == d.train[t].body[pix] &&
-                     std::abs(d.train[t].depth[q] - z) <= 0.05 * std::max<double>(z, d.train[t].depth[q]);
+          interior = interior && d.truth->train[t].body[q] == d.truth->train[t].body[pix] &&
+                     std::abs(d.truth->train[t].depth[q] - z) <= 0.05 * std::max<double>(z, d.truth->train[t].depth[q]);
         }
         const double zn = p.depth[static_cast<std::size_t>(t) * W * H + pix];
         if (!interior || zn == 0) continue;
-        const int moving = d.scene.bodies[static_cast<std::size_t>(d.train[t].body[pix])].moves ? 1 : 0;
+        const int moving = d.truth->scene.bodies[static_cast<std::size_t>(d.truth->train[t].body[pix])].moves ? 1 : 0;
         s2[moving] += (zn / z - 1) * (zn / z - 1);
         ++n[moving];
       }
@@ -339,7 +339,7 @@ TEST_CASE("semantic features: unit norm; arm links close, arm and box clearly di
     CHECK(std::sqrt(n2) == doctest::Approx(1.0).epsilon(1e-5));
   }
   auto emb = [&](const char* name) {
-    return Eigen::Map<const Eigen::VectorXd>(p.body_embedding.data() + d.scene.find_body(name) * C, C);
+    return Eigen::Map<const Eigen::VectorXd>(p.body_embedding.data() + d.truth->scene.find_body(name) * C, C);
   };
   CHECK(emb("upper_arm").dot(emb("forearm")) > 0.85);
   CHECK(std::abs(emb("upper_arm").dot(emb("box"))) < 0.35);
@@ -347,7 +347,7 @@ TEST_CASE("semantic features: unit norm; arm links close, arm and box clearly di
   CHECK(std::abs(emb("ball").dot(emb("box"))) < 0.35);
   // Track feature samples on the arm are closer to the arm than to the box, and vice versa,
   // for most samples (patches straddling an edge blur both).
-  const LiftedTracks l = lift_tracks(d.scene, p);
+  const LiftedTracks l = lift_tracks(d.cameras, p);
   long long arm = 0, arm_ok = 0, box = 0, box_ok = 0;
   for (int t = 0; t < l.frames; ++t)
     for (int j = 0; j < l.count; ++j) {
@@ -356,7 +356,7 @@ TEST_CASE("semantic features: unit norm; arm links close, arm and box clearly di
       const Eigen::Map<const Eigen::VectorXd> f(l.feature_samples.data() + s * C, C);
       CHECK(f.norm() == doctest::Approx(1.0).epsilon(1e-9));
       const double ca = f.dot(emb("forearm")), cb = f.dot(emb("box"));
-      const int cls = d.scene.bodies[l.body[j]].semantic_class;
+      const int cls = d.truth->scene.bodies[l.body[j]].semantic_class;
       if (cls == classes::arm) {
         ++arm;
         arm_ok += ca > cb;
@@ -380,8 +380,8 @@ TEST_CASE("object mask covers the foreground objects, dilated") {
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
         const std::size_t pix = static_cast<std::size_t>(y) * W + x;
-        const int b = d.train[t].body[pix];
-        const bool is_fg = b >= 0 && d.scene.bodies[b].foreground;
+        const int b = d.truth->train[t].body[pix];
+        const bool is_fg = b >= 0 && d.truth->scene.bodies[b].foreground;
         const std::uint8_t m = p.object_mask[static_cast<std::size_t>(t) * W * H + pix];
         fg += is_fg;
         in_mask += is_fg && m;
@@ -397,10 +397,10 @@ TEST_CASE("object mask covers the foreground objects, dilated") {
 TEST_CASE("lift_tracks: back-projection with the depth prior, smg view layouts, interpolated gaps") {
   const Dataset& d = test::small_dataset();
   // Exact priors: lifted positions match the truth up to sampling the depth at the pixel centre.
-  const Priors p = make_priors(d.scene, d.train, clean_config(300));
+  const Priors p = make_priors(d.truth->scene, d.truth->train, clean_config(300));
   LiftOptions lo;
   lo.min_visible_frames = 1;
-  const LiftedTracks l = lift_tracks(d.scene, p, lo);
+  const LiftedTracks l = lift_tracks(d.cameras, p, lo);
   REQUIRE(l.count == 300);
   CHECK(smg::validate_positions<double>(l.positions_view(), l.frames, l.count).is_ok());
   CHECK(smg::validate_visibility<std::uint8_t>(l.visibility_view(), l.frames, l.count).is_ok());
@@ -449,9 +449,9 @@ TEST_CASE("lift_tracks: back-projection with the depth prior, smg view layouts, 
 TEST_CASE("lift_tracks: the filters keep the right tracks and map them back") {
   const Dataset& d = test::small_dataset();
   LiftOptions strict;
-  strict.min_visible_frames = d.scene.frames();
-  const LiftedTracks all = lift_tracks(d.scene, d.priors, LiftOptions{1, false});
-  const LiftedTracks full = lift_tracks(d.scene, d.priors, strict);
+  strict.min_visible_frames = d.truth->scene.frames();
+  const LiftedTracks all = lift_tracks(d.cameras, d.priors, LiftOptions{1, false});
+  const LiftedTracks full = lift_tracks(d.cameras, d.priors, strict);
   CHECK(full.count < all.count);
   for (int j = 0; j < full.count; ++j) {
     int n = 0;
@@ -461,29 +461,29 @@ TEST_CASE("lift_tracks: the filters keep the right tracks and map them back") {
   }
   // The object filter uses the (dilated) object mask at the query pixel, as a pipeline would: a
   // few background tracks next to objects pass it.
-  const LiftedTracks objects = lift_tracks(d.scene, d.priors, LiftOptions{1, true});
+  const LiftedTracks objects = lift_tracks(d.cameras, d.priors, LiftOptions{1, true});
   CHECK(objects.count < all.count);
   int on_objects = 0;
   for (int j = 0; j < objects.count; ++j) {
     const int i = objects.track[j], q = d.priors.tracks.query_frame[i];
     const std::size_t s = static_cast<std::size_t>(q) * d.priors.tracks.count + i;
-    const std::size_t pix = static_cast<std::size_t>(d.priors.tracks.uv_true[s * 2 + 1]) * d.scene.width() +
+    const std::size_t pix = static_cast<std::size_t>(d.priors.tracks.uv_true[s * 2 + 1]) * d.truth->scene.width() +
                             static_cast<std::size_t>(d.priors.tracks.uv_true[s * 2]);
-    CHECK(d.priors.object_mask[static_cast<std::size_t>(q) * d.scene.width() * d.scene.height() + pix] == 1);
-    on_objects += d.scene.bodies[objects.body[j]].foreground;
+    CHECK(d.priors.object_mask[static_cast<std::size_t>(q) * d.truth->scene.width() * d.truth->scene.height() + pix] == 1);
+    on_objects += d.truth->scene.bodies[objects.body[j]].foreground;
   }
   CHECK(on_objects > objects.count * 9 / 10);
   int all_on_objects = 0;
-  for (int j = 0; j < all.count; ++j) all_on_objects += d.scene.bodies[all.body[j]].foreground;
+  for (int j = 0; j < all.count; ++j) all_on_objects += d.truth->scene.bodies[all.body[j]].foreground;
   CHECK(on_objects == all_on_objects);  // no object track is lost
 }
 
 TEST_CASE("priors are deterministic for a seed and identical for 1, 2 and 7 threads") {
   const Dataset& d = test::small_dataset();
   const PriorConfig c = test::small_config().priors;
-  const Priors a = make_priors(d.scene, d.train, c, smg::ParallelOptions{1, 0});
-  const Priors b = make_priors(d.scene, d.train, c, smg::ParallelOptions{2, 0});
-  const Priors e = make_priors(d.scene, d.train, c, smg::ParallelOptions{7, 0});
+  const Priors a = make_priors(d.truth->scene, d.truth->train, c, smg::ParallelOptions{1, 0});
+  const Priors b = make_priors(d.truth->scene, d.truth->train, c, smg::ParallelOptions{2, 0});
+  const Priors e = make_priors(d.truth->scene, d.truth->train, c, smg::ParallelOptions{7, 0});
   for (const Priors* x : {&b, &e, &d.priors}) {
     CHECK(x->depth == a.depth);
     CHECK(x->features == a.features);
@@ -495,7 +495,7 @@ TEST_CASE("priors are deterministic for a seed and identical for 1, 2 and 7 thre
   }
   PriorConfig other = c;
   other.seed = 1;
-  const Priors f = make_priors(d.scene, d.train, other);
+  const Priors f = make_priors(d.truth->scene, d.truth->train, other);
   CHECK(f.depth != a.depth);
   CHECK(f.tracks.uv != a.tracks.uv);
 }
@@ -515,8 +515,8 @@ TEST_CASE("validate_prior_config rejects bad values with a clear message") {
   c.tracks = 0;
   CHECK(validate_prior_config(c).message().find("tracks") != std::string::npos);
   const Dataset& d = test::small_dataset();
-  CHECK_THROWS_AS(make_priors(d.scene, d.train, c), std::invalid_argument);
-  CHECK_THROWS_AS(make_priors(d.scene, {}, PriorConfig()), std::invalid_argument);
+  CHECK_THROWS_AS(make_priors(d.truth->scene, d.truth->train, c), std::invalid_argument);
+  CHECK_THROWS_AS(make_priors(d.truth->scene, {}, PriorConfig()), std::invalid_argument);
 }
 
 TEST_CASE("bending layout: tracks and lifted tracks cover the arm's links, with the standard priors") {
@@ -524,16 +524,16 @@ TEST_CASE("bending layout: tracks and lifted tracks cover the arm's links, with 
   apply_scene_layout(SceneLayout::bending, &cfg);
   CHECK(cfg.priors.moving_depth_factor == PriorConfig().moving_depth_factor);
   const Dataset d = make_dataset(cfg);
-  std::vector<int> per_link(static_cast<std::size_t>(d.scene.arm.links), 0);
+  std::vector<int> per_link(static_cast<std::size_t>(d.truth->scene.arm.links), 0);
   for (int b : d.priors.tracks.body) {
-    const Body& body = d.scene.bodies[static_cast<std::size_t>(b)];
+    const Body& body = d.truth->scene.bodies[static_cast<std::size_t>(b)];
     if (body.semantic_class == classes::arm) ++per_link[static_cast<std::size_t>(body.link)];
   }
   // Every link is tracked: the graph then has edges inside the arm across its bending joints.
   for (int n : per_link) CHECK(n >= 3);
-  const LiftedTracks l = lift_tracks(d.scene, d.priors, {3, true});
+  const LiftedTracks l = lift_tracks(d.cameras, d.priors, {3, true});
   int arm = 0;
-  for (int b : l.body) arm += d.scene.bodies[static_cast<std::size_t>(b)].semantic_class == classes::arm;
+  for (int b : l.body) arm += d.truth->scene.bodies[static_cast<std::size_t>(b)].semantic_class == classes::arm;
   CHECK(arm >= 20);
 }
 
@@ -585,7 +585,7 @@ TEST_CASE("tracker failures: each knob measured on the generated priors (off, ty
   const Dataset exact = make_dataset(cfg);
   const Tracks& tx = exact.priors.tracks;
   long long failed = 0, elsewhere = 0;
-  const int W = exact.scene.width(), H = exact.scene.height();
+  const int W = exact.truth->scene.width(), H = exact.truth->scene.height();
   for (std::size_t s = 0; s < tx.kind.size(); ++s) {
     if (tx.kind[s] != SampleKind::stuck && tx.kind[s] != SampleKind::switched) continue;
     CHECK(tx.visible[s] == 1);
@@ -593,7 +593,7 @@ TEST_CASE("tracker failures: each knob measured on the generated priors (off, ty
     const int x = static_cast<int>(std::floor(tx.uv[s * 2])), y = static_cast<int>(std::floor(tx.uv[s * 2 + 1]));
     ++failed;
     REQUIRE((x >= 0 && y >= 0 && x < W && y < H));
-    const int b = exact.train[static_cast<std::size_t>(t)].body[static_cast<std::size_t>(y) * W + x];
+    const int b = exact.truth->train[static_cast<std::size_t>(t)].body[static_cast<std::size_t>(y) * W + x];
     elsewhere += b != tx.body[s % static_cast<std::size_t>(tx.count)];
   }
   REQUIRE(failed > 50);

@@ -238,7 +238,7 @@ TEST_CASE("point_visible: occlusion by another body and by the body's own near s
 
 TEST_CASE("the generated scene: hit points in body frames map back to the world under the motion") {
   const Dataset& d = test::small_dataset();
-  const Scene& s = d.scene;
+  const Scene& s = d.truth->scene;
   SMG_TEST_RNG(rng, 11);
   int checked = 0;
   for (int k = 0; k < 400; ++k) {
@@ -266,9 +266,9 @@ TEST_CASE("the generated scene: hit points in body frames map back to the world 
 
 TEST_CASE("render: depth and id at pixel centres agree with single rays; exact colours; thread-count independence") {
   const Dataset& d = test::small_dataset();
-  const Scene& s = d.scene;
+  const Scene& s = d.truth->scene;
   const int t = 5;
-  const RenderOutput& r = d.train[t];
+  const RenderOutput& r = d.truth->train[t];
   const Camera& cam = s.train_cameras[t];
   int hits = 0;
   for (int y = 0; y < s.height(); y += 3)
@@ -323,7 +323,7 @@ TEST_CASE("render: depth and id at pixel centres agree with single rays; exact c
 
 TEST_CASE("render: anti-aliasing averages the sub-pixel rays") {
   const Dataset& d = test::small_dataset();
-  const Scene& s = d.scene;
+  const Scene& s = d.truth->scene;
   const Camera& cam = s.train_cameras[0];
   for (int k : {1, 2, 3}) {
     CAPTURE(k);
@@ -348,18 +348,18 @@ TEST_CASE("render: anti-aliasing averages the sub-pixel rays") {
 
 TEST_CASE("covisibility_mask agrees with a direct check, marks empty pixels 0 and covers most of the objects") {
   const Dataset& d = test::small_dataset();
-  const Scene& s = d.scene;
-  REQUIRE(d.test_covisible.size() == 2);
+  const Scene& s = d.truth->scene;
+  REQUIRE(d.truth->test_covisible.size() == 2);
   const int W = s.width(), H = s.height(), T = s.frames();
   for (int v = 0; v < 2; ++v) {
-    const auto& mask = d.test_covisible[static_cast<std::size_t>(v)];
+    const auto& mask = d.truth->test_covisible[static_cast<std::size_t>(v)];
     REQUIRE(mask.size() == static_cast<std::size_t>(T) * W * H);
     long long object_px = 0, object_cov = 0, disagree = 0, checked = 0;
     for (int t = 0; t < T; t += 3)
       for (int y = 0; y < H; y += 2)
         for (int x = 0; x < W; x += 2) {
           const std::size_t pix = static_cast<std::size_t>(y) * W + x;
-          const RenderOutput& r = d.test[static_cast<std::size_t>(v)][static_cast<std::size_t>(t)];
+          const RenderOutput& r = d.truth->test[static_cast<std::size_t>(v)][static_cast<std::size_t>(t)];
           const std::uint8_t m = mask[static_cast<std::size_t>(t) * W * H + pix];
           if (r.body[pix] < 0) {
             CHECK(m == 0);

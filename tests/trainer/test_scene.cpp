@@ -252,7 +252,7 @@ TEST_CASE("test cameras are fixed at wide baselines from the moving training cam
 
 TEST_CASE("every object is in view: most frames of the training camera and of both test cameras") {
   const Dataset& d = test::small_dataset();
-  const Scene& s = d.scene;
+  const Scene& s = d.truth->scene;
   for (int b = 0; b < s.body_count(); ++b) {
     CAPTURE(s.bodies[b].name);
     auto frames_seen = [&](const std::vector<RenderOutput>& view) {
@@ -264,9 +264,9 @@ TEST_CASE("every object is in view: most frames of the training camera and of bo
       }
       return n;
     };
-    CHECK(frames_seen(d.train) >= s.frames() * 3 / 4);
-    CHECK(frames_seen(d.test[0]) >= s.frames() * 3 / 4);
-    CHECK(frames_seen(d.test[1]) >= s.frames() * 3 / 4);
+    CHECK(frames_seen(d.truth->train) >= s.frames() * 3 / 4);
+    CHECK(frames_seen(d.truth->test[0]) >= s.frames() * 3 / 4);
+    CHECK(frames_seen(d.truth->test[1]) >= s.frames() * 3 / 4);
   }
 }
 
