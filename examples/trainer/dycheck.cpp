@@ -491,6 +491,10 @@ namespace layout_io {
 
 void fail_at(const std::string& rel, const std::string& problem) { fail(rel, problem); }
 bool has_file(const std::string& root, const std::string& rel) { return SceneReader(root).exists(rel); }
+bool has_folder(const std::string& root, const std::string& rel) {
+  std::error_code ec;
+  return fs::is_directory(fs::path(root) / rel, ec);
+}
 json::Value read_json(const std::string& root, const std::string& rel) { return SceneReader(root).json(rel); }
 npy::Array read_npy(const std::string& root, const std::string& rel) { return SceneReader(root).npy_file(rel); }
 files::Png8 read_png(const std::string& root, const std::string& rel) { return SceneReader(root).png(rel); }

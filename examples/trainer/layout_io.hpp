@@ -22,7 +22,10 @@ namespace trainer::layout_io {
 // Throws DataError("<rel>: <problem>").
 [[noreturn]] void fail_at(const std::string& rel, const std::string& problem);
 
+// Whether root/rel exists (a file or a folder), and whether it is a folder (rel "" = root); no
+// error is thrown (an unreadable path counts as absent).
 bool has_file(const std::string& root, const std::string& rel);
+bool has_folder(const std::string& root, const std::string& rel);
 // Whole-file readers (JSON allows NaN/Infinity, as Python writes them).
 json::Value read_json(const std::string& root, const std::string& rel);
 npy::Array read_npy(const std::string& root, const std::string& rel);

@@ -45,11 +45,6 @@ using layout_io::fail_at;
 constexpr float kMoscaEpiTh = 0.001f;     // profile/iphone/iphone_prep.yaml epi_th
 constexpr int kMoscaMaxInstances = 64;    // the trainer's feature channel limit
 
-bool mosca_is_dir(const std::string& root, const std::string& rel) {
-  std::error_code ec;
-  return fs::is_directory(fs::path(root) / rel, ec);
-}
-
 // Sorted file names in root/rel ending in `ext` (rel "" = the scene folder itself).
 std::vector<std::string> mosca_list(const std::string& root, const std::string& rel, const std::string& ext) {
   std::vector<std::string> names;
@@ -305,7 +300,7 @@ DycheckScene read_mosca(const std::string& dir) {
   // Dynamic masks from the epipolar error, else everything dynamic.
   s.has_mask.assign(T, 1);
   s.dynamic_mask.assign(T * HW, 1);
-  if (mosca_is_dir(dir, "epi/error")) {
+  if (layout_io::has_folder(dir, "epi/error")) {
     for (std::size_t t = 0; t < T; ++t) {
       const std::vector<std::uint8_t> m = mosca_read_epi(dir, "epi/error/" + stems[t] + ".npy", s.width, s.height);
       std::copy(m.begin(), m.end(), s.dynamic_mask.begin() + static_cast<std::ptrdiff_t>(t * HW));
@@ -315,7 +310,7 @@ DycheckScene read_mosca(const std::string& dir) {
   }
   mosca_read_tracks(dir, s);
   layout_io::read_feature_files(dir, s);
-  if (s.feature_dim == 0 && mosca_is_dir(dir, "vos_deva/Annotations")) mosca_read_instances(dir, s);
+  if (s.feature_dim == 0 && layout_io::has_folder(dir, "vos_deva/Annotations")) mosca_read_instances(dir, s);
   return s;
 }
 

@@ -36,11 +36,6 @@ using layout_io::fail_at;
 const char* const kSomPre = "flow3d_preprocessed/";
 const char* const kSomLidarDisparity = "flow3d_preprocessed/aligned_depth_anything_lidar/1x/";
 
-bool som_is_dir(const std::string& root, const std::string& rel) {
-  std::error_code ec;
-  return fs::is_directory(fs::path(root) / rel, ec);
-}
-
 // sigmoid in double (the logits are float32 in the file).
 double som_sigmoid(double x) { return 1.0 / (1.0 + std::exp(-x)); }
 
@@ -147,7 +142,7 @@ void som_read_tracks(const std::string& root, DycheckScene& s, const DycheckRead
 // A camera at 1x from camera/<frame>.json with SoM's principal point moved to our pixel centres.
 Camera som_read_camera(const std::string& root, const std::string& frame) {
   const std::string rel = "camera/" + frame + ".json";
-  if (!layout_io::has_file(root, rel) && som_is_dir(root, std::string(kSomPre) + "colmap"))
+  if (!layout_io::has_file(root, rel) && layout_io::has_folder(root, std::string(kSomPre) + "colmap"))
     fail_at(rel, "missing; COLMAP cameras (flow3d_preprocessed/colmap/sparse) are not supported, the Nerfies camera/ JSON files are needed");
   Camera c = layout_io::read_nerfies_camera(root, rel, 1);
   c.cx += 0.5;
@@ -176,9 +171,9 @@ DycheckScene read_som(const std::string& dir, const DycheckReadOptions& options)
   }
 
   // Depth (file comment): lidar-aligned disparity, else lidar z; then SoM's clamp.
-  const bool disparity = som_is_dir(dir, kSomLidarDisparity);
-  if (!disparity && !som_is_dir(dir, "depth/1x")) {
-    if (som_is_dir(dir, std::string(kSomPre) + "aligned_depth_anything_colmap"))
+  const bool disparity = layout_io::has_folder(dir, kSomLidarDisparity);
+  if (!disparity && !layout_io::has_folder(dir, "depth/1x")) {
+    if (layout_io::has_folder(dir, std::string(kSomPre) + "aligned_depth_anything_colmap"))
       fail_at(std::string(kSomPre) + "aligned_depth_anything_colmap",
               "in COLMAP's scale, which needs COLMAP cameras (not supported); add aligned_depth_anything_lidar/1x or depth/1x");
     fail_at(kSomLidarDisparity, "missing, and no lidar depth/1x either");

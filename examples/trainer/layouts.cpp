@@ -6,20 +6,13 @@
 #include <string>
 #include <vector>
 
+#include "trainer/layout_io.hpp"
+
 namespace trainer {
 
 namespace {
 
 namespace fs = std::filesystem;
-
-bool layouts_is_dir(const fs::path& p) {
-  std::error_code ec;
-  return fs::is_directory(p, ec);
-}
-bool layouts_exists(const fs::path& p) {
-  std::error_code ec;
-  return fs::exists(p, ec);
-}
 
 // A *bootstapir*.npz file directly in the folder (MoSca's Saved2D globs "*<key>*.npz").
 bool layouts_has_bootstapir(const fs::path& dir) {
@@ -47,10 +40,12 @@ const char* data_layout_description(DataLayout layout) {
 
 DataLayout detect_data_layout(const std::string& dir) {
   const fs::path d(dir);
-  if (!layouts_is_dir(d)) throw DataError(dir + ": not a folder");
-  const bool som = layouts_is_dir(d / "flow3d_preprocessed");
-  const bool mosca = layouts_is_dir(d / "sensor_depth") && layouts_is_dir(d / "cameras") && layouts_has_bootstapir(d);
-  const bool ours_tracks = layouts_exists(d / "priors/tracks.npz");
+  using layout_io::has_file;
+  using layout_io::has_folder;
+  if (!has_folder(dir, "")) throw DataError(dir + ": not a folder");
+  const bool som = has_folder(dir, "flow3d_preprocessed");
+  const bool mosca = has_folder(dir, "sensor_depth") && has_folder(dir, "cameras") && layouts_has_bootstapir(d);
+  const bool ours_tracks = has_file(dir, "priors/tracks.npz");
   if (som && mosca)
     throw DataError(dir + ": ambiguous scene folder: it holds both flow3d_preprocessed/ (Shape-of-Motion) and "
                           "sensor_depth/ + cameras/ + *bootstapir*.npz (MoSca)");
@@ -59,7 +54,7 @@ DataLayout detect_data_layout(const std::string& dir) {
                     (som ? "flow3d_preprocessed/ (Shape-of-Motion)" : "sensor_depth/ + cameras/ + *bootstapir*.npz (MoSca)"));
   if (som) return DataLayout::som;
   if (mosca) return DataLayout::mosca;
-  if (layouts_exists(d / "priors") || layouts_exists(d / "splits") || layouts_exists(d / "camera")) return DataLayout::dycheck;
+  if (has_file(dir, "priors") || has_file(dir, "splits") || has_file(dir, "camera")) return DataLayout::dycheck;
   throw DataError(dir + ": not a scene folder: looked for flow3d_preprocessed/ (Shape-of-Motion), sensor_depth/ + cameras/ "
                         "+ *bootstapir*.npz (MoSca), and priors/, splits/ or camera/ (Dycheck + priors)");
 }

@@ -32,15 +32,36 @@ class Progress {
   std::chrono::steady_clock::time_point start() const { return start_; }
   void line(const std::string& stage, const std::string& text) const {
     if (quiet_ || !stream_) return;
-    std::fprintf(stream_, "[%7.1fs] %-7s %s\n", elapsed(), stage.c_str(), cli::escape_line(text).c_str());
+    char head[64];
+    std::snprintf(head, sizeof head, "[%7.1fs] %-7s ", elapsed(), stage.c_str());
+    const std::string out = head + cli::escape_line(text) + "\n";
+    if (holding_) {
+      held_ += out;
+      return;
+    }
+    std::fputs(out.c_str(), stream_);
     std::fflush(stream_);
   }
   bool quiet() const { return quiet_; }
+
+  // Holds the lines back, in memory, until release(): a caller that may still refuse its input
+  // (smg_trainer --data before stage 0 has accepted the scene) then prints only the refusal;
+  // a Progress destroyed while holding drops them.
+  void hold() const { holding_ = true; }
+  void release() const {
+    holding_ = false;
+    if (held_.empty()) return;
+    std::fputs(held_.c_str(), stream_);
+    std::fflush(stream_);
+    held_.clear();
+  }
 
  private:
   std::FILE* stream_;
   bool quiet_;
   std::chrono::steady_clock::time_point start_;
+  mutable bool holding_ = false;  // hold()/release() are const like line(): callers pass const&
+  mutable std::string held_;
 };
 
 // printf into a std::string.

@@ -33,6 +33,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -124,73 +125,23 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
 }
 
 
-// --data: trains on a scene from disk and writes renders, tracks3d.npy and metrics.json. OUT is
-// created after stage 0, which can still refuse the scene (DataError).
-int run_data(const trainer::TrainerConfig& cfg, trainer::Dataset data, const char* layout, double seconds_read,
-             const trainer::TrackQueries* queries, const std::vector<float>* truth, const fs::path& out,
-             bool quiet, bool view) {
-  // Stage 0's progress lines are held back (a temporary file) until the scene is accepted, so that
-  // a refused scene prints its one error line and nothing else.
-  const std::unique_ptr<std::FILE, int (*)(std::FILE*)> held(quiet ? nullptr : std::tmpfile(), &std::fclose);
-  const trainer::Progress early(held.get(), quiet);
-  early.line("data", std::string("layout: ") + layout);
-  early.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", scene " +
-                          data.source + ", output " + out.string());
-  trainer::TrainerResult stage0 = trainer::run_stage0(cfg, std::move(data), early);
-  if (held) {
-    std::rewind(held.get());
-    std::array<char, 4096> buf{};
-    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), held.get())) > 0;) std::fwrite(buf.data(), 1, n, stderr);
-    std::fflush(stderr);
-  }
-  const trainer::Progress progress(stderr, quiet, early.start());
-  // Once the scene is accepted: the one note of a scene without feature maps (even with --quiet).
-  if (stage0.data.priors.feature_dim == 0)
-    std::cerr << "smg_trainer: note: no feature files (priors/features/<frame>.npy): the graph is geometric"
-              << (cfg.variant.semantic_graph ? ", without the semantic gate of variant " + trainer::to_string(cfg.variant.variant)
-                                             : std::string())
-              << "\n";
-  cli::ensure_writable_dir(out);
-  const trainer::TrainerResult r = trainer::run_trainer(std::move(stage0), progress);
-  const auto t0 = std::chrono::steady_clock::now();
-  fs::create_directories(out / "renders");
-  for (std::size_t v = 0; v < r.evaluation.frame_renders.size(); ++v)
-    trainer::write_png((out / "renders" / (r.data.eval[v].name + ".png")).string(), r.evaluation.frame_renders[v]);
-  std::vector<float> tracks;
-  trainer::QueryTrackError te;
-  if (queries) {
-    tracks = trainer::carry_queries(*queries, r.data, r.nodes, r.model);
-    npy::write((out / "tracks3d.npy").string(), tracks.data(),
-               {queries->count(), r.data.frames(), 3});
-    if (truth) {
-      te = trainer::query_track_error(tracks, *truth);
-      progress.line("eval", trainer::format("%d query tracks: EPE %.4f m, within 5 cm %.3f, within 10 cm %.3f",
-                                            queries->count(), te.epe, te.within_5cm, te.within_10cm));
-    }
-  }
-  trainer::RunRecord rec;
-  rec.config = &cfg;
-  rec.out = out.string();
-  rec.seconds_read = seconds_read;
-  rec.seconds_write = trainer::seconds_since(t0);
-  rec.queries = queries ? queries->count() : 0;
-  rec.query_error = queries && truth ? &te : nullptr;
-  const std::string line = trainer::metrics_json(r, rec);
-  trainer::write_metrics_json(out.string(), line);
-  if (view) {
-    trainer::ViewInputs vi;
-    vi.metrics_json = line;
-    if (queries) {
-      vi.tracks = &tracks;
-      vi.truth = truth;
-      vi.queries = queries->count();
-    }
-    progress.line("done", "page of the run: " + trainer::write_view_html(out.string(), r, vi));
-  }
-  progress.line("done", std::to_string(r.evaluation.frame_renders.size()) + " renders and metrics.json in " + out.string() + "/");
-  std::cout << line << std::endl;
-  return 0;
-}
+// What the command line asks for, parsed and validated (with --data, the scene read and
+// validated too) before any work.
+struct Request {
+  trainer::TrainerConfig cfg;
+  enum class Job { train, export_scene, export_case } job = Job::train;
+  fs::path out;                 // train: OUT; export_scene / export_case: the folder to write
+  std::string export_layout;    // export_scene: dycheck, som or mosca
+  bool pictures = true, quiet = false, view = true;
+  // --data: the scene (moved into the run once it starts) and its layout's description;
+  // --track-queries / --track-truth.
+  bool from_disk = false;
+  std::optional<trainer::Dataset> data;
+  const char* data_layout = nullptr;
+  double seconds_read = 0;
+  std::optional<trainer::TrackQueries> queries;
+  std::optional<std::vector<float>> truth;
+};
 
 // --export-dycheck: the generated scene in the Dycheck layout, with 3D query tracks.
 // layout som / mosca: the same scene in Shape-of-Motion's or MoSca's layout (layouts.hpp).
@@ -216,146 +167,200 @@ int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, const
   return 0;
 }
 
+// Parses the command line into `q` and, with --data, reads and validates the scene: every file
+// problem throws (DataError naming the file), a bad flag throws cli::UsageError. Returns false
+// after --help.
+bool parse(int argc, char** argv, Request& q) {
+  trainer::TrainerConfig& cfg = q.cfg;
+  cli::Args args(trainer::setting_flags());
+  if (!trainer::flags::parse(args, argc, argv, "smg_trainer",
+                             "Reconstructs the example dynamic scene with SMG and evaluates it on two held-out "
+                             "views (docs/trainer.md)."))
+    return false;
+  cfg = trainer::default_config(args.get_switch("quick"));
+  trainer::apply_settings(args, &cfg);
+  q.pictures = !args.get_switch("no-pictures");
+  q.view = !args.get_switch("no-view");
+  q.quiet = args.get_switch("quiet");
+  trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
+  if (args.given("data")) {
+    if (cfg.node_loss.confidence_source == trainer::ConfidenceSource::truth)
+      throw cli::UsageError("--confidence-from truth needs the generated scene's ground truth, not --data");
+    for (const trainer::Setting& f : trainer::settings())
+      if (f.generated_only && args.given(f.name))
+        throw cli::UsageError(std::string("--") + f.name + " cannot be used with --data");
+  } else {
+    for (const char* f : {"track-queries", "track-truth"})
+      if (args.given(f)) throw cli::UsageError(std::string("--") + f + " needs --data");
+  }
+  if (args.given("export-layout") && !args.given("export-dycheck"))
+    throw cli::UsageError("--export-layout needs --export-dycheck");
+  if (args.given("track-truth") && !args.given("track-queries"))
+    throw cli::UsageError("--track-truth needs --track-queries");
+  if (args.given("export-dycheck")) {
+    q.job = Request::Job::export_scene;
+    q.out = args.get("export-dycheck");
+    q.export_layout = args.get_choice("export-layout", trainer::export_layout_names());
+    if (q.out.empty()) throw cli::UsageError("--export-dycheck needs a folder");
+    cli::ensure_writable_dir(q.out);
+  } else if (args.given("export-case")) {
+    q.job = Request::Job::export_case;
+    q.out = args.get("export-case");
+    if (q.out.empty()) throw cli::UsageError("--export-case needs a folder");
+    cli::ensure_writable_dir(q.out);
+  } else if (args.given("data")) {
+    // Created only once the scene is validated (train); a file in its place is refused now.
+    q.out = args.get("out");
+    std::error_code ec;
+    if (q.out.empty()) throw cli::UsageError("--out needs a folder");
+    if (fs::exists(q.out, ec) && !fs::is_directory(q.out, ec))
+      throw cli::UsageError("output folder '" + q.out.string() + "' is not a folder");
+  } else {
+    q.out = args.get("out");
+    cli::ensure_writable_dir(q.out);
+  }
+  if (!args.given("data")) return true;
+  q.from_disk = true;
+  // Every file is validated here: a bad scene exits 2 with one line naming the file.
+  const auto t0 = std::chrono::steady_clock::now();
+  if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
+  trainer::DataLayout layout = trainer::DataLayout::dycheck;
+  q.data = trainer::dataset_from_dycheck(trainer::read_data_scene(args.get("data"), &layout));
+  q.data_layout = trainer::data_layout_description(layout);
+  if (args.given("track-queries")) q.queries = trainer::read_track_queries(args.get("track-queries"), *q.data);
+  if (args.given("track-truth")) {
+    const std::string path = args.get("track-truth");
+    try {
+      const npy::Array a = npy::read(path);
+      const std::vector<std::int64_t> want{q.queries->count(), q.data->frames(), 3};
+      if (a.shape != want) throw npy::Error("shape " + npy::shape_string(a.shape) + ", expected " + npy::shape_string(want));
+      q.truth = a.as<float>(path);
+    } catch (const npy::Error& e) {
+      throw trainer::DataError(path + ": " + e.what());
+    }
+    for (float v : *q.truth)
+      if (!std::isfinite(v)) throw trainer::DataError(path + ": not finite");
+  }
+  q.seconds_read = trainer::seconds_since(t0);
+  return true;
+}
+
+// Trains on the procedural scene, or on the scene from disk. A scene from disk can still be
+// refused by stage 0 (DataError): its progress lines are held back until it is accepted, and
+// OUT is created only then, so a refused scene prints its one error line and leaves nothing.
+trainer::TrainerResult train(Request& q, const trainer::Progress& progress) {
+  const trainer::TrainerConfig& cfg = q.cfg;
+  if (!q.data) {
+    progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", seed " +
+                               std::to_string(cfg.dataset.scene.seed) + ", output " + q.out.string());
+    return trainer::run_trainer(cfg, progress);
+  }
+  progress.hold();
+  progress.line("data", std::string("layout: ") + q.data_layout);
+  progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", scene " + q.data->source +
+                             ", output " + q.out.string());
+  trainer::TrainerResult stage0 = trainer::run_stage0(cfg, std::move(*q.data), progress);
+  q.data.reset();
+  progress.release();
+  // Once the scene is accepted: the one note of a scene without feature maps (even with --quiet).
+  if (stage0.data.priors.feature_dim == 0)
+    std::cerr << "smg_trainer: note: no feature files (priors/features/<frame>.npy): the graph is geometric"
+              << (cfg.variant.semantic_graph ? ", without the semantic gate of variant " + trainer::to_string(cfg.variant.variant)
+                                             : std::string())
+              << "\n";
+  cli::ensure_writable_dir(q.out);
+  return trainer::run_trainer(std::move(stage0), progress);
+}
+
+// Writes OUT: the validation frames' renders (OUT/renders/<frame>.png), the query tracks
+// (OUT/tracks3d.npy), the pictures of the test views (procedural scene), metrics.json and
+// view.html. Returns metrics.json's line.
+std::string write_run(const Request& q, const trainer::TrainerResult& r, const trainer::Progress& progress) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const trainer::Evaluation& e = r.evaluation;
+  std::vector<std::string> written;
+  if (!r.data.truth) {
+    fs::create_directories(q.out / "renders");
+    for (std::size_t v = 0; v < e.frame_renders.size(); ++v)
+      trainer::write_png((q.out / "renders" / (r.data.eval[v].name + ".png")).string(), e.frame_renders[v]);
+  } else if (q.pictures) {
+    written = trainer::write_pictures(q.out.string(), r);
+  }
+  std::vector<float> tracks;
+  trainer::QueryTrackError te;
+  if (q.queries) {
+    tracks = trainer::carry_queries(*q.queries, r.data, r.nodes, r.model);
+    npy::write((q.out / "tracks3d.npy").string(), tracks.data(), {q.queries->count(), r.data.frames(), 3});
+    if (q.truth) {
+      te = trainer::query_track_error(tracks, *q.truth);
+      progress.line("eval", trainer::format("%d query tracks: EPE %.4f m, within 5 cm %.3f, within 10 cm %.3f",
+                                            q.queries->count(), te.epe, te.within_5cm, te.within_10cm));
+    }
+  }
+  trainer::RunRecord rec;
+  rec.config = &q.cfg;
+  rec.out = q.out.string();
+  rec.seconds_read = q.seconds_read;
+  rec.seconds_write = trainer::seconds_since(t0);
+  rec.queries = q.queries ? q.queries->count() : 0;
+  rec.query_error = q.queries && q.truth ? &te : nullptr;
+  const std::string line = trainer::metrics_json(r, rec);
+  trainer::write_metrics_json(q.out.string(), line);
+  if (q.view) {
+    trainer::ViewInputs vi;
+    vi.metrics_json = line;
+    if (q.queries) {
+      vi.tracks = &tracks;
+      vi.truth = q.truth ? &*q.truth : nullptr;
+      vi.queries = q.queries->count();
+    }
+    written.push_back(trainer::write_view_html(q.out.string(), r, vi));
+  }
+  const std::string what = r.data.truth ? std::string("pictures")
+                                        : std::to_string(e.frame_renders.size()) + " renders";
+  progress.line("done", what + " and metrics.json in " + q.out.string() + "/");
+  for (const std::string& p : written) progress.line("done", "  " + p);
+  return line;
+}
+
 }  // namespace
 
+// parse -> run -> write. Exit codes: 0 done; 2 a bad flag, an output folder that cannot be
+// written or a scene refused (one line on stderr, before anything is written); 1 a failure
+// during the run.
 int main(int argc, char** argv) {
-  trainer::TrainerConfig cfg;
-  fs::path out, export_dir, dycheck_dir;
-  bool pictures = true, quiet = false, view = true;
-  std::string export_layout;
-  const char* data_layout = nullptr;  // --data: the detected layout's description
-  // --data: the scene, read and validated before anything is trained.
-  trainer::Dataset data;
-  bool have_data = false;
-  double seconds_read = 0;
-  trainer::TrackQueries queries;
-  std::vector<float> truth;
-  bool have_queries = false, have_truth = false;
+  Request q;
   try {
-    cli::Args args(trainer::setting_flags());
-    if (!trainer::flags::parse(args, argc, argv, "smg_trainer",
-                               "Reconstructs the example dynamic scene with SMG and evaluates it on two held-out "
-                               "views (docs/trainer.md)."))
-      return 0;
-    const bool quick = args.get_switch("quick");
-    cfg = trainer::default_config(quick);
-    trainer::apply_settings(args, &cfg);
-    pictures = !args.get_switch("no-pictures");
-    view = !args.get_switch("no-view");
-    quiet = args.get_switch("quiet");
-    trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
-    if (args.given("data")) {
-      if (cfg.node_loss.confidence_source == trainer::ConfidenceSource::truth)
-        throw cli::UsageError("--confidence-from truth needs the generated scene's ground truth, not --data");
-      for (const trainer::Setting& f : trainer::settings())
-        if (f.generated_only && args.given(f.name))
-          throw cli::UsageError(std::string("--") + f.name + " cannot be used with --data");
-    } else {
-      for (const char* f : {"track-queries", "track-truth"})
-        if (args.given(f)) throw cli::UsageError(std::string("--") + f + " needs --data");
-    }
-    if (args.given("export-layout") && !args.given("export-dycheck"))
-      throw cli::UsageError("--export-layout needs --export-dycheck");
-    if (args.given("track-truth") && !args.given("track-queries"))
-      throw cli::UsageError("--track-truth needs --track-queries");
-    if (args.given("export-dycheck")) {
-      dycheck_dir = args.get("export-dycheck");
-      export_layout = args.get_choice("export-layout", trainer::export_layout_names());
-      if (dycheck_dir.empty()) throw cli::UsageError("--export-dycheck needs a folder");
-      cli::ensure_writable_dir(dycheck_dir);
-    } else if (args.given("export-case")) {
-      export_dir = args.get("export-case");
-      if (export_dir.empty()) throw cli::UsageError("--export-case needs a folder");
-      cli::ensure_writable_dir(export_dir);
-    } else if (args.given("data")) {
-      // Created only once the scene is validated (run_data); a file in its place is refused now.
-      out = args.get("out");
-      std::error_code ec;
-      if (out.empty()) throw cli::UsageError("--out needs a folder");
-      if (fs::exists(out, ec) && !fs::is_directory(out, ec))
-        throw cli::UsageError("output folder '" + out.string() + "' is not a folder");
-    } else {
-      out = args.get("out");
-      cli::ensure_writable_dir(out);
-    }
-    if (args.given("data")) {
-      // Every file is validated here: a bad scene exits 2 with one line naming the file.
-      const auto t0 = std::chrono::steady_clock::now();
-      if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
-      trainer::DataLayout layout = trainer::DataLayout::dycheck;
-      data = trainer::dataset_from_dycheck(trainer::read_data_scene(args.get("data"), &layout));
-      data_layout = trainer::data_layout_description(layout);
-      have_data = true;
-      if (args.given("track-queries")) {
-        queries = trainer::read_track_queries(args.get("track-queries"), data);
-        have_queries = true;
-      }
-      if (args.given("track-truth")) {
-        const std::string path = args.get("track-truth");
-        try {
-          const npy::Array a = npy::read(path);
-          const std::vector<std::int64_t> want{queries.count(), data.frames(), 3};
-          if (a.shape != want)
-            throw npy::Error("shape " + npy::shape_string(a.shape) + ", expected " + npy::shape_string(want));
-          truth = a.as<float>(path);
-        } catch (const npy::Error& e) {
-          throw trainer::DataError(path + ": " + e.what());
-        }
-        for (float v : truth)
-          if (!std::isfinite(v)) throw trainer::DataError(path + ": not finite");
-        have_truth = true;
-      }
-      seconds_read = trainer::seconds_since(t0);
-    }
+    if (!parse(argc, argv, q)) return 0;
   } catch (const std::exception& e) {
     std::cerr << "smg_trainer: error: " << cli::escape_line(e.what()) << "\n";
     return 2;
   }
 
   try {
+    const trainer::TrainerConfig& cfg = q.cfg;
     if (cfg.threads > 0) smg::set_num_threads(cfg.threads);
-    if (have_data)
-      return run_data(cfg, std::move(data), data_layout, seconds_read, have_queries ? &queries : nullptr,
-                      have_truth ? &truth : nullptr, out, quiet, view);
-    if (!dycheck_dir.empty()) return export_dycheck(cfg, dycheck_dir, export_layout, quiet);
-    const trainer::Progress progress(stderr, quiet);
-    if (!export_dir.empty()) {
+    if (q.job == Request::Job::export_scene) return export_dycheck(cfg, q.out, q.export_layout, q.quiet);
+    const trainer::Progress progress(stderr, q.quiet);
+    if (q.job == Request::Job::export_case) {
       progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", seed " +
                                  std::to_string(cfg.dataset.scene.seed) + ", exporting the stage-1 case to " +
-                                 export_dir.string());
+                                 q.out.string());
       const trainer::TrainerResult r = trainer::run_stage0(cfg, progress);
-      const std::string line = export_case(export_dir, cfg, r);
+      const std::string line = export_case(q.out, cfg, r);
       progress.line("done", "stage-1 case (T=" + std::to_string(r.nodes.frames) + ", N=" +
-                                std::to_string(r.nodes.count) + ") in " + export_dir.string() + "/");
+                                std::to_string(r.nodes.count) + ") in " + q.out.string() + "/");
       std::cout << line << std::endl;
       return 0;
     }
-    progress.line("start", "variant " + trainer::to_string(cfg.variant.variant) + ", seed " +
-                               std::to_string(cfg.dataset.scene.seed) + ", output " + out.string());
-    const trainer::TrainerResult r = trainer::run_trainer(cfg, progress);
-    std::vector<std::string> written;
-    if (pictures) written = trainer::write_pictures(out.string(), r);
-    trainer::RunRecord rec;
-    rec.config = &cfg;
-    rec.out = out.string();
-    const std::string line = trainer::metrics_json(r, rec);
-    trainer::write_metrics_json(out.string(), line);
-    if (view) {
-      trainer::ViewInputs vi;
-      vi.metrics_json = line;
-      written.push_back(trainer::write_view_html(out.string(), r, vi));
-    }
-    if (!quiet) {
-      progress.line("done", "pictures and metrics.json in " + out.string() + "/");
-      for (const auto& p : written) progress.line("done", "  " + p);
-    }
-    std::cout << line << std::endl;
+    const trainer::TrainerResult r = train(q, progress);
+    std::cout << write_run(q, r, progress) << std::endl;
     return 0;
   } catch (const trainer::DataError& e) {
     // A scene refused by stage 0 (--data): a data problem like those found while reading. (The
     // exporter's write errors stay failures of the run.)
     std::cerr << "smg_trainer: error: " << cli::escape_line(e.what()) << "\n";
-    return have_data ? 2 : 1;
+    return q.from_disk ? 2 : 1;
   } catch (const cli::UsageError& e) {
     std::cerr << "smg_trainer: error: " << cli::escape_line(e.what()) << "\n";
     return 2;

@@ -180,3 +180,35 @@ TEST_CASE("progress lines: one line each, control characters escaped") {
   CHECK(std::count(got.begin(), got.end(), '\n') == 1);
   CHECK(got.find('\x1b') == std::string::npos);
 }
+
+TEST_CASE("progress lines: hold() keeps them back until release(), in order; dropped if never released") {
+  const auto read_all = [](std::FILE* f) {
+    std::rewind(f);
+    std::string got;
+    for (int ch; (ch = std::fgetc(f)) != EOF;) got += static_cast<char>(ch);
+    return got;
+  };
+  std::FILE* f = std::tmpfile();
+  REQUIRE(f != nullptr);
+  {
+    const trainer::Progress p(f, false);
+    p.hold();
+    p.line("data", "first");
+    p.line("stage0", "second");
+    CHECK(read_all(f).empty());  // nothing written while held
+    p.release();
+    const std::string got = read_all(f);
+    CHECK(std::count(got.begin(), got.end(), '\n') == 2);
+    CHECK(got.find("first") < got.find("second"));
+    p.line("stage1", "third");  // after release: straight through
+    CHECK(read_all(f).find("third") != std::string::npos);
+    std::fseek(f, 0, SEEK_END);
+  }
+  {
+    const trainer::Progress p(f, false);
+    p.hold();
+    p.line("data", "refused");  // a refused scene: the held lines never reach the stream
+  }
+  CHECK(read_all(f).find("refused") == std::string::npos);
+  std::fclose(f);
+}
