@@ -495,6 +495,7 @@ bool has_folder(const std::string& root, const std::string& rel) {
   std::error_code ec;
   return fs::is_directory(fs::path(root) / rel, ec);
 }
+std::vector<unsigned char> read_bytes(const std::string& root, const std::string& rel) { return SceneReader(root).bytes(rel); }
 json::Value read_json(const std::string& root, const std::string& rel) { return SceneReader(root).json(rel); }
 npy::Array read_npy(const std::string& root, const std::string& rel) { return SceneReader(root).npy_file(rel); }
 files::Png8 read_png(const std::string& root, const std::string& rel) { return SceneReader(root).png(rel); }

@@ -27,6 +27,7 @@ namespace trainer::layout_io {
 bool has_file(const std::string& root, const std::string& rel);
 bool has_folder(const std::string& root, const std::string& rel);
 // Whole-file readers (JSON allows NaN/Infinity, as Python writes them).
+std::vector<unsigned char> read_bytes(const std::string& root, const std::string& rel);
 json::Value read_json(const std::string& root, const std::string& rel);
 npy::Array read_npy(const std::string& root, const std::string& rel);
 files::Png8 read_png(const std::string& root, const std::string& rel);

@@ -1,17 +1,24 @@
 // examples/trainer/layout_som.cpp — Shape-of-Motion's preprocessed iPhone layout (docs/data.md,
 // "Shape-of-Motion"): the reader and the writer. Our own code, following the loader
-// vye16/shape-of-motion flow3d/data/iphone_dataset.py::iPhoneDataset (camera_type "original",
-// factor 1) and flow3d/data/utils.py::parse_tapir_track_info:
+// vye16/shape-of-motion flow3d/data/iphone_dataset.py::iPhoneDataset (factor 1),
+// flow3d/data/colmap.py and flow3d/data/utils.py::parse_tapir_track_info:
+// - Cameras: SoM's default camera_type "refined" where its files are there: the COLMAP model
+//   flow3d_preprocessed/colmap/sparse/{cameras,images}.bin (images found by "<frame>.png"; w2c =
+//   [R(qvec) | tvec]; K from the model's pinhole parameters, distortion ignored, as
+//   get_intrinsics_extrinsics does) with the depth aligned to it, depth_type
+//   "depth_anything_colmap". colmap/scale.npy (COLMAP units -> metres; SoM applies it in its
+//   evaluation) scales the translations and the depth, so the scene is metric like the others;
+//   without it the scene stays in COLMAP's units (the trainer's lengths follow the scene's extent).
+//   Otherwise camera_type "original": the Nerfies camera/<frame>.json with the depth SoM's README
+//   pairs with those metric cameras, "depth_anything_lidar" (aligned_depth_anything_lidar/1x), or
+//   without it the lidar depth/1x/<frame>.npy [H, W, 1] (0 = none).
 // - Pixels: SoM's tracks, depth samples and K use integer pixel centres (grid_sample with
-//   align_corners=True, get_bkgd_points's arange grid, K straight from camera/<frame>.json). The
-//   trainer puts the centre of pixel i at i + 0.5, so track x, y and the principal point get
-//   + 0.5 here: every ray is the ray SoM computes.
-// - Depth: with the Nerfies (metric) cameras SoM's README pairs depth_type "depth_anything_lidar"
-//   (flow3d_preprocessed/aligned_depth_anything_lidar/1x, disparity aligned to the lidar): depth =
-//   1 / max(disparity, 1e-3), except that a disparity of exactly 0 is a hole (no depth, 0) where
-//   SoM would put 1000 m: our exporter writes holes that way. Without it, the lidar depth/1x/<frame>.npy [H, W, 1] (0 = none).
-//   Either way SoM clamps depth to 2.5 x the median over frames of each frame's maximum; so do we.
-//   aligned_depth_anything_colmap is in COLMAP's scale and goes with COLMAP cameras: not read.
+//   align_corners=True, get_bkgd_points's arange grid, K as stored). The trainer puts the centre
+//   of pixel i at i + 0.5, so track x, y and the principal point get + 0.5 here: every ray is the
+//   ray SoM computes.
+// - Depth from disparity: depth = 1 / max(disparity, 1e-3), except that a disparity of exactly 0
+//   is a hole (no depth, 0) where SoM would put 1000 m: our exporter writes holes that way. SoM
+//   clamps depth to 2.5 x the median over frames of each frame's maximum; so do we.
 // - Visibility: vis = 1 - sigmoid(occ), conf = 1 - sigmoid(dist); visible iff vis * conf > 0.5.
 //   (SoM's further filter, the query frame's mask, is our stage 0's object-mask rule.)
 // - Masks: track_anything/1x value / 255 > 0.5 is dynamic (SoM thresholds masks at 0.5).
@@ -19,10 +26,14 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <map>
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "npy.hpp"
+#include "trainer/colmap_model.hpp"
 #include "trainer/layout_io.hpp"
 #include "trainer/layouts.hpp"
 
@@ -35,6 +46,10 @@ using layout_io::fail_at;
 
 const char* const kSomPre = "flow3d_preprocessed/";
 const char* const kSomLidarDisparity = "flow3d_preprocessed/aligned_depth_anything_lidar/1x/";
+const char* const kSomColmapDisparity = "flow3d_preprocessed/aligned_depth_anything_colmap/1x/";
+const char* const kSomColmapCameras = "flow3d_preprocessed/colmap/sparse/cameras.bin";
+const char* const kSomColmapImages = "flow3d_preprocessed/colmap/sparse/images.bin";
+const char* const kSomColmapScale = "flow3d_preprocessed/colmap/scale.npy";
 
 // sigmoid in double (the logits are float32 in the file).
 double som_sigmoid(double x) { return 1.0 / (1.0 + std::exp(-x)); }
@@ -139,11 +154,101 @@ void som_read_tracks(const std::string& root, DycheckScene& s, const DycheckRead
   }
 }
 
-// A camera at 1x from camera/<frame>.json with SoM's principal point moved to our pixel centres.
-Camera som_read_camera(const std::string& root, const std::string& frame) {
+// The camera set a scene is read with (file comment): SoM's refined COLMAP cameras where the
+// model and the depth aligned to it are both there, else the original Nerfies camera/ JSON.
+struct SomCameras {
+  bool refined = false;
+  double scale = 1.0;  // refined: colmap/scale.npy (COLMAP units -> metres), 1 without the file
+  std::map<std::string, Camera> by_image;  // refined: by image name, "<frame>.png"
+};
+
+// The pinhole of a COLMAP camera as SoM's get_intrinsics_extrinsics takes it: f, cx, cy for the
+// SIMPLE_PINHOLE / SIMPLE_RADIAL / RADIAL models, fx, fy, cx, cy for PINHOLE / OPENCV /
+// OPENCV_FISHEYE / FULL_OPENCV (distortion ignored, as SoM does); any other model is refused.
+void som_colmap_intrinsics(const colmap::CameraRecord& c, Camera& cam) {
+  const std::string model = colmap::model_name(c.model_id);
+  if (model == "SIMPLE_PINHOLE" || model == "SIMPLE_RADIAL" || model == "RADIAL") {
+    cam.fx = cam.fy = c.params[0];
+    cam.cx = c.params[1];
+    cam.cy = c.params[2];
+  } else if (model == "PINHOLE" || model == "OPENCV" || model == "OPENCV_FISHEYE" || model == "FULL_OPENCV") {
+    cam.fx = c.params[0];
+    cam.fy = c.params[1];
+    cam.cx = c.params[2];
+    cam.cy = c.params[3];
+  } else {
+    fail_at(kSomColmapCameras, "camera " + std::to_string(c.id) + ": model " + model +
+                                   " is not supported (Shape-of-Motion reads SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, "
+                                   "RADIAL, OPENCV, OPENCV_FISHEYE and FULL_OPENCV)");
+  }
+  if (!(cam.fx > 0 && cam.fy > 0))
+    fail_at(kSomColmapCameras, "camera " + std::to_string(c.id) + ": focal length must be > 0");
+  if (c.width == 0 || c.height == 0 || c.width > 1u << 16 || c.height > 1u << 16)
+    fail_at(kSomColmapCameras, "camera " + std::to_string(c.id) + ": image size " + std::to_string(c.width) + "x" +
+                                   std::to_string(c.height) + " is out of range");
+  cam.width = static_cast<int>(c.width);
+  cam.height = static_cast<int>(c.height);
+}
+
+SomCameras som_cameras(const std::string& root) {
+  SomCameras out;
+  out.refined = layout_io::has_file(root, kSomColmapCameras) && layout_io::has_folder(root, kSomColmapDisparity);
+  if (!out.refined) return out;
+  if (layout_io::has_file(root, kSomColmapScale)) {
+    const npy::Array a = layout_io::read_npy(root, kSomColmapScale);
+    const std::vector<double> v = a.as<double>(kSomColmapScale);
+    if (v.size() != 1) fail_at(kSomColmapScale, "expected one value, found shape " + npy::shape_string(a.shape));
+    if (!(std::isfinite(v[0]) && v[0] > 0)) fail_at(kSomColmapScale, "the scale must be finite and > 0");
+    out.scale = v[0];
+  }
+  std::vector<colmap::CameraRecord> cameras;
+  std::vector<colmap::ImageRecord> images;
+  try {
+    cameras = colmap::parse_cameras(layout_io::read_bytes(root, kSomColmapCameras));
+  } catch (const colmap::FormatError& e) {
+    fail_at(kSomColmapCameras, e.what());
+  }
+  try {
+    images = colmap::parse_images(layout_io::read_bytes(root, kSomColmapImages));
+  } catch (const colmap::FormatError& e) {
+    fail_at(kSomColmapImages, e.what());
+  }
+  std::map<int, Camera> intrinsics;
+  for (const colmap::CameraRecord& c : cameras) som_colmap_intrinsics(c, intrinsics[c.id]);
+  for (const colmap::ImageRecord& im : images) {
+    const auto k = intrinsics.find(im.camera_id);
+    if (k == intrinsics.end())
+      fail_at(kSomColmapImages, "image '" + im.name + "': camera " + std::to_string(im.camera_id) + " is not in cameras.bin");
+    const Eigen::Quaterniond q(im.qvec[0], im.qvec[1], im.qvec[2], im.qvec[3]);
+    if (std::abs(q.norm() - 1.0) > 1e-6)
+      fail_at(kSomColmapImages, "image '" + im.name + "': qvec is not a unit quaternion (norm " + std::to_string(q.norm()) + ")");
+    Camera cam = k->second;
+    // w2c = [R(qvec) | tvec] (SoM: qvec2rotmat, tvec as stored); the scale makes the camera
+    // centres -Rᵀt metric, so t scales with them. + 0.5: SoM's integer pixel centres to ours.
+    cam.world_to_camera.setIdentity();
+    cam.world_to_camera.topLeftCorner<3, 3>() = q.normalized().toRotationMatrix();
+    cam.world_to_camera.topRightCorner<3, 1>() = out.scale * Eigen::Vector3d(im.tvec[0], im.tvec[1], im.tvec[2]);
+    cam.cx += 0.5;
+    cam.cy += 0.5;
+    out.by_image[im.name] = cam;
+  }
+  return out;
+}
+
+// A frame's camera at 1x, with SoM's principal point moved to our pixel centres, and the file it
+// came from (for messages).
+Camera som_read_camera(const std::string& root, const std::string& frame, const SomCameras& cams, std::string* from) {
+  if (cams.refined) {
+    *from = kSomColmapImages;
+    const auto it = cams.by_image.find(frame + ".png");
+    if (it == cams.by_image.end()) fail_at(kSomColmapImages, "no image named '" + frame + ".png' (a frame of the splits)");
+    return it->second;
+  }
   const std::string rel = "camera/" + frame + ".json";
-  if (!layout_io::has_file(root, rel) && layout_io::has_folder(root, std::string(kSomPre) + "colmap"))
-    fail_at(rel, "missing; COLMAP cameras (flow3d_preprocessed/colmap/sparse) are not supported, the Nerfies camera/ JSON files are needed");
+  *from = rel;
+  if (!layout_io::has_file(root, rel) && layout_io::has_file(root, kSomColmapCameras))
+    fail_at(rel, std::string("missing; the COLMAP cameras (flow3d_preprocessed/colmap/sparse) go with the depth aligned "
+                             "to them, ") + kSomColmapDisparity + ", which is missing too");
   Camera c = layout_io::read_nerfies_camera(root, rel, 1);
   c.cx += 0.5;
   c.cy += 0.5;
@@ -157,33 +262,39 @@ DycheckScene read_som(const std::string& dir, const DycheckReadOptions& options)
   s.root = dir;
   s.train = layout_io::read_train_split(dir);
   const std::size_t T = s.train.size();
+  const SomCameras cams = som_cameras(dir);
+  std::string from;
   for (std::size_t t = 0; t < T; ++t) {
-    s.train_cameras.push_back(som_read_camera(dir, s.train[t].name));
+    s.train_cameras.push_back(som_read_camera(dir, s.train[t].name, cams, &from));
     const Camera& c = s.train_cameras.back();
     if (t == 0) {
       s.width = c.width;
       s.height = c.height;
     } else if (c.width != s.width || c.height != s.height) {
-      fail_at("camera/" + s.train[t].name + ".json", "image size differs from the first training frame's");
+      fail_at(from, "image size of frame " + s.train[t].name + " differs from the first training frame's");
     }
-    s.train_rgb.push_back(layout_io::read_rgb_png(dir, "rgb/1x/" + s.train[t].name + ".png", c,
-                                                  "camera/" + s.train[t].name + ".json", "1x"));
+    s.train_rgb.push_back(layout_io::read_rgb_png(dir, "rgb/1x/" + s.train[t].name + ".png", c, from, "1x"));
   }
 
-  // Depth (file comment): lidar-aligned disparity, else lidar z; then SoM's clamp.
-  const bool disparity = layout_io::has_folder(dir, kSomLidarDisparity);
+  // Depth (file comment): with the refined cameras the disparity aligned to them, in metres by the
+  // scale; else lidar-aligned disparity, else lidar z; then SoM's clamp.
+  const bool disparity = cams.refined || layout_io::has_folder(dir, kSomLidarDisparity);
   if (!disparity && !layout_io::has_folder(dir, "depth/1x")) {
     if (layout_io::has_folder(dir, std::string(kSomPre) + "aligned_depth_anything_colmap"))
       fail_at(std::string(kSomPre) + "aligned_depth_anything_colmap",
-              "in COLMAP's scale, which needs COLMAP cameras (not supported); add aligned_depth_anything_lidar/1x or depth/1x");
+              "in COLMAP's scale, which needs the COLMAP cameras (flow3d_preprocessed/colmap/sparse/cameras.bin, missing); "
+              "add them, or aligned_depth_anything_lidar/1x or depth/1x");
     fail_at(kSomLidarDisparity, "missing, and no lidar depth/1x either");
   }
+  const std::string depth_dir = cams.refined ? kSomColmapDisparity : disparity ? kSomLidarDisparity : "depth/1x/";
   const std::size_t HW = static_cast<std::size_t>(s.width) * static_cast<std::size_t>(s.height);
   s.depth.assign(T * HW, 0.0f);
   std::vector<float> frame_max(T, 0.0f);
   for (std::size_t t = 0; t < T; ++t) {
-    const std::string rel = (disparity ? std::string(kSomLidarDisparity) : std::string("depth/1x/")) + s.train[t].name + ".npy";
-    const std::vector<float> d = som_read_depth(dir, rel, disparity, s.width, s.height);
+    const std::string rel = depth_dir + s.train[t].name + ".npy";
+    std::vector<float> d = som_read_depth(dir, rel, disparity, s.width, s.height);
+    if (cams.scale != 1.0)
+      for (float& z : d) z = static_cast<float>(static_cast<double>(z) * cams.scale);
     frame_max[t] = *std::max_element(d.begin(), d.end());
     std::copy(d.begin(), d.end(), s.depth.begin() + static_cast<std::ptrdiff_t>(t * HW));
   }
@@ -198,9 +309,9 @@ DycheckScene read_som(const std::string& dir, const DycheckReadOptions& options)
   // Validation frames: camera, rgb/1x, covisible/1x/val.
   s.val = layout_io::read_split_file(dir, "splits/val.json");
   for (const DycheckFrame& f : s.val) {
-    s.val_cameras.push_back(som_read_camera(dir, f.name));
+    s.val_cameras.push_back(som_read_camera(dir, f.name, cams, &from));
     const Camera& c = s.val_cameras.back();
-    s.val_rgb.push_back(layout_io::read_rgb_png(dir, "rgb/1x/" + f.name + ".png", c, "camera/" + f.name + ".json", "1x"));
+    s.val_rgb.push_back(layout_io::read_rgb_png(dir, "rgb/1x/" + f.name + ".png", c, from, "1x"));
     s.val_covisible.push_back(
         layout_io::read_binary_mask(dir, std::string(kSomPre) + "covisible/1x/val/" + f.name + ".png", c.width, c.height));
   }
@@ -226,17 +337,43 @@ void write_som(const std::string& dir, const DycheckScene& s) {
   const std::size_t Q = static_cast<std::size_t>(tr.count);
   const std::string pre = kSomPre;
   for (const std::string& d : std::vector<std::string>{"camera", "rgb/1x", "splits", "priors/features", pre + "aligned_depth_anything_lidar/1x",
+                              pre + "aligned_depth_anything_colmap/1x", pre + "colmap/sparse",
                               pre + "track_anything/1x", pre + "covisible/1x/val", pre + "2d_tracks/1x"})
     layout_io::make_dir(dir, d);
   layout_io::write_file(dir, "splits/train.json", layout_io::split_file_json(s.train));
   layout_io::write_file(dir, "splits/val.json", layout_io::split_file_json(s.val));
   layout_io::write_file(dir, "extra.json", "{\"fps\": 30.0, \"factor\": 1}\n");  // SoM reads fps from it
-  // Cameras: back to SoM's integer pixel centres.
+  // Cameras, twice as a SoM scene has them: the original Nerfies camera/ JSON and the refined
+  // COLMAP model (one PINHOLE camera per frame; the reader takes these). The COLMAP model is in
+  // units of 1 / kColmapScale metres, as a COLMAP reconstruction is in its own units, and
+  // colmap/scale.npy says so. Both back to SoM's integer pixel centres.
+  constexpr double kColmapScale = 2.0;  // a power of two: the round trip through it is exact
+  std::vector<colmap::CameraRecord> colmap_cameras;
+  std::vector<colmap::ImageRecord> colmap_images;
   auto write_frame = [&](const DycheckFrame& f, Camera cam, const Image& rgb) {
     cam.cx -= 0.5;
     cam.cy -= 0.5;
     layout_io::write_file(dir, "camera/" + f.name + ".json", layout_io::nerfies_camera_json(cam, 1));
     layout_io::write_png_file(dir, "rgb/1x/" + f.name + ".png", rgb);
+    const int id = static_cast<int>(colmap_images.size()) + 1;
+    colmap::CameraRecord c;
+    c.id = id;
+    c.model_id = 1;  // PINHOLE
+    c.width = static_cast<std::uint64_t>(cam.width);
+    c.height = static_cast<std::uint64_t>(cam.height);
+    c.params = {cam.fx, cam.fy, cam.cx, cam.cy};
+    colmap_cameras.push_back(c);
+    colmap::ImageRecord im;
+    im.id = id;
+    im.camera_id = id;
+    im.name = f.name + ".png";
+    const Eigen::Quaterniond q(Eigen::Matrix3d(cam.rotation()));
+    im.qvec[0] = q.w();
+    im.qvec[1] = q.x();
+    im.qvec[2] = q.y();
+    im.qvec[3] = q.z();
+    for (int k = 0; k < 3; ++k) im.tvec[k] = cam.translation()(k) / kColmapScale;
+    colmap_images.push_back(im);
   };
   for (std::size_t t = 0; t < T; ++t) {
     write_frame(s.train[t], s.train_cameras[t], s.train_rgb[t]);
@@ -247,6 +384,9 @@ void write_som(const std::string& dir, const DycheckScene& s) {
     }
     layout_io::write_file(dir, pre + "aligned_depth_anything_lidar/1x/" + s.train[t].name + ".npy",
                           npy::to_bytes(disp.data(), {s.height, s.width}));
+    for (float& d : disp) d = static_cast<float>(d * kColmapScale);  // 1 / (z / scale)
+    layout_io::write_file(dir, pre + "aligned_depth_anything_colmap/1x/" + s.train[t].name + ".npy",
+                          npy::to_bytes(disp.data(), {s.height, s.width}));
     layout_io::write_png_file(dir, pre + "track_anything/1x/" + s.train[t].name + ".png",
                               layout_io::mask_image(s.dynamic_mask.data() + t * HW, s.width, s.height));
   }
@@ -255,6 +395,10 @@ void write_som(const std::string& dir, const DycheckScene& s) {
     layout_io::write_png_file(dir, pre + "covisible/1x/val/" + s.val[v].name + ".png",
                               layout_io::mask_image(s.val_covisible[v].data(), s.val_cameras[v].width, s.val_cameras[v].height));
   }
+  layout_io::write_file(dir, pre + "colmap/sparse/cameras.bin", colmap::cameras_bytes(colmap_cameras));
+  layout_io::write_file(dir, pre + "colmap/sparse/images.bin", colmap::images_bytes(colmap_images));
+  const double scale = kColmapScale;
+  layout_io::write_file(dir, pre + "colmap/scale.npy", npy::to_bytes(&scale, {}));
   // Tracks: one [N_q, 4] file per (query, target) pair; logits +-10 give visible / invisible.
   for (std::size_t q = 0; q < T; ++q) {
     std::vector<std::size_t> rows;

@@ -30,8 +30,9 @@ bool layouts_has_bootstapir(const fs::path& dir) {
 const char* data_layout_description(DataLayout layout) {
   switch (layout) {
     case DataLayout::som:
-      return "Shape-of-Motion (flow3d_preprocessed/: 1x images, 2d_tracks/1x, aligned_depth_anything_lidar/1x or lidar "
-             "depth/1x, Nerfies cameras)";
+      return "Shape-of-Motion (flow3d_preprocessed/: 1x images, 2d_tracks/1x; the COLMAP cameras colmap/sparse with "
+             "aligned_depth_anything_colmap/1x where both are there, else the Nerfies camera/ with "
+             "aligned_depth_anything_lidar/1x or lidar depth/1x)";
     case DataLayout::mosca: return "MoSca (images/, sensor_depth/ dep, cameras/, *bootstapir*.npz tracks, epi/error masks)";
     case DataLayout::dycheck: break;
   }

@@ -3,7 +3,8 @@
 // float32 disparity round trip, masks, tracks, features), stage 0 gives the same lifted tracks,
 // nodes and graph, and a short run the same metrics within a stated tolerance. Also smg_trainer
 // --export-layout som / mosca and --data on them, and both layouts'
-// refusals through the CLI.
+// refusals through the CLI. The SoM export holds both of SoM's camera sets; the reader takes the
+// refined COLMAP one, which must equal the original Nerfies one.
 #include <doctest/doctest.h>
 
 #include <algorithm>
@@ -156,8 +157,21 @@ TEST_CASE("the procedural scene in the Dycheck, Shape-of-Motion and MoSca layout
   trainer::DataLayout ld = trainer::DataLayout::som, ls = trainer::DataLayout::dycheck, lm = trainer::DataLayout::dycheck;
   const trainer::DycheckScene a = trainer::read_data_scene(dy.string(), &ld);
   CHECK(ld == trainer::DataLayout::dycheck);
-  equivalence_compare(cfg, a, trainer::read_data_scene(som.string(), &ls), "som");
+  const trainer::DycheckScene refined = trainer::read_data_scene(som.string(), &ls);
+  equivalence_compare(cfg, a, refined, "som");
   CHECK(ls == trainer::DataLayout::som);
+  // The same SoM export read with its original cameras (camera/ and the lidar-aligned depth, once
+  // the COLMAP model is gone): the same cameras to 1e-12 and the same depth, bit for bit (the
+  // COLMAP scale is a power of two).
+  fs::remove_all(som / "flow3d_preprocessed/colmap");
+  const trainer::DycheckScene original = trainer::read_data_scene(som.string());
+  REQUIRE(original.frames() == refined.frames());
+  for (std::size_t t = 0; t < refined.train_cameras.size(); ++t) {
+    const trainer::Camera &p = original.train_cameras[t], &q = refined.train_cameras[t];
+    CHECK((p.world_to_camera - q.world_to_camera).cwiseAbs().maxCoeff() < 1e-12);
+    CHECK(std::abs(p.fx - q.fx) + std::abs(p.fy - q.fy) + std::abs(p.cx - q.cx) + std::abs(p.cy - q.cy) < 1e-12);
+  }
+  CHECK(original.depth == refined.depth);
   equivalence_compare(cfg, a, trainer::read_data_scene(mosca.string(), &lm), "mosca");
   CHECK(lm == trainer::DataLayout::mosca);
   for (const fs::path& p : {dy, som, mosca}) fs::remove_all(p);
@@ -202,24 +216,28 @@ TEST_CASE("smg_trainer --export-layout som, --data on it; the SoM layout's refus
   layout_cli_round_trip(scene, out, "som",
                         {"splits/train.json", "camera/0_00000.json", "rgb/1x/0_00007.png", "extra.json",
                          pre + "aligned_depth_anything_lidar/1x/0_00007.npy", pre + "track_anything/1x/0_00000.png",
-                         pre + "covisible/1x/val/1_00000.png", pre + "2d_tracks/1x/0_00003_0_00005.npy"},
+                         pre + "covisible/1x/val/1_00000.png", pre + "2d_tracks/1x/0_00003_0_00005.npy",
+                         pre + "colmap/sparse/cameras.bin", pre + "colmap/sparse/images.bin", pre + "colmap/scale.npy",
+                         pre + "aligned_depth_anything_colmap/1x/0_00007.npy"},
                         "Shape-of-Motion");
   auto run = layout_cli_run;
   const fs::path bad_out = fs::temp_directory_path() / "smg_test_layout_cli_bad_out";
   fs::remove_all(bad_out);
-  fs::remove(scene / "camera/0_00004.json");
+  // The export has SoM's refined cameras (read) beside the original ones.
+  const std::string images = smg::test::slurp(scene / (pre + "colmap/sparse/images.bin"));
+  smg::test::write_bytes(scene / (pre + "colmap/sparse/images.bin"), "xx");
   smg::test::write_bytes(scene / (pre + "2d_tracks/1x/0_00001_0_00002.npy"), "not a numpy file");
   const struct {
     std::string args, message;
   } cases[] = {
-      {"--data " + scene.string(), "camera/0_00004.json: "},
+      {"--data " + scene.string(), pre + "colmap/sparse/images.bin: truncated at byte 0 (reading the image count)"},
       {"--export-layout som", "--export-layout needs --export-dycheck"},
   };
   for (const auto& c : cases) {
     CAPTURE(c.args);
     smg::test::check_refused(run(c.args + " --out " + bad_out.string()), c.message, bad_out);
   }
-  smg::test::write_bytes(scene / "camera/0_00004.json", smg::test::slurp(scene / "camera/0_00003.json"));
+  smg::test::write_bytes(scene / (pre + "colmap/sparse/images.bin"), images);
   smg::test::check_refused(run("--data " + scene.string() + " --out " + bad_out.string()),
                            pre + "2d_tracks/1x/0_00001_0_00002.npy: ", bad_out);
   fs::remove_all(scene);

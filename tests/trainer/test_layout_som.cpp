@@ -13,6 +13,7 @@
 #include "npy.hpp"
 #include "support/files.hpp"
 #include "layout_fixture.hpp"
+#include "trainer/colmap_model.hpp"
 #include "trainer/layouts.hpp"
 
 namespace fs = std::filesystem;
@@ -23,6 +24,12 @@ const fs::path kSomFixture = fs::path(SMG_TEST_DATA_DIR) / "som_small";
 
 fs::path som_copy(const std::string& name) { return trainer::test::layout_fixture_copy("som_small", name); }
 std::string som_error(const fs::path& dir) { return trainer::test::layout_read_error(dir); }
+
+// tests/data/som_colmap (written by som_small/make_fixture.py) copied over a copy of som_small:
+// the scene with SoM's default refined COLMAP cameras and the depth aligned to them.
+void overlay_colmap(const fs::path& d) {
+  fs::copy(fs::path(SMG_TEST_DATA_DIR) / "som_colmap", d, fs::copy_options::recursive | fs::copy_options::overwrite_existing);
+}
 
 }  // namespace
 
@@ -113,12 +120,14 @@ TEST_CASE("read_som: one broken file at a time names that file") {
     trainer::test::check_missing_files("som_small", {pre + "2d_tracks/1x/0_00001_0_00002.npy", "camera/0_00002.json",
                                                      pre + "track_anything/1x/0_00001.png"});
   }
-  SUBCASE("COLMAP cameras only") {
+  SUBCASE("COLMAP cameras without the depth aligned to them, and no camera/ JSON") {
     const fs::path d = som_copy("colmap");
     fs::remove_all(d / "camera");
-    fs::create_directories(d / (pre + "colmap/sparse"));
-    CHECK(som_error(d) == "camera/0_00000.json: missing; COLMAP cameras (flow3d_preprocessed/colmap/sparse) are not "
-                          "supported, the Nerfies camera/ JSON files are needed");
+    overlay_colmap(d);
+    fs::remove_all(d / (pre + "aligned_depth_anything_colmap"));
+    CHECK(som_error(d) == "camera/0_00000.json: missing; the COLMAP cameras (flow3d_preprocessed/colmap/sparse) go with "
+                          "the depth aligned to them, flow3d_preprocessed/aligned_depth_anything_colmap/1x/, which is "
+                          "missing too");
   }
   SUBCASE("a disparity file of the wrong size") {
     const fs::path d = som_copy("disparity_size");
@@ -129,8 +138,9 @@ TEST_CASE("read_som: one broken file at a time names that file") {
   SUBCASE("no depth at all; COLMAP-scaled depth only") {
     const fs::path d = som_copy("depth_colmap");
     fs::rename(d / (pre + "aligned_depth_anything_lidar"), d / (pre + "aligned_depth_anything_colmap"));
-    CHECK(som_error(d) == pre + "aligned_depth_anything_colmap: in COLMAP's scale, which needs COLMAP cameras (not "
-                                "supported); add aligned_depth_anything_lidar/1x or depth/1x");
+    CHECK(som_error(d) == pre + "aligned_depth_anything_colmap: in COLMAP's scale, which needs the COLMAP cameras "
+                                "(flow3d_preprocessed/colmap/sparse/cameras.bin, missing); add them, or "
+                                "aligned_depth_anything_lidar/1x or depth/1x");
   }
   SUBCASE("a validation camera JSON without orientation") {
     const fs::path d = som_copy("val_camera");
@@ -170,4 +180,125 @@ TEST_CASE("detect_data_layout: by the folder's contents; ambiguous or unknown fo
   CHECK(trainer::detect_data_layout(d.string()) == trainer::DataLayout::mosca);
   CHECK(som_error(d) == "images: no PNG images");  // read as MoSca (tests/trainer/test_layout_mosca.cpp)
   fs::remove_all(d);
+}
+
+TEST_CASE("read_som: SoM's default, refined COLMAP cameras and COLMAP-aligned depth (numpy/struct-written overlay)") {
+  const std::string pre = "flow3d_preprocessed/";
+  const fs::path d = som_copy("refined");
+  overlay_colmap(d);
+  trainer::DataLayout layout = trainer::DataLayout::dycheck;
+  const trainer::DycheckScene s = trainer::read_data_scene(d.string(), &layout);
+  CHECK(layout == trainer::DataLayout::som);
+  REQUIRE(s.frames() == 3);
+  CHECK(s.width == 16);
+  CHECK(s.height == 12);
+  // The refined cameras, not camera/<frame>.json (f 20, identity): SIMPLE_RADIAL f 22, (7, 5)
+  // + 0.5, distortion ignored; Ry(10 deg); translation (0.2, -0.1, 0.05) units x 0.5 m per unit.
+  const Eigen::Matrix3d ry = Eigen::AngleAxisd(10.0 * EIGEN_PI / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  for (const trainer::Camera& c : s.train_cameras) {
+    CHECK(c.fx == 22.0);
+    CHECK(c.fy == 22.0);
+    CHECK(c.cx == 7.5);
+    CHECK(c.cy == 5.5);
+    CHECK(c.width == 16);
+    CHECK((c.rotation() - ry).cwiseAbs().maxCoeff() < 1e-15);
+    CHECK((c.translation() - Eigen::Vector3d(0.1, -0.05, 0.025)).cwiseAbs().maxCoeff() < 1e-15);
+  }
+  // The validation frame's PINHOLE camera 2, found by name among images listed out of order.
+  REQUIRE(s.val_cameras.size() == 1);
+  const trainer::Camera& v = s.val_cameras[0];
+  CHECK(v.fx == 21.0);
+  CHECK(v.fy == 19.0);
+  CHECK(v.cx == 7.75);
+  CHECK(v.cy == 6.25);
+  CHECK(v.rotation().isIdentity(0.0));
+  CHECK(v.translation().isZero(0.0));
+  // Depth: 1 / (COLMAP disparity 0.5 / depth) in units, x 0.5: the metric 1 m / 2 m again.
+  const std::size_t HW = 16 * 12;
+  for (std::size_t t = 0; t < 3; ++t) {
+    CAPTURE(t);
+    CHECK(s.depth[t * HW + 5 * 16 + 5 + t] == 1.0f);
+    CHECK(s.depth[t * HW + 0] == 2.0f);
+  }
+  SUBCASE("without scale.npy: COLMAP's own units") {
+    fs::remove(d / (pre + "colmap/scale.npy"));
+    const trainer::DycheckScene u = trainer::read_data_scene(d.string());
+    CHECK((u.train_cameras[1].translation() - Eigen::Vector3d(0.2, -0.1, 0.05)).cwiseAbs().maxCoeff() < 1e-15);
+    CHECK(u.depth[0] == 4.0f);
+  }
+  SUBCASE("without the aligned depth: the original cameras and the lidar-aligned depth") {
+    fs::remove_all(d / (pre + "aligned_depth_anything_colmap"));
+    const trainer::DycheckScene o = trainer::read_data_scene(d.string());
+    CHECK(o.train_cameras[0].fx == 20.0);
+    CHECK(o.train_cameras[0].rotation().isIdentity(0.0));
+  }
+}
+
+TEST_CASE("read_som: broken COLMAP files, each named with its problem") {
+  namespace colmap = trainer::colmap;
+  const std::string sparse = "flow3d_preprocessed/colmap/sparse/";
+  const auto refined = [](const std::string& name) {
+    const fs::path d = som_copy("colmap_" + name);
+    overlay_colmap(d);
+    return d;
+  };
+  const std::vector<colmap::CameraRecord> cams = {{1, 1, 16, 12, {20.0, 20.0, 7.5, 5.5}}};
+  const auto image = [](int id, const std::string& name, int camera, double qw = 1.0) {
+    colmap::ImageRecord im;
+    im.id = id;
+    im.name = name;
+    im.camera_id = camera;
+    im.qvec[0] = qw;
+    return im;
+  };
+  const std::vector<colmap::ImageRecord> all = {image(1, "0_00000.png", 1), image(2, "0_00001.png", 1),
+                                                image(3, "0_00002.png", 1), image(4, "1_00001.png", 1)};
+  SUBCASE("truncated cameras.bin") {
+    const fs::path d = refined("truncated");
+    const std::string b = smg::test::slurp(d / (sparse + "cameras.bin"));
+    REQUIRE(b.size() == 120);  // 8 + (24 + 4 x 8) x 2
+    smg::test::write_bytes(d / (sparse + "cameras.bin"), b.substr(0, b.size() - 4));
+    CHECK(som_error(d) == sparse + "cameras.bin: truncated at byte 112 (reading params)");
+  }
+  SUBCASE("bytes after the last image") {
+    const fs::path d = refined("padded");
+    smg::test::write_bytes(d / (sparse + "images.bin"), colmap::images_bytes(all) + "xy");
+    CHECK(som_error(d) == sparse + "images.bin: 2 bytes after the last record");
+  }
+  SUBCASE("an unknown camera model and one SoM does not read") {
+    const fs::path d = refined("model");
+    smg::test::write_bytes(d / (sparse + "cameras.bin"), colmap::cameras_bytes({{1, 42, 16, 12, {}}}));
+    CHECK(som_error(d) == sparse + "cameras.bin: camera 1: unknown camera model id 42");
+    smg::test::write_bytes(d / (sparse + "cameras.bin"), colmap::cameras_bytes({{1, 7, 16, 12, {20, 8, 6, 0.1, 0}}}));
+    CHECK(som_error(d) == sparse + "cameras.bin: camera 1: model FOV is not supported (Shape-of-Motion reads "
+                                   "SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, OPENCV_FISHEYE and FULL_OPENCV)");
+  }
+  SUBCASE("a frame of the splits missing from images.bin; an image of an unknown camera") {
+    const fs::path d = refined("frames");
+    smg::test::write_bytes(d / (sparse + "cameras.bin"), colmap::cameras_bytes(cams));
+    smg::test::write_bytes(d / (sparse + "images.bin"), colmap::images_bytes({all[0], all[2], all[3]}));
+    CHECK(som_error(d) == sparse + "images.bin: no image named '0_00001.png' (a frame of the splits)");
+    smg::test::write_bytes(d / (sparse + "images.bin"), colmap::images_bytes({all[0], all[1], all[2], image(4, "1_00001.png", 5)}));
+    CHECK(som_error(d) == sparse + "images.bin: image '1_00001.png': camera 5 is not in cameras.bin");
+  }
+  SUBCASE("a quaternion that is not a rotation") {
+    const fs::path d = refined("qvec");
+    smg::test::write_bytes(d / (sparse + "cameras.bin"), colmap::cameras_bytes(cams));
+    smg::test::write_bytes(d / (sparse + "images.bin"), colmap::images_bytes({all[0], all[1], image(3, "0_00002.png", 1, 2.0), all[3]}));
+    CHECK(som_error(d).rfind(sparse + "images.bin: image '0_00002.png': qvec is not a unit quaternion (norm 2", 0) == 0);
+  }
+  SUBCASE("a scale.npy of two values, or negative") {
+    const fs::path d = refined("scale");
+    const double two[2] = {1.0, 2.0};
+    smg::test::write_bytes(d / "flow3d_preprocessed/colmap/scale.npy", npy::to_bytes(two, {2}));
+    CHECK(som_error(d) == "flow3d_preprocessed/colmap/scale.npy: expected one value, found shape [2]");
+    const double neg = -1.0;
+    smg::test::write_bytes(d / "flow3d_preprocessed/colmap/scale.npy", npy::to_bytes(&neg, {}));
+    CHECK(som_error(d) == "flow3d_preprocessed/colmap/scale.npy: the scale must be finite and > 0");
+  }
+  SUBCASE("images.bin missing") {
+    const fs::path d = refined("missing");
+    fs::remove(d / (sparse + "images.bin"));
+    CHECK(som_error(d).rfind(sparse + "images.bin: ", 0) == 0);
+  }
 }

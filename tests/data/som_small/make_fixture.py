@@ -10,6 +10,15 @@ depth_type "depth_anything_lidar", factor 1; flow3d/data/utils.py::parse_tapir_t
   flow3d_preprocessed/covisible/1x/val/<frame>.png                  0/255 grey
   flow3d_preprocessed/2d_tracks/1x/<q>_<t>.npy                      float32 [N_q, 4]
 
+It also writes tests/data/som_colmap (an overlay: copied over som_small it makes the scene SoM
+reads with its defaults, camera_type "refined" and depth_type "depth_anything_colmap"):
+
+  flow3d_preprocessed/colmap/sparse/{cameras,images}.bin   COLMAP's binary model, written with
+      struct in COLMAP's layout (colmap/scripts/python/read_write_model.py, write_cameras_binary
+      and write_images_binary, the functions SoM's flow3d/data/colmap.py reads back)
+  flow3d_preprocessed/colmap/scale.npy                      float64 0-d: COLMAP units -> metres
+  flow3d_preprocessed/aligned_depth_anything_colmap/1x/<frame>.npy  float32 disparity in COLMAP units
+
 The scene: a fronto-parallel plane at 2 m, a square at 1 m moving 1 px per frame to the right,
 camera 0 at the origin looking down +z (identity orientation). Track rows: x, y (integer pixel
 centres), occlusion logit, expected-distance logit. Tests (tests/trainer/test_layout_som.cpp) check
@@ -113,5 +122,55 @@ def main():
             np.save(os.path.join(pre, "2d_tracks/1x", f"{train[q]}_{train[t]}.npy"), rows)
 
 
+# COLMAP's overlay (docstring). The refined cameras differ from camera/<frame>.json on purpose, so
+# that the tests see which set was read: the training frames share camera 1 (SIMPLE_RADIAL f=22,
+# cx=7.0, cy=5.0, k=0.3: SoM ignores the distortion), the validation frame has camera 2 (PINHOLE
+# fx=21, fy=19, cx=7.25, cy=5.75). Every training frame is rotated 10 degrees about y and
+# translated by (0.2, -0.1, 0.05) COLMAP units, with scale 0.5 m per unit. images.bin lists the
+# frames out of order, with one image that no split names, and 2D points (which are skipped).
+COLMAP_SCALE = 0.5
+COLMAP_ANGLE = np.deg2rad(10.0)
+
+
+def colmap_qvec_y(angle):
+    """The unit quaternion (w, x, y, z) of a rotation by `angle` about y."""
+    return [np.cos(angle / 2), 0.0, np.sin(angle / 2), 0.0]
+
+
+def write_colmap(root):
+    sparse = os.path.join(root, "flow3d_preprocessed/colmap/sparse")
+    disp_dir = os.path.join(root, "flow3d_preprocessed/aligned_depth_anything_colmap/1x")
+    os.makedirs(sparse, exist_ok=True)
+    os.makedirs(disp_dir, exist_ok=True)
+    # cameras.bin: uint64 count; per camera int32 id, int32 model id, uint64 width, uint64 height, doubles.
+    cams = [(1, 2, [22.0, 7.0, 5.0, 0.3]), (2, 1, [21.0, 19.0, 7.25, 5.75])]
+    with open(os.path.join(sparse, "cameras.bin"), "wb") as f:
+        f.write(struct.pack("<Q", len(cams)))
+        for cid, model, params in cams:
+            f.write(struct.pack("<iiQQ", cid, model, W, H))
+            f.write(struct.pack("<" + "d" * len(params), *params))
+    # images.bin: uint64 count; per image int32 id, 4 + 3 doubles, int32 camera id, name + NUL,
+    # uint64 point count, then (double x, double y, int64 point3D id) per point.
+    images = [(7, "0_00002.png", 1), (3, "1_00001.png", 2), (5, "0_00000.png", 1), (9, "2_00000.png", 2),
+              (6, "0_00001.png", 1)]
+    with open(os.path.join(sparse, "images.bin"), "wb") as f:
+        f.write(struct.pack("<Q", len(images)))
+        for iid, name, cid in images:
+            q = colmap_qvec_y(COLMAP_ANGLE if cid == 1 else 0.0)
+            t = [0.2, -0.1, 0.05] if cid == 1 else [0.0, 0.0, 0.0]
+            f.write(struct.pack("<idddddddi", iid, *q, *t, cid))
+            f.write(name.encode() + b"\x00")
+            points = [(1.5, 2.5, -1), (3.0, 4.0, 17)]
+            f.write(struct.pack("<Q", len(points)))
+            for x, y, pid in points:
+                f.write(struct.pack("<ddq", x, y, pid))
+    np.save(os.path.join(root, "flow3d_preprocessed/colmap/scale.npy"), np.float64(COLMAP_SCALE))
+    # Disparity in COLMAP units: depth_units = depth_m / scale, disparity = 1 / depth_units.
+    for t in range(T):
+        depth_m = np.where(square(t), 1.0, 2.0)
+        np.save(os.path.join(disp_dir, f"0_{t:05d}.npy"), (COLMAP_SCALE / depth_m).astype(np.float32))
+
+
 if __name__ == "__main__":
     main()
+    write_colmap(os.path.join(os.path.dirname(HERE), "som_colmap"))
