@@ -94,9 +94,15 @@ class SceneReader {
     const std::vector<unsigned char> b = bytes(rel);
     return labelled([&] { return npy::parse(b.data(), b.size(), rel); });
   }
-  files::Png8 png(const std::string& rel) const {
+  files::Pixels8 png(const std::string& rel) const {
     const std::vector<unsigned char> b = bytes(rel);
     return labelled([&] { return files::decode_png(b, rel); });
+  }
+  // A photograph: JPEG where the name says so (MoSca's images/*.jpg), else PNG.
+  files::Pixels8 photo(const std::string& rel) const {
+    if (!files::is_jpeg_name(rel)) return png(rel);
+    const std::vector<unsigned char> b = bytes(rel);
+    return labelled([&] { return files::decode_jpeg(b, rel); });
   }
 
  private:
@@ -234,7 +240,7 @@ std::vector<DycheckFrame> read_split(const SceneReader& in, const std::string& r
 
 // A 0/255 one-channel PNG (see the file comment) as 0/1, checked against the expected size.
 std::vector<std::uint8_t> read_binary_png(const SceneReader& in, const std::string& rel, int width, int height) {
-  const files::Png8 png = in.png(rel);
+  const files::Pixels8 png = in.png(rel);
   if (png.width != width || png.height != height)
     fail(rel, "image is " + size_str(png.width, png.height) + ", expected " + size_str(width, height));
   const int C = png.channels;
@@ -258,7 +264,7 @@ std::vector<std::uint8_t> read_binary_png(const SceneReader& in, const std::stri
 // only words the size message.
 Image read_rgb(const SceneReader& in, const std::string& rel, const Camera& cam, const std::string& camera_rel,
                const char* scale = "2x") {
-  const files::Png8 png = in.png(rel);
+  const files::Pixels8 png = in.photo(rel);
   if (png.channels != 3 && png.channels != 4)
     fail(rel, "expected an RGB or RGBA image, found " + std::to_string(png.channels) + " channel(s)");
   if (png.width != cam.width || png.height != cam.height)
@@ -498,7 +504,8 @@ bool has_folder(const std::string& root, const std::string& rel) {
 std::vector<unsigned char> read_bytes(const std::string& root, const std::string& rel) { return SceneReader(root).bytes(rel); }
 json::Value read_json(const std::string& root, const std::string& rel) { return SceneReader(root).json(rel); }
 npy::Array read_npy(const std::string& root, const std::string& rel) { return SceneReader(root).npy_file(rel); }
-files::Png8 read_png(const std::string& root, const std::string& rel) { return SceneReader(root).png(rel); }
+files::Pixels8 read_png(const std::string& root, const std::string& rel) { return SceneReader(root).png(rel); }
+files::Pixels8 read_photo(const std::string& root, const std::string& rel) { return SceneReader(root).photo(rel); }
 std::map<std::string, npy::Array> read_npz(const std::string& root, const std::string& rel) {
   const std::vector<unsigned char> b = SceneReader(root).bytes(rel);
   return labelled([&] { return files::parse_npz(b, rel); });

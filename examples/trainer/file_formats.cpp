@@ -1,7 +1,7 @@
 // examples/trainer/file_formats.cpp — whole files, PNG decoding, .npz archives.
 //
 // The one translation unit of the trainer library that compiles stb_image (Debian's
-// libstb-dev), static, for PNG decoding only. The compressed members of an .npz archive are
+// libstb-dev), static, for PNG and JPEG decoding only. The compressed members of an .npz archive are
 // inflated by zlib (Debian's zlib1g-dev), the reference implementation of DEFLATE that numpy's
 // own writer (Python's zipfile) uses. ZIP structures: PKWARE APPNOTE.TXT sections 4.3 and 4.5.
 #include "trainer/file_formats.hpp"
@@ -13,12 +13,15 @@
 #define STB_IMAGE_IMPLEMENTATION
 #define STB_IMAGE_STATIC
 #define STBI_ONLY_PNG
+#define STBI_ONLY_JPEG
 #include <stb/stb_image.h>
 
 #include <zlib.h>
 
 #include <algorithm>
+#include <cctype>
 #include <climits>
+#include <initializer_list>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -40,22 +43,49 @@ std::vector<unsigned char> read_bytes(const std::string& path, const std::string
   return bytes;
 }
 
-Png8 decode_png(const std::vector<unsigned char>& bytes, const std::string& label) {
+namespace {
+
+// stb decodes whichever format it finds: the signature decides first, so that a PNG reader never
+// takes a JPEG (and the reverse).
+bool starts_with(const std::vector<unsigned char>& b, std::initializer_list<unsigned char> sig) {
+  return b.size() >= sig.size() && std::equal(sig.begin(), sig.end(), b.begin());
+}
+
+Pixels8 decode_8bit(const std::vector<unsigned char>& bytes, const std::string& label, const char* format) {
   if (bytes.size() > static_cast<std::size_t>(INT_MAX)) throw std::runtime_error(label + ": file too large");
   const auto* data = reinterpret_cast<const stbi_uc*>(bytes.data());
   const int len = static_cast<int>(bytes.size());
   int w = 0, h = 0, c = 0;
   if (!stbi_info_from_memory(data, len, &w, &h, &c))
-    throw std::runtime_error(label + ": not a PNG image (" + stbi_failure_reason() + ")");
-  if (stbi_is_16_bit_from_memory(data, len)) throw std::runtime_error(label + ": 16-bit PNG (8-bit expected)");
+    throw std::runtime_error(label + ": not a " + format + " image (" + stbi_failure_reason() + ")");
+  if (stbi_is_16_bit_from_memory(data, len)) throw std::runtime_error(label + ": 16-bit " + format + " (8-bit expected)");
   std::unique_ptr<stbi_uc, void (*)(void*)> pixels(stbi_load_from_memory(data, len, &w, &h, &c, 0), stbi_image_free);
-  if (!pixels) throw std::runtime_error(label + ": corrupt PNG (" + stbi_failure_reason() + ")");
-  Png8 out;
+  if (!pixels) throw std::runtime_error(label + ": corrupt " + format + " (" + stbi_failure_reason() + ")");
+  Pixels8 out;
   out.width = w;
   out.height = h;
   out.channels = c;
   out.pixels.assign(pixels.get(), pixels.get() + static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * static_cast<std::size_t>(c));
   return out;
+}
+
+}  // namespace
+
+Pixels8 decode_png(const std::vector<unsigned char>& bytes, const std::string& label) {
+  if (!starts_with(bytes, {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'}))
+    throw std::runtime_error(label + ": not a PNG image (no PNG signature)");
+  return decode_8bit(bytes, label, "PNG");
+}
+
+Pixels8 decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& label) {
+  if (!starts_with(bytes, {0xff, 0xd8, 0xff})) throw std::runtime_error(label + ": not a JPEG image (no JPEG start-of-image marker)");
+  return decode_8bit(bytes, label, "JPEG");
+}
+
+bool is_jpeg_name(const std::string& name) {
+  std::string ext = name.substr(name.find_last_of('.') == std::string::npos ? name.size() : name.find_last_of('.'));
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+  return ext == ".jpg" || ext == ".jpeg";
 }
 
 std::uint32_t crc32(const unsigned char* data, std::size_t n, std::uint32_t crc) {

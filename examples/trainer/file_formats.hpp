@@ -22,14 +22,21 @@ namespace trainer::files {
 // `path`, "<label>: not a regular file", or "<label>: cannot read".
 std::vector<unsigned char> read_bytes(const std::string& path, const std::string& label);
 
-// Pixels of an 8-bit PNG exactly as stored: [height][width][channels], channels 1 (grey),
-// 2 (grey + alpha), 3 (RGB) or 4 (RGBA); a palette image comes as RGB(A).
-struct Png8 {
+// Pixels of an 8-bit image: [height][width][channels], channels 1 (grey), 2 (grey + alpha),
+// 3 (RGB) or 4 (RGBA); a palette PNG comes as RGB(A). A PNG's exactly as stored.
+struct Pixels8 {
   int width = 0, height = 0, channels = 0;
   std::vector<std::uint8_t> pixels;
 };
-// Decodes a PNG image held in memory; 16-bit PNGs and other formats are refused.
-Png8 decode_png(const std::vector<unsigned char>& bytes, const std::string& label);
+// Decodes a PNG image held in memory; 16-bit PNGs and other formats (JPEG included) are refused.
+Pixels8 decode_png(const std::vector<unsigned char>& bytes, const std::string& label);
+// Decodes a baseline or progressive JPEG held in memory (stb_image's decoder: within the usual
+// one or two levels of libjpeg's integer IDCT); other formats are refused. Only readers of
+// photographs use it (MoSca's images/): masks and maps stay lossless PNG.
+Pixels8 decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& label);
+// Whether a file name ends in .jpg or .jpeg (any case): the readers that accept JPEG pick the
+// decoder by the name, as MoSca's glob does.
+bool is_jpeg_name(const std::string& name);
 
 // CRC-32 (ISO 3309 / ZIP, polynomial 0xEDB88320; zlib's crc32) of n bytes, continuing from `crc`
 // (0 to start).

@@ -30,7 +30,9 @@ bool has_folder(const std::string& root, const std::string& rel);
 std::vector<unsigned char> read_bytes(const std::string& root, const std::string& rel);
 json::Value read_json(const std::string& root, const std::string& rel);
 npy::Array read_npy(const std::string& root, const std::string& rel);
-files::Png8 read_png(const std::string& root, const std::string& rel);
+files::Pixels8 read_png(const std::string& root, const std::string& rel);
+// A photograph: JPEG where the name ends in .jpg / .jpeg (any case), else PNG.
+files::Pixels8 read_photo(const std::string& root, const std::string& rel);
 std::map<std::string, npy::Array> read_npz(const std::string& root, const std::string& rel);
 // A float array as float32 values (any float dtype, either memory order); non-float refused.
 std::vector<float> float_values(const npy::Array& a, const std::string& rel);
@@ -43,7 +45,8 @@ Camera read_nerfies_camera(const std::string& root, const std::string& rel, int 
 std::vector<DycheckFrame> read_split_file(const std::string& root, const std::string& rel);
 // splits/train.json sorted by time id: at least one frame, every time id once.
 std::vector<DycheckFrame> read_train_split(const std::string& root);
-// 8-bit RGB(A) PNG of the camera's size as [H][W][3] values / 255; `scale` words the message.
+// 8-bit RGB(A) PNG (or JPEG, by the name: read_photo) of the camera's size as [H][W][3] values
+// / 255; `scale` words the message.
 Image read_rgb_png(const std::string& root, const std::string& rel, const Camera& cam, const std::string& camera_rel,
                    const char* scale);
 // A 0/255 one-channel PNG of width x height as 0/1 (any other value refused, naming its pixel).

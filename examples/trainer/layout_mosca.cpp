@@ -3,8 +3,9 @@
 // lib_prior/prior_loading.py::Saved2D (images, sensor depth, tracks, epipolar error, DEVA
 // instances), data_utils/iphone_helpers.py::load_iphone_cameras (Nerfies JSON cameras) and
 // profile/iphone/iphone_prep.yaml (epi_th 0.001):
-// - Frames: the sorted stems of images/*.png ("{camera}_{time:05d}"; camera 0 trains);
-//   evaluation: test_images/*.png with test_cameras/<stem>.json and test_covisible/<stem>.png.
+// - Frames: the sorted stems of images/*.{png,jpg,jpeg} ("{camera}_{time:05d}"; camera 0 trains);
+//   evaluation: test_images/*.{png,jpg,jpeg} with test_cameras/<stem>.json and
+//   test_covisible/<stem>.png.
 // - Pixels: MoSca indexes depth with the tracks' integer pixel indices and builds K from the
 //   JSON's principal point, i.e. integer pixel centres, as Shape-of-Motion; the trainer puts the
 //   centre of pixel i at i + 0.5, so track x, y and the principal point get + 0.5 here. The JSON
@@ -29,6 +30,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "npy.hpp"
@@ -69,21 +71,23 @@ DycheckFrame mosca_frame(const std::string& stem, int index) {
   return f;
 }
 
-// Stems of <rel>/*.png; a .jpg/.jpeg there is refused (the trainer decodes PNG only).
-std::vector<std::string> mosca_stems(const std::string& root, const std::string& rel) {
-  for (const char* ext : {".jpg", ".jpeg", ".JPG"}) {
-    const std::vector<std::string> jpg = mosca_list(root, rel, ext);
-    if (!jpg.empty()) fail_at(rel + "/" + jpg.front(), "JPEG images are not supported; convert " + rel + "/ to PNG");
-  }
-  std::vector<std::string> stems;
-  for (const std::string& n : mosca_list(root, rel, ".png")) stems.push_back(n.substr(0, n.size() - 4));
-  return stems;
+// The images of <rel>/: *.png, *.jpg, *.jpeg (any case of the extension), sorted by stem, as
+// {stem, file name}. A stem with two files (a.png and a.jpg) is refused: which one is the frame?
+std::vector<std::pair<std::string, std::string>> mosca_images(const std::string& root, const std::string& rel) {
+  std::map<std::string, std::string> by_stem;
+  for (const char* ext : {".png", ".PNG", ".jpg", ".JPG", ".jpeg", ".JPEG"})
+    for (const std::string& n : mosca_list(root, rel, ext)) {
+      const std::string stem = n.substr(0, n.size() - std::char_traits<char>::length(ext));
+      const auto [it, fresh] = by_stem.emplace(stem, n);
+      if (!fresh) fail_at(rel + "/" + n, "two images of frame " + stem + " (" + it->second + " too)");
+    }
+  return {by_stem.begin(), by_stem.end()};
 }
 
 // A camera from a Nerfies JSON, at the factor that matches its image (module comment), moved to
 // the trainer's pixel centres.
 Camera mosca_read_camera(const std::string& root, const std::string& rel, const std::string& image_rel) {
-  const files::Png8 png = layout_io::read_png(root, image_rel);
+  const files::Pixels8 png = layout_io::read_photo(root, image_rel);
   Camera c = layout_io::read_nerfies_camera(root, rel, 1);
   if (c.width != png.width || c.height != png.height) {
     const Camera half = layout_io::read_nerfies_camera(root, rel, 2);
@@ -128,7 +132,7 @@ std::vector<std::uint8_t> mosca_read_epi(const std::string& root, const std::str
 
 // A mask PNG (any channel count) as first channel > 0: MoSca's test_covisible rule.
 std::vector<std::uint8_t> mosca_read_positive(const std::string& root, const std::string& rel, int W, int H) {
-  const files::Png8 png = layout_io::read_png(root, rel);
+  const files::Pixels8 png = layout_io::read_png(root, rel);
   if (png.width != W || png.height != H)
     fail_at(rel, "image is " + std::to_string(png.width) + "x" + std::to_string(png.height) + ", expected " + std::to_string(W) +
                      "x" + std::to_string(H));
@@ -219,7 +223,7 @@ void mosca_read_instances(const std::string& root, DycheckScene& s) {
   for (std::size_t t = 0; t < T; ++t) {
     const std::string rel = dir + s.train[t].name + ".png";
     if (!layout_io::has_file(root, rel)) continue;
-    const files::Png8 png = layout_io::read_png(root, rel);
+    const files::Pixels8 png = layout_io::read_png(root, rel);
     if (png.width != s.width || png.height != s.height)
       fail_at(rel, "image is " + std::to_string(png.width) + "x" + std::to_string(png.height) + ", expected " +
                        std::to_string(s.width) + "x" + std::to_string(s.height));
@@ -264,12 +268,16 @@ void mosca_read_instances(const std::string& root, DycheckScene& s) {
 DycheckScene read_mosca(const std::string& dir) {
   DycheckScene s;
   s.root = dir;
-  const std::vector<std::string> stems = mosca_stems(dir, "images");
-  if (stems.empty()) fail_at("images", "no PNG images");
+  std::vector<std::string> stems, files;
+  for (const auto& [stem, file] : mosca_images(dir, "images")) {
+    stems.push_back(stem);
+    files.push_back(file);
+  }
+  if (stems.empty()) fail_at("images", "no images (*.png, *.jpg, *.jpeg)");
   for (std::size_t t = 0; t < stems.size(); ++t) s.train.push_back(mosca_frame(stems[t], static_cast<int>(t)));
   const std::size_t T = s.train.size();
   for (std::size_t t = 0; t < T; ++t) {
-    const std::string cam_rel = "cameras/" + stems[t] + ".json", img_rel = "images/" + stems[t] + ".png";
+    const std::string cam_rel = "cameras/" + stems[t] + ".json", img_rel = "images/" + files[t];
     s.train_cameras.push_back(mosca_read_camera(dir, cam_rel, img_rel));
     const Camera& c = s.train_cameras.back();
     if (t == 0) {
@@ -288,9 +296,9 @@ DycheckScene read_mosca(const std::string& dir) {
   }
 
   // Evaluation: test_images/ with test_cameras/ and test_covisible/.
-  for (const std::string& stem : mosca_stems(dir, "test_images")) {
+  for (const auto& [stem, file] : mosca_images(dir, "test_images")) {
     s.val.push_back(mosca_frame(stem, 0));
-    const std::string cam_rel = "test_cameras/" + stem + ".json", img_rel = "test_images/" + stem + ".png";
+    const std::string cam_rel = "test_cameras/" + stem + ".json", img_rel = "test_images/" + file;
     s.val_cameras.push_back(mosca_read_camera(dir, cam_rel, img_rel));
     const Camera& c = s.val_cameras.back();
     s.val_rgb.push_back(layout_io::read_rgb_png(dir, img_rel, c, cam_rel, "the test_images/"));

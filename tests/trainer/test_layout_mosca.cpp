@@ -4,6 +4,8 @@
 // broken file at a time, each an error naming that file.
 #include <doctest/doctest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
@@ -138,12 +140,12 @@ TEST_CASE("read_mosca: one broken file at a time names that file") {
                                                        "\"tangential_distortion\": [0, 0], \"image_size\": [20, 20]}");
     CHECK(layout_read_error(d) == "images/0_00001.png: image is 16x12, but cameras/0_00001.json says 20x20 (nor half of it)");
   }
-  SUBCASE("one file replaced: a JPEG image, dep or an epipolar error map of the wrong shape") {
+  SUBCASE("one file replaced or added: a second image of a frame, dep or an epipolar error map of the wrong shape") {
     const std::vector<float> v(16, 0.0f);
     const struct {
       std::string rel, bytes, message;
     } cases[] = {
-        {"images/0_00003.jpg", "jpeg", "images/0_00003.jpg: JPEG images are not supported; convert images/ to PNG"},
+        {"images/0_00001.jpg", "jpeg", "images/0_00001.jpg: two images of frame 0_00001 (0_00001.png too)"},
         {dep, trainer::files::npz_bytes({{"dep", npy::to_bytes(v.data(), {2, 8})}}), dep + ": dep has shape [2, 8], expected [12, 16]"},
         {"epi/error/0_00000.npy", npy::to_bytes(v.data(), {16}), "epi/error/0_00000.npy: shape [16], expected [12, 16]"},
     };
@@ -153,5 +155,49 @@ TEST_CASE("read_mosca: one broken file at a time names that file") {
       smg::test::write_bytes(d / c.rel, c.bytes);
       CHECK(layout_read_error(d) == c.message);
     }
+  }
+}
+
+// The three training images as JPEG files written by libjpeg-turbo's cjpeg (tests/data/mosca_jpeg,
+// made by its make_fixture.py), in place of mosca_small's PNGs.
+TEST_CASE("read_mosca: JPEG images written by libjpeg's cjpeg decode as djpeg decodes them") {
+  const fs::path d = mosca_copy("jpeg");
+  const fs::path overlay = fs::path(SMG_TEST_DATA_DIR) / "mosca_jpeg";
+  const trainer::DycheckScene png = trainer::read_mosca(d.string());
+  for (int t = 0; t < 3; ++t) fs::remove(d / ("images/0_0000" + std::to_string(t) + ".png"));
+  fs::copy(overlay / "images", d / "images", fs::copy_options::recursive | fs::copy_options::overwrite_existing);
+  const trainer::DycheckScene s = trainer::read_mosca(d.string());
+  REQUIRE(s.train.size() == 3);
+  CHECK(s.train[1].name == "0_00001");
+  for (std::size_t t = 0; t < 3; ++t) {
+    CAPTURE(t);
+    // djpeg's P6 file: "P6\n16 12\n255\n" and 16 x 12 x 3 bytes.
+    const std::string ppm = smg::test::slurp(overlay / ("reference/0_0000" + std::to_string(t) + ".ppm"));
+    const std::string head = "P6\n16 12\n255\n";
+    REQUIRE(ppm.size() == head.size() + 16 * 12 * 3);
+    REQUIRE(ppm.compare(0, head.size(), head) == 0);
+    const trainer::Image& im = s.train_rgb[t];
+    REQUIRE(im.pixels.size() == 16 * 12 * 3);
+    double to_djpeg = 0, to_original = 0;
+    for (std::size_t k = 0; k < im.pixels.size(); ++k) {
+      const double v = std::round(255.0 * im.pixels[k]);  // back to the decoded 8-bit level
+      to_djpeg = std::max(to_djpeg, std::abs(v - static_cast<unsigned char>(ppm[head.size() + k])));
+      to_original = std::max(to_original, std::abs(v - std::round(255.0 * png.train_rgb[t].pixels[k])));
+    }
+    // stb's IDCT and upsampling against libjpeg's integer IDCT: a level or two; against the lossless
+    // original, the encoder's loss at quality 95 on the square's sharp edges.
+    MESSAGE("frame " << t << ": max |stb - djpeg| " << to_djpeg << " levels, max |stb - original PNG| " << to_original);
+    CHECK(to_djpeg <= 2.0);
+    CHECK(to_original <= 24.0);
+    CHECK(to_original > 0.0);  // lossy: these are the JPEG's pixels, not the PNG's
+  }
+  SUBCASE("a .jpg that is not a JPEG") {
+    smg::test::write_bytes(d / "images/0_00002.jpg", smg::test::slurp(fs::path(SMG_TEST_DATA_DIR) / "mosca_small/images/0_00002.png"));
+    CHECK(layout_read_error(d) == "images/0_00002.jpg: not a JPEG image (no JPEG start-of-image marker)");
+  }
+  SUBCASE("a truncated JPEG") {
+    const std::string b = smg::test::slurp(overlay / "images/0_00000.jpg");
+    smg::test::write_bytes(d / "images/0_00000.jpg", b.substr(0, 40));
+    CHECK(layout_read_error(d).rfind("images/0_00000.jpg: ", 0) == 0);
   }
 }

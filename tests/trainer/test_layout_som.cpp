@@ -178,7 +178,7 @@ TEST_CASE("detect_data_layout: by the folder's contents; ambiguous or unknown fo
                                      "and sensor_depth/ + cameras/ + *bootstapir*.npz (MoSca)");
   fs::remove_all(d / "flow3d_preprocessed");
   CHECK(trainer::detect_data_layout(d.string()) == trainer::DataLayout::mosca);
-  CHECK(som_error(d) == "images: no PNG images");  // read as MoSca (tests/trainer/test_layout_mosca.cpp)
+  CHECK(som_error(d) == "images: no images (*.png, *.jpg, *.jpeg)");  // read as MoSca (tests/trainer/test_layout_mosca.cpp)
   fs::remove_all(d);
 }
 
