@@ -23,15 +23,19 @@
 // T − 2) go to per-block spill buffers added afterwards in block order. No float atomics: the
 // results are bit-identical for any thread count, in float and double.
 //
-// Memory (what it allocates, all in the EnergyWorkspace): per scratch slot 4·N·S_b (the block's
+// Memory (what it allocates; all but the last item in the EnergyWorkspace): per scratch slot 4·N·S_b (the block's
 // positions and confidences) + 3·N·S_b (the block's position gradient) + 4·N (one frame's
 // velocities and edge changes, confidences only) + O(K·S_b · gaps) per-node arrays, with
 // S_b = the block's stored frames (at most 32 + max δ, rounded up to 4); plus
-// 2·blocks·max(δ)·N·3 spill, N·3 for LRM's last-frame term and N for 1/Σw. There is no T·N·K
+// 2·blocks·max(δ)·N·3 spill, N·3 for LRM's last-frame term, N for 1/Σw and 16 scalars of
+// alignment slack; outside the workspace, per block (not per node), four vectors of O(K)
+// entries (LRM's lanes, the active edges), as carap() and lrm() have. There is no T·N·K
 // and no T·N·3 scratch (the raw-quaternion gradient is converted per contribution). The number
 // of slots (≤ threads, ≤ blocks) is lowered until the total is at most the bytes of the inputs
 // (positions, rotations, visibility, graph); only one slot is left where even that exceeds
-// them, which happens for short sequences (about T < 2·S_b). regularizers_extra_bytes()
+// them, which happens for short sequences (one block holding every frame plus its padding: with
+// N = 5000, K = 8 or 16, all four terms and gradients, float, up to T ≈ 20 frames; measured with
+// regularizers_extra_bytes, the inputs then being under 3.3 MB). regularizers_extra_bytes()
 // returns the figure; tests/energy/test_regularizers.cpp checks it against the workspace.
 #pragma once
 
