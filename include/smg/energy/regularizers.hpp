@@ -66,24 +66,6 @@
 
 namespace smg {
 
-// Which terms the fused step computes. Confidences off: C-ARAP and LRM use c ≡ 1 (as carap()
-// and lrm() do with an empty confidence view).
-struct RegularizerTerms {
-  bool confidence = true;  // c_{t,i} (E6); written to the `confidence` output when given
-  bool carap = true;       // (E9), weights (E7) with the confidences
-  bool arap = false;       // (E9) with c ≡ 1, α = 1 (ablations)
-  bool lrm = true;         // (E14), weights (E7) with the confidences
-};
-
-// The options of the fused step: the terms, and each term's own options (plain values).
-struct RegularizerOptions {
-  RegularizerTerms terms;
-  ConfidenceOptions confidence;
-  CarapOptions carap;
-  ArapOptions arap;
-  LrmOptions lrm;
-};
-
 // The energies of one fused step, each as the separate operator returns it (0 for a term that
 // is off), in Accumulator<S> (double for float).
 template <class S>
