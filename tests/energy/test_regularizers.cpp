@@ -169,6 +169,12 @@ void fused_check_equal(const Scene<double>& s, const std::string& what) {
       CHECK(fused_rel(f.e.lrm, r.e.lrm) <= 1e-12);
       CHECK(fused_rel_diff(f.gx, r.gx) <= 1e-12);
       CHECK(fused_rel_diff(f.gr, r.gr) <= 1e-12);
+      // Energies only (no gradient buffers: no spill, a different frame overlap).
+      const FusedOut<double> fe = fused_run(s, o, 2, raw, false);
+      CHECK(fused_rel(fe.e.carap, r.e.carap) <= 1e-12);
+      CHECK(fused_rel(fe.e.arap, r.e.arap) <= 1e-12);
+      CHECK(fused_rel(fe.e.lrm, r.e.lrm) <= 1e-12);
+      CHECK(fused_max_abs(fe.gx) == 0.0);
       // Terms that are off are exactly 0; those that are on vanish only where the separate
       // operator's does (LRM with one neighbour, one frame).
       CHECK((f.e.carap != 0.0) == (r.e.carap != 0.0));

@@ -227,8 +227,9 @@ RegularizerPlan regularizer_plan(Index T, Index N, Index K, const RegularizerOpt
   p.n_gaps = static_cast<Index>(gaps.size());
   p.want_x = want_x && (p.rigid || p.lrm);
   p.want_r = want_r && p.rigid;
-  // LRM's velocity term reaches the next frame: one spilled frame at least.
-  if (p.lrm && p.want_x) p.G = std::max<Index>(p.G, 1);
+  // LRM's velocity at a block's last frame reads the next frame (E1), and its gradient reaches
+  // it: one frame past the block at least, with or without gradients.
+  if (p.lrm) p.G = std::max<Index>(p.G, 1);
   p.B = carap_block_frames(T, p.G);
   // LRM's lane groups start at multiples of W, as lrm()'s do.
   if (p.lrm) p.B = RegularizerPlan::round_up(p.B, p.W);
