@@ -33,9 +33,9 @@
 // and no T·N·3 scratch (the raw-quaternion gradient is converted per contribution). The number
 // of slots (≤ threads, ≤ blocks) is lowered until the total is at most the bytes of the inputs
 // (positions, rotations, visibility, graph); only one slot is left where even that exceeds
-// them, which happens for short sequences (one block holding every frame plus its padding: with
-// N = 5000, K = 8 or 16, all four terms and gradients, float, up to T ≈ 20 frames; measured with
-// regularizers_extra_bytes, the inputs then being under 3.3 MB). regularizers_extra_bytes()
+// them, which happens for short sequences: one slot (7·N·S_b) plus the spill (about 6·N·max δ
+// per block of 8 to 32 frames) against 7·N·T of inputs; with N = 5000, K = 8 or 16, all four
+// terms and gradients, float, up to T ≈ 20 frames (measured). regularizers_extra_bytes()
 // returns the figure; tests/energy/test_regularizers.cpp checks it against the workspace.
 #pragma once
 
