@@ -15,6 +15,10 @@
 //   err_detach_vs_exact LRM with ω held constant: ‖g_detached − g_exact‖ / ‖g_exact‖ (double)
 //   ad_ratio            autodiff rows: AutoDiffScalar time / analytic time on the same problem
 //   ns_per_block        residual rows: time per residual block (with its Jacobians)
+//   separate_ns_per_term, speedup, fused_vs_separate, extra_mb, input_mb
+//                       BM_regularizers: the four separate calls' time per term, separate / fused,
+//                       the relative difference of their results, the fused step's workspace
+//                       and the inputs' size (MB)
 //   locality rows       C-ARAP / LRM with gradient with the nodes in a random order and in the
 //                       Morton order of smg/graph/node_order.hpp (same scene, same graph)
 #include <benchmark/benchmark.h>
@@ -308,6 +312,84 @@ void BM_carap_plus_lrm(benchmark::State& state) {
       state, [&](const Reference& r) { return relative_error(gx, sum(r), gr, r.carap_r); },
       [&](const Reference& r, const Reference& o) { return relative_error(sum(r), sum(o), r.carap_r, o.carap_r); });
   state.counters["target_ms"] = 100.0;
+}
+
+// ---- The fused regulariser step (smg/energy/regularizers.hpp): confidences + C-ARAP + ARAP +
+// LRM in one pass, against the four separate calls on the same scene, threads and workspace
+// reuse. ns_per_term is the fused step's; separate_ns_per_term the separate calls' (timed right
+// after, the same number of iterations), speedup their ratio, extra_mb the fused step's
+// workspace and input_mb the inputs it stays under. ----
+smg::RegularizerOptions regularizer_options() {
+  smg::RegularizerOptions o;
+  o.terms.arap = true;
+  o.carap = carap_options();
+  o.arap = arap_options();
+  o.lrm = lrm_options();
+  return o;
+}
+template <class S, bool kGradient>
+void BM_regularizers(benchmark::State& state) {
+  const Scene<S>& s = scene_as<S>();
+  const smg::RegularizerOptions o = regularizer_options();
+  std::vector<S> gx(s.x.size()), gr(s.x.size()), c(s.v.size());
+  smg::EnergyWorkspace<S> ws, ws_sep;
+  const double terms = 2 * neighbour_terms() + 2 * pair_terms();
+  const smg::FrameScalarsView<S> cv(c.data(), s.T, s.N);
+  auto fused = [&] {
+    return double(smg::regularizers<S>(s.positions(), s.rotations(), s.visibility(), s.graph(), o, cv,
+                                       grad_view(gx, s, kGradient), tangent_view(gr, s, kGradient),
+                                       &ws, threads(state))
+                      .total());
+  };
+  auto separate = [&] {
+    const smg::PositionsView<S> vx = grad_view(gx, s, kGradient);
+    const smg::TangentsView<S> vr = tangent_view(gr, s, kGradient);
+    smg::node_confidences<S>(s.positions(), s.visibility(), s.graph(), o.confidence, cv, {}, {}, &ws_sep,
+                             threads(state));
+    const smg::FrameScalarsView<const S> cc(c.data(), s.T, s.N);
+    return double(smg::carap<S>(s.positions(), s.rotations(), cc, s.graph(), o.carap, vx, vr, &ws_sep,
+                                threads(state))) +
+           double(smg::arap<S>(s.positions(), s.rotations(), s.graph(), o.arap, vx, vr, &ws_sep, threads(state))) +
+           double(smg::lrm<S>(s.positions(), cc, s.graph(), o.lrm, vx, &ws_sep, threads(state)));
+  };
+  const double e = time_energy(state, terms, fused);
+  const std::vector<S> fgx = gx, fgr = gr;
+  const double fused_ns = state.counters["ns_per_term"];
+  double e_sep = 0;
+  const smg_bench::Stopwatch clock;
+  const Index iters = std::max<Index>(1, static_cast<Index>(state.iterations()));
+  for (Index k = 0; k < iters; ++k) {
+    e_sep = separate();
+    benchmark::DoNotOptimize(e_sep);
+  }
+  const double sep_ns = clock.seconds() * 1e9 / (static_cast<double>(iters) * terms);
+  state.counters["separate_ns_per_term"] = sep_ns;
+  state.counters["speedup"] = fused_ns > 0 ? sep_ns / fused_ns : 0.0;
+  state.counters["fused_vs_separate"] =
+      kGradient ? relative_error(fgx, std::vector<double>(gx.begin(), gx.end()), fgr,
+                                 std::vector<double>(gr.begin(), gr.end()))
+                : std::abs(e - e_sep) / std::abs(e_sep);
+  state.counters["extra_mb"] = static_cast<double>(ws.bytes()) / 1e6;
+  state.counters["input_mb"] =
+      static_cast<double>(sizeof(S) * (s.x.size() + s.q.size() + s.w.size()) + s.v.size() +
+                          sizeof(std::int32_t) * s.idx.size()) / 1e6;
+  auto total = [](const Reference& r, bool x) {
+    std::vector<double> v(r.carap_x.size());
+    for (std::size_t k = 0; k < v.size(); ++k)
+      v[k] = x ? r.carap_x[k] + r.arap_x[k] + r.lrm_x[k] : r.carap_r[k] + r.arap_r[k];
+    return v;
+  };
+  set_errors<S>(
+      state,
+      [&](const Reference& r) {
+        return kGradient ? relative_error(fgx, total(r, true), fgr, total(r, false))
+                         : std::abs(e - (r.carap + r.arap + r.lrm)) / (r.carap + r.arap + r.lrm);
+      },
+      [&](const Reference& r, const Reference& q) {
+        return kGradient ? relative_error(total(r, true), total(q, true), total(r, false), total(q, false))
+                         : std::abs((r.carap + r.arap + r.lrm) - (q.carap + q.arap + q.lrm)) /
+                               (q.carap + q.arap + q.lrm);
+      });
 }
 
 // ---- Memory locality: the same scene and graph with the nodes in a random order, and in the
@@ -643,6 +725,9 @@ int main(int argc, char** argv) {
   if (db) add("BM_arap<double, true>", BM_arap<double, true>);
   if (fl) add("BM_carap_plus_lrm<float>", BM_carap_plus_lrm<float>);
   if (db) add("BM_carap_plus_lrm<double>", BM_carap_plus_lrm<double>);
+  if (fl) add("BM_regularizers<float, false>", BM_regularizers<float, false>);
+  if (fl) add("BM_regularizers<float, true>", BM_regularizers<float, true>);
+  if (db) add("BM_regularizers<double, true>", BM_regularizers<double, true>);
   if (locality) {
     if (fl) add("locality/carap_grad<float>/random", BM_locality<float, 0, false>);
     if (fl) add("locality/carap_grad<float>/morton", BM_locality<float, 0, true>);

@@ -1,6 +1,7 @@
-// examples/torch/smg_torch_energy.cpp — node confidences, C-ARAP, plain ARAP and LRM for
-// smg_torch: the library's validation, then the energy and its analytic gradient in one pass
-// (the Python autograd.Function keeps the gradient and scales it by grad_output in backward).
+// examples/torch/smg_torch_energy.cpp — node confidences, C-ARAP, plain ARAP, LRM and their
+// fused step (regularizers) for smg_torch: the library's validation, then the energy and its
+// analytic gradient in one pass (the Python autograd.Function keeps the gradient and scales it
+// by grad_output in backward).
 #include <algorithm>
 #include <chrono>
 #include <limits>
@@ -150,6 +151,102 @@ py::tuple lrm_impl(const at::Tensor& positions, const at::Tensor& indices, const
   return py::make_tuple(at::scalar_tensor(e, in.ref.options()), opt(gx));
 }
 
+// regularizers(positions, quats or None, indices, weights, visibility or None, terms, conf,
+// carap, arap, lrm, grad_positions, grad_quats, validate) -> (energies [3] = (carap, arap, lrm)
+// of positions' dtype, confidence [T, N] or None, grad_positions or None, grad_quats or None):
+// smg::regularizers, the fused step (confidences, C-ARAP, ARAP, LRM in one pass). `terms` is a
+// dict of four bools; conf, carap, arap and lrm are dicts with every option of that term (the
+// Python wrapper fills the defaults). Each term's options are checked on their own first, so that
+// a message names the term ("carap.alpha: ..."). CPU tensors only: there is no fused CUDA kernel
+// yet, so a CUDA tensor raises NotImplementedError (use the separate operators on CUDA).
+py::tuple regularizers_impl(const at::Tensor& positions, const OptTensor& quats,
+                            const at::Tensor& indices, const at::Tensor& weights,
+                            const OptTensor& visibility, const py::dict& terms,
+                            const py::dict& conf, const py::dict& carap, const py::dict& arap,
+                            const py::dict& lrm, bool grad_x, bool grad_q, bool validate) {
+  smg::RegularizerOptions o;
+  auto flag = [&](const char* name) { return terms[name].cast<bool>(); };
+  o.terms.confidence = flag("confidence");
+  o.terms.carap = flag("carap");
+  o.terms.arap = flag("arap");
+  o.terms.lrm = flag("lrm");
+  auto num = [](const py::dict& d, const char* name) { return d[name].cast<double>(); };
+  // gap_list's own messages ("gaps[0]: ...") prefixed with the term, like the option checks.
+  auto gaps_of = [](const py::dict& d, const char* term) {
+    const py::object gw = d["gap_weights"];
+    std::optional<std::vector<double>> w;
+    if (!gw.is_none()) w = gw.cast<std::vector<double>>();
+    try {
+      return gap_list(d["gaps"].cast<py::sequence>(), w);
+    } catch (const py::value_error& e) {
+      value_error(std::string(term) + "." + e.what());
+    }
+  };
+  o.confidence = confidence_options(num(conf, "kappa_m"), num(conf, "kappa_r"),
+                                    num(conf, "lambda_m"), num(conf, "lambda_r"), num(conf, "eps"));
+  o.carap.alpha = num(carap, "alpha");
+  o.carap.lambda_c = num(carap, "lambda_c");
+  o.carap.lambda_l = num(carap, "lambda_l");
+  o.carap.gaps = gaps_of(carap, "carap");
+  o.carap.normalization = normalization(carap["normalize"].cast<bool>());
+  o.carap.weight = num(carap, "weight");
+  o.arap.lambda_c = num(arap, "lambda_c");
+  o.arap.lambda_l = num(arap, "lambda_l");
+  o.arap.gaps = gaps_of(arap, "arap");
+  o.arap.normalization = normalization(arap["normalize"].cast<bool>());
+  o.arap.weight = num(arap, "weight");
+  o.lrm = lrm_options(num(lrm, "alpha"), num(lrm, "huber_delta"), lrm["detach_omega"].cast<bool>(),
+                      lrm["normalize"].cast<bool>());
+  o.lrm.weight = num(lrm, "weight");
+  // Each term's options first, the message prefixed with the term ("carap.alpha: must be ...").
+  auto term_ok = [](bool on, const smg::Status& st, const char* term) {
+    if (on && !st) value_error(std::string(term) + "." + python_message(st.message(), {}));
+  };
+  term_ok(o.terms.confidence, smg::validate_options(o.confidence), "confidence");
+  term_ok(o.terms.carap, smg::validate_options(o.carap), "carap");
+  term_ok(o.terms.arap, smg::validate_options(o.arap), "arap");
+  term_ok(o.terms.lrm, smg::validate_options(o.lrm), "lrm");
+  const bool rigid = o.terms.carap || o.terms.arap;
+  if (rigid && !quats) value_error("quats: needed for carap or arap");
+  const EnergyInputs in = prepare(positions, rigid ? quats : std::nullopt, indices, weights,
+                                  std::nullopt, visibility, validate);
+  if (in.ref.cuda())
+    not_implemented("regularizers: not yet on CUDA tensors (no fused CUDA kernel, issue 24); "
+                    "use node_confidences, carap, arap and lrm on CUDA");
+  const at::Tensor gx = zeros_if(grad_x, in, 3), gq = zeros_if(grad_q && rigid, in, 4);
+  const at::Tensor c = o.terms.confidence ? at::empty({in.T, in.N}, in.ref.options()) : at::Tensor();
+  at::Tensor energies = at::zeros({3}, in.ref.options().dtype(at::kDouble));
+  dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
+    using S = decltype(s);
+    using I = decltype(i);
+    const auto xv = positions_view<S>(in);
+    const smg::QuaternionsView<const S> qv = rigid ? quat_view<S>(in.q) : smg::QuaternionsView<const S>();
+    const smg::VisibilityView<const std::uint8_t> vv =
+        in.vis.defined() ? smg::VisibilityView<const std::uint8_t>(cptr<std::uint8_t>(in.vis),
+                                                                   in.vis.size(0), in.vis.size(1))
+                         : smg::VisibilityView<const std::uint8_t>();
+    const auto gv = graph_view<S, I>(in.g);
+    const smg::FrameScalarsView<S> cv =
+        c.defined() ? smg::FrameScalarsView<S>(mptr<S>(c), in.T, in.N) : smg::FrameScalarsView<S>();
+    const smg::PositionsView<S> gxv = gx.defined() ? smg::PositionsView<S>(mptr<S>(gx), in.T, in.N)
+                                                   : smg::PositionsView<S>();
+    smg::RotationGradientView<S> gqv;
+    if (gq.defined()) gqv = smg::QuaternionsView<S>(mptr<S>(gq), in.T, in.N);
+    ok(smg::validate_regularizers<S>(xv, qv, vv, gv, o, cv, gxv, gqv), kEnergyNames);
+    smg::RegularizerResult<S> r;
+    {
+      py::gil_scoped_release release;
+      r = smg::regularizers<S>(xv, qv, vv, gv, o, cv, gxv, gqv, nullptr, parallel_options());
+    }
+    double* e = energies.data_ptr<double>();
+    e[0] = double(r.carap);
+    e[1] = double(r.arap);
+    e[2] = double(r.lrm);
+    return 0;
+  });
+  return py::make_tuple(energies.to(in.ref.options().dtype()), opt(c), opt(gx), opt(gq));
+}
+
 // _library_seconds(op, positions, quats, indices, weights, confidence, repeat): the binding's
 // overhead benchmark (bench/torch/bench_torch.py). Prepares the same inputs as the operators,
 // then times, with std::chrono, best of `repeat`, the bare library call as a C++ caller would
@@ -245,6 +342,9 @@ void register_energy(py::module_& m) {
       },
       "positions"_a, "quats"_a, "indices"_a, "weights"_a, "lambda_c"_a, "lambda_l"_a, "gaps"_a,
       "gap_weights"_a, "normalize"_a, "grad_positions"_a, "grad_quats"_a, "validate"_a);
+  m.def("regularizers", &regularizers_impl, "positions"_a, "quats"_a, "indices"_a, "weights"_a,
+        "visibility"_a, "terms"_a, "confidence"_a, "carap"_a, "arap"_a, "lrm"_a,
+        "grad_positions"_a, "grad_quats"_a, "validate"_a);
   m.def("_library_seconds", &library_seconds, "op"_a, "positions"_a, "quats"_a, "indices"_a, "weights"_a,
         "confidence"_a, "repeat"_a);
   m.def("lrm", &lrm_impl, "positions"_a, "indices"_a, "weights"_a, "confidence"_a, "alpha"_a,

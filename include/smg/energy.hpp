@@ -19,5 +19,6 @@
 #include "smg/energy/lrm_residuals.hpp"
 #include "smg/energy/lrm_term.hpp"
 #include "smg/energy/options.hpp"
+#include "smg/energy/regularizers.hpp"
 #include "smg/energy/velocity.hpp"
 #include "smg/energy/workspace.hpp"

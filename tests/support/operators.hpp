@@ -90,8 +90,23 @@ struct Lrm {
   }
 };
 
+// The fused step (regularizers.hpp) with all four terms: the confidences it computes (from the
+// visibility; the confidence input is not read), C-ARAP, ARAP and LRM; returns their sum.
+struct Regularizers {
+  static constexpr const char* name = "regularizers";
+  template <class S, class I>
+  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+                    ParallelOptions parallel = {}) {
+    RegularizerOptions o;
+    o.terms.arap = true;
+    return double(regularizers<S>(in.positions, in.rotations, in.visibility, in.graph, o, out.confidence,
+                                  out.positions, out.rotations, workspace, parallel)
+                      .total());
+  }
+};
+
 // The list. A new regulariser gets a struct like the ones above and an entry here.
-using Operators = std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm>;
+using Operators = std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Regularizers>;
 
 // Calls f(Op{}) for each operator of the list, in its order.
 template <class F>

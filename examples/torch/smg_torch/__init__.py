@@ -5,6 +5,8 @@ build, also CUDA tensors for node_confidences, carap, arap, lrm and dqb: docs/cu
     c = smg.node_confidences(positions, g)                        # [T, N], no grad
     e = smg.carap(positions, quats, g, c) + smg.lrm(positions, g, c)
     e.backward()                                                  # analytic gradients
+    r = smg.regularizers(positions, quats, g, visibility)         # the same in one fused pass
+    r.total.backward()                                            # (CPU tensors)
 
 Shapes and meanings: docs/interop.md. Every energy returns a 0-dim tensor and is differentiable
 w.r.t. positions [T, N, 3] and the raw, unnormalised quaternions [T, N, 4] (w, x, y, z);
@@ -38,8 +40,8 @@ import torch
 
 from . import _C  # noqa: E402  (after torch: the module links against libtorch)
 
-__all__ = ["Graph", "has_cuda", "build_graph", "node_confidences", "carap", "arap", "lrm", "dqb", "render", "version",
-           "set_memory_limit", "memory_limit"]
+__all__ = ["Graph", "has_cuda", "build_graph", "node_confidences", "carap", "arap", "lrm", "regularizers",
+           "Regularizers", "dqb", "render", "version", "set_memory_limit", "memory_limit"]
 
 version = _C.version
 
@@ -211,6 +213,101 @@ def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor
     _check(positions=positions, indices=idx, weights=w, confidence=confidence)
     return _LrmFunction.apply(positions, idx, w, confidence, float(alpha), float(huber_delta),
                               bool(detach_omega), bool(normalize), bool(validate))
+
+
+class Regularizers(NamedTuple):
+    """What smg_torch.regularizers returns: total = carap + arap + lrm (0-dim, differentiable
+    w.r.t. positions and quats), the three energies (0-dim, detached: for logging; a term that is
+    off is 0) and the confidences [T, N] (no gradient; None when off)."""
+
+    total: torch.Tensor
+    carap: torch.Tensor
+    arap: torch.Tensor
+    lrm: torch.Tensor
+    confidence: Optional[torch.Tensor]
+
+
+#: The options of each term of regularizers, with their defaults (those of node_confidences,
+#: carap, arap and lrm; weight multiplies the term and its gradient).
+REGULARIZER_DEFAULTS = {
+    "confidence": dict(kappa_m=2.5, kappa_r=2.5, lambda_m=1.0, lambda_r=1.0, eps=1e-4),
+    "carap": dict(alpha=0.6, lambda_c=1.0, lambda_l=1.0, gaps=(1, 2, 4), gap_weights=None,
+                  normalize=False, weight=1.0),
+    "arap": dict(lambda_c=1.0, lambda_l=1.0, gaps=(1, 2, 4), gap_weights=None, normalize=False,
+                 weight=1.0),
+    "lrm": dict(alpha=0.6, huber_delta=0.01, detach_omega=False, normalize=False, weight=1.0),
+}
+
+
+def _term_options(name, value):
+    """(on, options dict) of one term: False/None = off, True = defaults, a dict = these options."""
+    if value is None or value is False:
+        return False, dict(REGULARIZER_DEFAULTS[name])
+    if value is True:
+        value = {}
+    if not isinstance(value, dict):
+        raise ValueError(f"{name}: expected True, False or a dict of options, got {type(value).__name__}")
+    out = dict(REGULARIZER_DEFAULTS[name])
+    for key, v in value.items():
+        if key not in out:
+            raise ValueError(f"{name}: unknown option {key!r} (known: {', '.join(out)})")
+        out[key] = v
+    if "gaps" in out:
+        out["gaps"], out["gap_weights"] = _gap_args(out["gaps"], out["gap_weights"])
+    for key in ("kappa_m", "kappa_r", "lambda_m", "lambda_r", "eps", "alpha", "lambda_c", "lambda_l",
+                "huber_delta", "weight"):
+        if key in out:
+            out[key] = float(out[key])
+    for key in ("normalize", "detach_omega"):
+        if key in out:
+            out[key] = bool(out[key])
+    return True, out
+
+
+class _RegularizersFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, positions, quats, idx, w, visibility, terms, opts, validate):
+        need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
+        e, c, gx, gq = _C.regularizers(
+            positions.detach(), None if quats is None else quats.detach(), idx, w.detach(),
+            visibility, terms, opts["confidence"], opts["carap"], opts["arap"], opts["lrm"],
+            need_x, need_q and quats is not None, validate)
+        ctx.grads = (gx, gq)
+        total = e.sum()
+        if c is None:
+            c = positions.new_zeros(0)  # autograd outputs must be tensors; mapped to None below
+        ctx.mark_non_differentiable(e, c)
+        return total, e, c
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_total, grad_e, grad_c):
+        gx, gq = ctx.grads
+        return (_scale(grad_total, gx), _scale(grad_total, gq)) + (None,) * 6
+
+
+def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: GraphLike,
+                 visibility: Optional[torch.Tensor] = None, *, confidence=True, carap=True,
+                 arap=False, lrm=True, validate: bool = False) -> Regularizers:
+    """The regulariser step fused (smg::regularizers, docs/math/energy.md "The fused regulariser
+    pass"): the confidences (E2-E6; visibility [T, N] or None = all visible), C-ARAP (E7-E10),
+    plain ARAP and LRM (E11-E16) in one pass over the graph. Each term is False (off), True (the
+    defaults of node_confidences / carap / arap / lrm) or a dict of its options
+    (REGULARIZER_DEFAULTS; `weight` scales the term). With confidence off, C-ARAP and LRM use
+    c = 1. quats [T, N, 4] may be None without carap and arap. Returns Regularizers(total, carap,
+    arap, lrm, confidence): `total` is differentiable w.r.t. positions and the raw quats (the
+    confidences are constants, as with the separate operators); the per-term energies are detached.
+    The same values as node_confidences + carap + arap + lrm to rounding (1e-12 relative in
+    float64, tests/torch/test_energy.py). CPU tensors; a CUDA tensor raises NotImplementedError
+    (no fused CUDA kernel yet: use the separate operators on CUDA)."""
+    idx, w = _graph(g)
+    _check(positions=positions, quats=quats, indices=idx, weights=w, visibility=visibility)
+    terms, opts = {}, {}
+    for name, value in (("confidence", confidence), ("carap", carap), ("arap", arap), ("lrm", lrm)):
+        terms[name], opts[name] = _term_options(name, value)
+    total, e, c = _RegularizersFunction.apply(positions, quats, idx, w, visibility, terms, opts,
+                                              bool(validate))
+    return Regularizers(total, e[0], e[1], e[2], c if terms["confidence"] else None)
 
 
 def _library_seconds(op: str, positions: torch.Tensor, quats: Optional[torch.Tensor], g: GraphLike,

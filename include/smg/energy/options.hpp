@@ -1,6 +1,7 @@
 // smg/energy/options.hpp — parameters of the confidence, C-ARAP, LRM and plain ARAP equations
-// (docs/design.md "Confidence", "C-ARAP", "LRM", "Plain ARAP"; docs/math/energy.md), with their
-// validation. Defaults are the paper's (section 4.1) and docs/interop.md's flag defaults.
+// and of their fused step, RegularizerOptions (docs/design.md "Confidence", "C-ARAP", "LRM",
+// "Plain ARAP"; docs/math/energy.md), with their validation. Defaults are the paper's (section
+// 4.1) and docs/interop.md's flag defaults.
 //
 // Parameters are plain doubles whatever the Scalar of the computation: they are converted once
 // per call. Every energy is a sum over terms "as in the paper"; Normalization::mean divides the
@@ -112,6 +113,24 @@ struct LrmOptions {
   bool detach_omega = false;   // hold ω constant in the gradient (for comparison)
   Normalization normalization = Normalization::sum;
   double weight = 1.0;         // overall factor on the energy and its gradient
+};
+
+// The fused step (regularizers.hpp): which terms it computes. Confidences off: C-ARAP and LRM
+// use c ≡ 1 (as carap() and lrm() do with an empty confidence view).
+struct RegularizerTerms {
+  bool confidence = true;  // c_{t,i} (E6); written to the `confidence` output when given
+  bool carap = true;       // (E9), weights (E7) with the confidences
+  bool arap = false;       // (E9) with c ≡ 1, α = 1 (ablations)
+  bool lrm = true;         // (E14), weights (E7) with the confidences
+};
+
+// The options of the fused step: the terms, and each term's own options (plain values).
+struct RegularizerOptions {
+  RegularizerTerms terms;
+  ConfidenceOptions confidence;
+  CarapOptions carap;
+  ArapOptions arap;
+  LrmOptions lrm;
 };
 
 namespace detail {

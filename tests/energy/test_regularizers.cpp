@@ -1,0 +1,403 @@
+// Tests of smg/energy/regularizers.hpp, the fused regulariser step: equal to the separate
+// operators (node_confidences, carap, arap, lrm) for every subset of the terms, bit-identical
+// for 1, 2 and 3 threads, float against double, the gradient against central differences, the
+// hard cases, the memory bound and the argument checks.
+//
+// Bitwise or 1e-12? The confidences are always bit-identical (same element functions, same
+// order). C-ARAP alone and ARAP alone (tangent gradients) use carap()'s block partition and
+// per-node arithmetic unchanged, so energy and gradients are bit-identical too. Everywhere else
+// the same terms are summed in another association (C-ARAP and ARAP d-gradients summed before
+// one back-propagation; LRM's contributions added per neighbour instead of through lrm()'s
+// [T][N][3] arrays; raw-quaternion gradients converted per contribution), so the comparison is
+// ≤ 1e-12 relative to the largest value, in double.
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "energy/scene.hpp"
+#include "smg/energy.hpp"
+#include "support/prelude.hpp"
+
+using smg::test::Scene;
+
+namespace {
+
+// Bitwise comparisons with carap(): its energy sums (Eigen packet sums over its scratch) are
+// associated by the scratch's address modulo the packet size; with SSE's 16-byte packets every
+// allocation is aligned, with AVX's 32 bytes carap()'s depends on malloc. The fused step aligns
+// its arrays to 64 bytes, so its own results (thread counts) are bitwise under either.
+#if defined(__AVX__)
+constexpr bool kFusedBitwiseWithCarap = false;
+#else
+constexpr bool kFusedBitwiseWithCarap = true;
+#endif
+
+template <class S>
+struct FusedOut {
+  smg::RegularizerResult<S> e;
+  std::vector<S> conf, gx, gr;
+};
+
+smg::RegularizerOptions fused_options(unsigned mask) {
+  smg::RegularizerOptions o;
+  o.terms.confidence = (mask & 1u) != 0;
+  o.terms.carap = (mask & 2u) != 0;
+  o.terms.arap = (mask & 4u) != 0;
+  o.terms.lrm = (mask & 8u) != 0;
+  o.arap.gaps = {{1, 1.0}, {3, 0.5}};
+  o.arap.lambda_l = 0.7;
+  o.lrm.huber_delta = 0.03;
+  o.lrm.weight = 2.0;
+  return o;
+}
+
+// The fused step; raw: rotation gradient as raw quaternions [T][N][4].
+template <class S>
+FusedOut<S> fused_run(const Scene<S>& s, const smg::RegularizerOptions& o, int threads,
+                      bool raw = false, bool grad = true, bool vis = true,
+                      smg::EnergyWorkspace<S>* ws = nullptr) {
+  FusedOut<S> r;
+  const std::size_t TN = static_cast<std::size_t>(s.T * s.N);
+  r.conf.assign(TN, S(-1));
+  r.gx.assign(TN * 3, S(0));
+  r.gr.assign(TN * (raw ? 4 : 3), S(0));
+  smg::ParallelOptions par;
+  par.threads = threads;
+  smg::RotationGradientView<S> gr;
+  if (grad) gr = raw ? smg::RotationGradientView<S>(smg::QuaternionsView<S>(r.gr.data(), s.T, s.N))
+                     : smg::RotationGradientView<S>(smg::TangentsView<S>(r.gr.data(), s.T, s.N));
+  const smg::VisibilityView<const std::uint8_t> v =
+      vis ? s.visibility() : smg::VisibilityView<const std::uint8_t>();
+  const smg::FrameScalarsView<S> c =
+      o.terms.confidence ? smg::FrameScalarsView<S>(r.conf.data(), s.T, s.N)
+                         : smg::FrameScalarsView<S>();
+  REQUIRE(smg::validate_regularizers<S>(s.positions(), s.rotations(), v, s.graph(), o, c,
+                                        smg::PositionsView<S>(r.gx.data(), s.T, s.N), gr));
+  r.e = smg::regularizers<S>(s.positions(), s.rotations(), v, s.graph(), o, c,
+                             grad ? smg::PositionsView<S>(r.gx.data(), s.T, s.N)
+                                  : smg::PositionsView<S>(),
+                             gr, ws, par);
+  return r;
+}
+
+// The same with the four separate operators.
+template <class S>
+FusedOut<S> fused_separate(const Scene<S>& s, const smg::RegularizerOptions& o, int threads,
+                           bool raw = false, bool vis = true) {
+  FusedOut<S> r;
+  const std::size_t TN = static_cast<std::size_t>(s.T * s.N);
+  r.conf.assign(TN, S(-1));
+  r.gx.assign(TN * 3, S(0));
+  r.gr.assign(TN * (raw ? 4 : 3), S(0));
+  smg::ParallelOptions par;
+  par.threads = threads;
+  const smg::RotationGradientView<S> gr =
+      raw ? smg::RotationGradientView<S>(smg::QuaternionsView<S>(r.gr.data(), s.T, s.N))
+          : smg::RotationGradientView<S>(smg::TangentsView<S>(r.gr.data(), s.T, s.N));
+  const smg::PositionsView<S> gx(r.gx.data(), s.T, s.N);
+  smg::FrameScalarsView<const S> c;
+  if (o.terms.confidence) {
+    smg::node_confidences<S>(s.positions(),
+                             vis ? s.visibility() : smg::VisibilityView<const std::uint8_t>(),
+                             s.graph(), o.confidence,
+                             smg::FrameScalarsView<S>(r.conf.data(), s.T, s.N), {}, {}, nullptr,
+                             par);
+    c = smg::FrameScalarsView<const S>(r.conf.data(), s.T, s.N);
+  }
+  if (o.terms.carap)
+    r.e.carap = smg::carap<S>(s.positions(), s.rotations(), c, s.graph(), o.carap, gx, gr,
+                              nullptr, par);
+  if (o.terms.arap)
+    r.e.arap = smg::arap<S>(s.positions(), s.rotations(), s.graph(), o.arap, gx, gr, nullptr, par);
+  if (o.terms.lrm) r.e.lrm = smg::lrm<S>(s.positions(), c, s.graph(), o.lrm, gx, nullptr, par);
+  return r;
+}
+
+template <class S>
+double fused_max_abs(const std::vector<S>& a) {
+  double m = 0;
+  for (S v : a) m = std::max(m, std::abs(static_cast<double>(v)));
+  return m;
+}
+
+// max |a − b| / max(|b|, tiny) over the arrays.
+template <class S>
+double fused_rel_diff(const std::vector<S>& a, const std::vector<S>& b) {
+  double d = 0;
+  for (std::size_t k = 0; k < a.size(); ++k)
+    d = std::max(d, std::abs(static_cast<double>(a[k]) - static_cast<double>(b[k])));
+  return d / std::max(fused_max_abs(b), 1e-300);
+}
+
+double fused_rel(double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-300); }
+
+template <class S>
+bool fused_all_finite(const FusedOut<S>& r) {
+  auto fin = [](const std::vector<S>& v) {
+    return std::all_of(v.begin(), v.end(), [](S x) { return std::isfinite(x); });
+  };
+  return fin(r.gx) && fin(r.gr) && std::isfinite(static_cast<double>(r.e.total()));
+}
+
+// Fused against separate on one scene, every subset of the four terms, tangent and raw.
+void fused_check_equal(const Scene<double>& s, const std::string& what) {
+  CAPTURE(what);
+  for (unsigned mask = 0; mask < 16; ++mask)
+    for (bool raw : {false, true}) {
+      CAPTURE(mask);
+      CAPTURE(raw);
+      const smg::RegularizerOptions o = fused_options(mask);
+      const FusedOut<double> f = fused_run(s, o, 2, raw);
+      const FusedOut<double> r = fused_separate(s, o, 2, raw);
+      CHECK(fused_all_finite(f));
+      if (o.terms.confidence) CHECK(f.conf == r.conf);  // bitwise: same functions, same order
+      // C-ARAP or ARAP alone (tangent): carap()'s arithmetic unchanged, bitwise.
+      const bool bitwise = kFusedBitwiseWithCarap && !raw && (mask & 8u) == 0 &&
+                           ((mask & 6u) == 2u || (mask & 6u) == 4u);
+      if (bitwise) {
+        CHECK(f.e.carap == r.e.carap);
+        CHECK(f.e.arap == r.e.arap);
+        CHECK(f.gx == r.gx);
+        CHECK(f.gr == r.gr);
+      }
+      CHECK(fused_rel(f.e.carap, r.e.carap) <= 1e-12);
+      CHECK(fused_rel(f.e.arap, r.e.arap) <= 1e-12);
+      CHECK(fused_rel(f.e.lrm, r.e.lrm) <= 1e-12);
+      CHECK(fused_rel_diff(f.gx, r.gx) <= 1e-12);
+      CHECK(fused_rel_diff(f.gr, r.gr) <= 1e-12);
+      // Energies only (no gradient buffers: no spill, a different frame overlap).
+      const FusedOut<double> fe = fused_run(s, o, 2, raw, false);
+      CHECK(fused_rel(fe.e.carap, r.e.carap) <= 1e-12);
+      CHECK(fused_rel(fe.e.arap, r.e.arap) <= 1e-12);
+      CHECK(fused_rel(fe.e.lrm, r.e.lrm) <= 1e-12);
+      CHECK(fused_max_abs(fe.gx) == 0.0);
+      // Terms that are off are exactly 0; those that are on vanish only where the separate
+      // operator's does (LRM with one neighbour, one frame).
+      CHECK((f.e.carap != 0.0) == (r.e.carap != 0.0));
+      CHECK((f.e.arap != 0.0) == (r.e.arap != 0.0));
+      CHECK((f.e.lrm != 0.0) == (r.e.lrm != 0.0));
+      if ((mask & 2u) == 0) CHECK(f.e.carap == 0.0);
+      if ((mask & 4u) == 0) CHECK(f.e.arap == 0.0);
+      if ((mask & 8u) == 0) CHECK(f.e.lrm == 0.0);
+      if (s.T > 4 && s.K > 1) {
+        CHECK(((mask & 2u) == 0) == (f.e.carap == 0.0));
+        CHECK(((mask & 8u) == 0) == (f.e.lrm == 0.0));
+      }
+    }
+}
+
+}  // namespace
+
+TEST_CASE("fused regularizers equal the separate operators for every subset of the terms") {
+  SMG_TEST_RNG(rng, 2401);
+  // T = 23: three blocks of frames, the last one short; random degrees and weights.
+  fused_check_equal(smg::test::random_scene(23, 30, 6, rng), "random graph");
+  fused_check_equal(smg::test::rigid_bodies_scene(17, 40, 5), "rigid bodies");
+}
+
+TEST_CASE("fused regularizers are bit-identical for 1, 2 and 3 threads") {
+  SMG_TEST_RNG(rng, 2402);
+  const Scene<double> sd = smg::test::random_scene(41, 36, 7, rng);
+  const Scene<float> sf = sd.cast<float>();
+  const smg::RegularizerOptions o = fused_options(15);
+  for (bool raw : {false, true}) {
+    CAPTURE(raw);
+    const FusedOut<double> d1 = fused_run(sd, o, 1, raw);
+    const FusedOut<float> f1 = fused_run(sf, o, 1, raw);
+    for (int threads : {2, 3}) {
+      CAPTURE(threads);
+      const FusedOut<double> d = fused_run(sd, o, threads, raw);
+      const FusedOut<float> f = fused_run(sf, o, threads, raw);
+      CHECK(d.e.carap == d1.e.carap);
+      CHECK(d.e.arap == d1.e.arap);
+      CHECK(d.e.lrm == d1.e.lrm);
+      CHECK(d.gx == d1.gx);
+      CHECK(d.gr == d1.gr);
+      CHECK(d.conf == d1.conf);
+      CHECK(f.e.carap == f1.e.carap);
+      CHECK(f.e.lrm == f1.e.lrm);
+      CHECK(f.gx == f1.gx);
+      CHECK(f.gr == f1.gr);
+      CHECK(f.conf == f1.conf);
+    }
+  }
+}
+
+TEST_CASE("fused regularizers in float agree with double") {
+  const Scene<double> sd = smg::test::rigid_bodies_scene(20, 50, 6);
+  const Scene<float> sf = sd.cast<float>();
+  const smg::RegularizerOptions o = fused_options(15);
+  const FusedOut<double> d = fused_run(sd, o, 2);
+  const FusedOut<float> f = fused_run(sf, o, 2);
+  CHECK(fused_all_finite(f));
+  CHECK(fused_rel(f.e.carap, d.e.carap) <= 1e-4);
+  CHECK(fused_rel(f.e.arap, d.e.arap) <= 1e-4);
+  CHECK(fused_rel(f.e.lrm, d.e.lrm) <= 1e-3);
+  std::vector<double> gxf(f.gx.begin(), f.gx.end()), grf(f.gr.begin(), f.gr.end());
+  CHECK(fused_rel_diff(gxf, d.gx) <= 1e-3);
+  CHECK(fused_rel_diff(grf, d.gr) <= 1e-3);
+  // Confidences: exp of ratios of small sums; float keeps a few digits.
+  double dc = 0;
+  for (std::size_t k = 0; k < d.conf.size(); ++k)
+    dc = std::max(dc, std::abs(double(f.conf[k]) - d.conf[k]));
+  CHECK(dc <= 1e-2);
+}
+
+TEST_CASE("fused regularizers' gradient matches central finite differences") {
+  SMG_TEST_RNG(rng, 2403);
+  Scene<double> s = smg::test::random_scene(7, 9, 4, rng);
+  // The confidences are constants for the gradient (stop-gradient), so the function that is
+  // differentiated has them held: c ≡ 1 (terms.confidence off) and α < 1 still weights C-ARAP.
+  smg::RegularizerOptions o = fused_options(2 | 4 | 8);
+  o.lrm.huber_delta = 0.05;
+  const FusedOut<double> f = fused_run(s, o, 2);
+  auto energy = [&] {
+    return static_cast<double>(fused_run(s, o, 1, false, false).e.total());
+  };
+  const std::vector<double> gx_fd = smg::test::central_gradient(s.x, energy, 1e-6);
+  CHECK(fused_rel_diff(f.gx, gx_fd) <= 2e-7);
+  std::vector<double> gr_fd(f.gr.size());
+  for (Index t = 0; t < s.T; ++t)
+    for (Index i = 0; i < s.N; ++i) {
+      const Eigen::Quaterniond q0 = s.rot(t, i);
+      for (int c = 0; c < 3; ++c)
+        gr_fd[static_cast<std::size_t>((t * s.N + i) * 3 + c)] = smg::test::central_difference_tangent(
+            q0, c, [&](const Eigen::Quaterniond& q) { s.set_rot(t, i, q); }, energy, 1e-6);
+    }
+  CHECK(fused_rel_diff(f.gr, gr_fd) <= 2e-7);
+  CHECK(fused_max_abs(f.gx) > 0.0);
+  CHECK(fused_max_abs(f.gr) > 0.0);
+}
+
+TEST_CASE("fused regularizers: hard cases equal the separate operators") {
+  SMG_TEST_RNG(rng, 2404);
+  {  // a node with no neighbours, and nobody's neighbour
+    Scene<double> s = smg::test::random_scene(12, 15, 5, rng);
+    for (Index k = 0; k < s.K; ++k) {
+      s.idx[static_cast<std::size_t>(3 * s.K + k)] = -1;
+      s.w[static_cast<std::size_t>(3 * s.K + k)] = 0.0;
+    }
+    // Node 3 is nobody's neighbour either: drop it from every row, valid entries first.
+    for (Index i = 0; i < s.N; ++i) {
+      Index n = 0;
+      for (Index k = 0; k < s.K; ++k) {
+        const std::size_t a = static_cast<std::size_t>(i * s.K + k);
+        if (s.idx[a] < 0 || s.idx[a] == 3) continue;
+        const std::size_t d = static_cast<std::size_t>(i * s.K + n++);
+        s.idx[d] = s.idx[a];
+        s.w[d] = s.w[a];
+      }
+      for (; n < s.K; ++n) {
+        s.idx[static_cast<std::size_t>(i * s.K + n)] = -1;
+        s.w[static_cast<std::size_t>(i * s.K + n)] = 0.0;
+      }
+    }
+    fused_check_equal(s, "isolated node");
+    const FusedOut<double> f = fused_run(s, fused_options(15), 1);
+    double g3 = 0;
+    for (Index t = 0; t < s.T; ++t)
+      for (int c = 0; c < 3; ++c) g3 += std::abs(f.gx[static_cast<std::size_t>((t * s.N + 3) * 3 + c)]);
+    CHECK(g3 == 0.0);
+  }
+  {  // every node invisible: all confidences 0
+    Scene<double> s = smg::test::random_scene(10, 12, 4, rng);
+    std::fill(s.v.begin(), s.v.end(), std::uint8_t(0));
+    fused_check_equal(s, "all invisible");
+    const FusedOut<double> f = fused_run(s, fused_options(1 | 2), 2);
+    CHECK(fused_max_abs(f.conf) == 0.0);
+  }
+  {  // zero-length edges: two nodes on top of each other in every frame
+    Scene<double> s = smg::test::random_scene(9, 10, 4, rng, true);
+    for (Index t = 0; t < s.T; ++t) s.set_pos(t, s.idx[0], s.pos(t, 0));
+    fused_check_equal(s, "zero-length edge");
+  }
+  {  // T smaller than the largest gap (4), T = 2 and T = 1
+    for (Index T : {3, 2, 1}) {
+      CAPTURE(T);
+      fused_check_equal(smg::test::random_scene(T, 8, 3, rng), "short sequence");
+    }
+  }
+  {  // K = 1
+    fused_check_equal(smg::test::random_scene(11, 9, 1, rng), "K = 1");
+  }
+}
+
+TEST_CASE("fused regularizers keep their extra memory under the inputs' size") {
+  // A trainer-shaped case (more frames than two blocks of 32): the workspace the call fills is
+  // what regularizers_extra_bytes says, and at most the bytes of positions, rotations,
+  // visibility and graph; the separate operators' workspace holds several T·N·3 arrays.
+  const Scene<double> s = smg::test::rigid_bodies_scene(96, 120, 8);
+  const smg::RegularizerOptions o = fused_options(15);
+  for (int threads : {1, 2, 3}) {
+    CAPTURE(threads);
+    smg::EnergyWorkspace<double> ws;
+    (void)fused_run(s, o, threads, true, true, true, &ws);
+    smg::ParallelOptions par;
+    par.threads = threads;
+    const std::size_t predicted = smg::regularizers_extra_bytes<double, std::int32_t>(
+        s.T, s.N, s.K, o, true, true, true, true, par);
+    const std::size_t inputs = sizeof(double) * (s.x.size() + s.q.size() + s.w.size()) +
+                               s.v.size() + sizeof(std::int32_t) * s.idx.size();
+    CAPTURE(predicted);
+    CAPTURE(inputs);
+    CHECK(ws.bytes() == predicted);
+    CHECK(ws.bytes() <= inputs);
+  }
+  // The separate calls' workspace, for the record of what the fused pass saves.
+  smg::EnergyWorkspace<double> sep;
+  std::vector<double> conf(static_cast<std::size_t>(s.T * s.N)), gx(s.x.size()), gr(s.x.size());
+  smg::node_confidences<double>(s.positions(), s.visibility(), s.graph(), o.confidence,
+                                smg::FrameScalarsView<double>(conf.data(), s.T, s.N), {}, {}, &sep);
+  (void)smg::lrm<double>(s.positions(), smg::FrameScalarsView<const double>(conf.data(), s.T, s.N),
+                         s.graph(), o.lrm, smg::PositionsView<double>(gx.data(), s.T, s.N), &sep);
+  smg::EnergyWorkspace<double> fused_ws;
+  (void)fused_run(s, o, 2, false, true, true, &fused_ws);
+  CHECK(fused_ws.bytes() < sep.bytes());
+}
+
+TEST_CASE("validate_regularizers names the bad argument in one line") {
+  SMG_TEST_RNG(rng, 2405);
+  Scene<double> s = smg::test::random_scene(5, 6, 3, rng);
+  std::vector<double> conf(static_cast<std::size_t>(s.T * s.N)), gx(s.x.size()), gr(s.x.size());
+  const smg::FrameScalarsView<double> c(conf.data(), s.T, s.N);
+  const smg::PositionsView<double> g(gx.data(), s.T, s.N);
+  auto check = [&](const smg::Status& st, const std::string& name) {
+    CAPTURE(st.message());
+    CHECK(!st);
+    CHECK(st.message().find(name) != std::string::npos);
+    CHECK(st.message().find('\n') == std::string::npos);
+  };
+  smg::RegularizerOptions o = fused_options(15);
+  CHECK(smg::validate_regularizers<double>(s.positions(), s.rotations(), s.visibility(), s.graph(),
+                                           o, c, g, smg::TangentsView<double>(gr.data(), s.T, s.N)));
+  // Rotations of the wrong length.
+  check(smg::validate_regularizers<double>(s.positions(),
+                                           smg::QuaternionsView<const double>(s.q.data(), s.T, s.N - 1),
+                                           s.visibility(), s.graph(), o),
+        "rotations");
+  // No rotations are fine without C-ARAP and ARAP.
+  o.terms.carap = o.terms.arap = false;
+  CHECK(smg::validate_regularizers<double>(s.positions(), {}, s.visibility(), s.graph(), o));
+  o = fused_options(15);
+  o.carap.alpha = 1.5;
+  check(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o),
+        "CarapOptions.alpha");
+  o = fused_options(15);
+  o.lrm.huber_delta = 0;
+  check(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o),
+        "LrmOptions.huber_delta");
+  o = fused_options(14);  // confidences off, but an output given
+  check(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o, c),
+        "confidence");
+  o = fused_options(15);
+  check(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o, c,
+                                           smg::PositionsView<double>(gx.data(), s.T - 1, s.N)),
+        "grad_positions");
+  s.x[4] = std::nan("");
+  check(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o),
+        "positions");
+}
