@@ -531,8 +531,10 @@ Accumulator<S> carap(detail::NonDeducedT<PositionsView<const S>> positions,
     std::fill(g, g + T * N * 3, S(0));
     k.gr = TangentsView<S>(g, T, N);
   }
-  k.scratch_per_slot = k.scratch_size();
-  k.scratch = ws->scratch(static_cast<std::size_t>(slots * k.scratch_per_slot));
+  // Aligned slots (EnergyWorkspace::scratch_aligned): bit-identical for any thread count with
+  // AVX's 32-byte packets too.
+  k.scratch_per_slot = static_cast<Index>(EnergyWorkspace<S>::aligned_slot_size(static_cast<std::size_t>(k.scratch_size())));
+  k.scratch = ws->scratch_aligned(static_cast<std::size_t>(slots * k.scratch_per_slot));
   if (k.gradient()) k.spill = ws->spill(static_cast<std::size_t>(2 * k.blocks * k.G * N * 3));
 
   std::vector<Acc> partial(static_cast<std::size_t>(k.blocks), Acc(0));

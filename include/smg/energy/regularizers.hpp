@@ -753,13 +753,9 @@ RegularizerResult<S> regularizers(
     k.inv_w = iw;
   }
   k.scratch_per_slot = p.slot_scalars();
-  {
-    // The slots' base on a 64-byte boundary (see RegularizerPlan::chunk).
-    S* base = ws->scratch(static_cast<std::size_t>(p.slots * k.scratch_per_slot +
-                                                   detail::RegularizerPlan::kAlign));
-    const std::size_t mis = reinterpret_cast<std::uintptr_t>(base) % 64;
-    k.scratch = base + (mis == 0 ? 0 : static_cast<Index>((64 - mis) / sizeof(S)));
-  }
+  // The slots' base on a 64-byte boundary (see RegularizerPlan::chunk; its kAlign slack covers
+  // the workspace's).
+  k.scratch = ws->scratch_aligned(static_cast<std::size_t>(p.slots * k.scratch_per_slot));
   if (p.spill_scalars() > 0) {
     k.spill = ws->spill(static_cast<std::size_t>(p.spill_scalars()));
     if (p.want_x && p.lrm) {

@@ -9,6 +9,7 @@
 #include "smg/core/config.hpp"
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 
@@ -21,6 +22,18 @@ class EnergyWorkspace {
   S* edge_change(std::size_t n) { return grow(edge_change_, n); }  // confidence: e_i^t [T][N]
   S* spill(std::size_t n) { return grow(spill_, n); }              // C-ARAP: frames past a block
   S* scratch(std::size_t n) { return grow(scratch_, n); }          // per-chunk SoA scratch
+  // At least n scalars of the per-chunk scratch starting on a 64-byte boundary. Why: Eigen's
+  // packet sums (sum_array) split an array's unaligned head off, so a sum's rounding depends on
+  // where the array lies; with slots of an aligned_slot_size and this base, every slot has the
+  // same alignment, and a result does not depend on which slot (thread) computed it.
+  S* scratch_aligned(std::size_t n) {
+    S* base = grow(scratch_, n + kAlignScalars);
+    const std::size_t mis = reinterpret_cast<std::uintptr_t>(base) % 64;
+    if (mis == 0 || 64 % sizeof(S) != 0) return base;  // (an autodiff scalar: nothing to align)
+    return base + (64 - mis) / sizeof(S);
+  }
+  // n rounded up to whole 64-byte lines, so that consecutive slots stay 64-byte aligned.
+  static std::size_t aligned_slot_size(std::size_t n) { return (n + kAlignScalars - 1) / kAlignScalars * kAlignScalars; }
   S* velocity_grad(std::size_t n) { return grow(velocity_grad_, n); }  // LRM: dL/du [T][N][3]
   S* velocity(std::size_t n) { return grow(velocity_, n); }            // LRM: u [T][N][3]
   S* rotation_grad(std::size_t n) { return grow(rotation_grad_, n); }  // C-ARAP: tangent before raw
@@ -35,6 +48,7 @@ class EnergyWorkspace {
   void release() { *this = EnergyWorkspace(); }
 
  private:
+  static constexpr std::size_t kAlignScalars = 64 % sizeof(S) == 0 && sizeof(S) <= 64 ? 64 / sizeof(S) : 1;
   static S* grow(std::vector<S>& v, std::size_t n) {
     if (v.size() < n) v.resize(n);
     return v.data();
