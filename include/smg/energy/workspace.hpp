@@ -28,9 +28,9 @@ class EnergyWorkspace {
   // same alignment, and a result does not depend on which slot (thread) computed it.
   S* scratch_aligned(std::size_t n) {
     S* base = grow(scratch_, n + kAlignScalars);
-    const std::size_t mis = reinterpret_cast<std::uintptr_t>(base) % 64;
-    if (mis == 0 || 64 % sizeof(S) != 0) return base;  // (an autodiff scalar: nothing to align)
-    return base + (64 - mis) / sizeof(S);
+    if constexpr (kAlignScalars == 1) return base;  // an autodiff scalar: nothing to align
+    const std::size_t mis = reinterpret_cast<std::uintptr_t>(base) % 64;  // a multiple of sizeof(S)
+    return mis == 0 ? base : base + (64 - mis) / sizeof(S);
   }
   // n rounded up to whole 64-byte lines, so that consecutive slots stay 64-byte aligned.
   static std::size_t aligned_slot_size(std::size_t n) { return (n + kAlignScalars - 1) / kAlignScalars * kAlignScalars; }
@@ -48,7 +48,9 @@ class EnergyWorkspace {
   void release() { *this = EnergyWorkspace(); }
 
  private:
-  static constexpr std::size_t kAlignScalars = 64 % sizeof(S) == 0 && sizeof(S) <= 64 ? 64 / sizeof(S) : 1;
+  // 16 scalars: 64 bytes of float, two lines of double (the fused step's RegularizerPlan::kAlign
+  // counts the same slack); 1 for a scalar type that does not divide a line (autodiff).
+  static constexpr std::size_t kAlignScalars = 64 % sizeof(S) == 0 && sizeof(S) <= 8 ? 16 : 1;
   static S* grow(std::vector<S>& v, std::size_t n) {
     if (v.size() < n) v.resize(n);
     return v.data();
