@@ -152,6 +152,11 @@ def fwd_bwd(energy, x, q, idx, w):
     return e.detach(), xs.grad, qs.grad
 
 
+def energy_fused(xs, qs, idx, w):
+    """The same sum through the fused step, smg_torch.regularizers (one pass; CPU tensors)."""
+    return smg.regularizers(xs, qs, (idx, w), None, confidence=True, carap=True, arap=True, lrm=True).total
+
+
 def energies_smg(x, q, idx, w):
     e, gx, gq = fwd_bwd(energy_smg, x, q, idx, w)
     return float(e), gx, gq
@@ -550,10 +555,16 @@ def main():
         t_cmp = compiled_peer(energy_ref, lambda fn: fwd_bwd(fn, x, q, idx, w), args.repeat, best_of)
         rows.append((f"energies fwd+bwd (conf + C-ARAP + LRM + ARAP), N={N} T={T} K={K} float32, {threads} thread(s)",
                      t_smg, t_ref, t_cmp))
+        fwd_bwd(energy_fused, x, q, idx, w)  # warm-up
+        t_fused = best_of(lambda: fwd_bwd(energy_fused, x, q, idx, w), args.repeat)
+        rows.append((f"the same, fused (smg_torch.regularizers), {threads} thread(s)", t_fused, t_ref, t_cmp))
     overhead = overhead_rows(x, q, idx, w, max(args.repeat, 5))
     e1, gx1, gq1 = energies_smg(x, q, idx, w)
     e2, gx2, gq2 = energies_torch(x, q, idx, w)
-    agree = f"float32 agreement: energy {abs(e1 - e2) / abs(e2):.1e}, grad x {rel(gx1, gx2):.1e}, grad q {rel(gq1, gq2):.1e}"
+    e3, gx3, gq3 = fwd_bwd(energy_fused, x, q, idx, w)
+    agree = (f"float32 agreement: energy {abs(e1 - e2) / abs(e2):.1e}, grad x {rel(gx1, gx2):.1e}, grad q {rel(gq1, gq2):.1e}; "
+             f"fused against eager: energy {abs(float(e3) - e2) / abs(e2):.1e}, grad x {rel(gx3, gx2):.1e}, "
+             f"grad q {rel(gq3, gq2):.1e}")
 
     torch.set_num_threads(2)
     s = skin_scene(N, T, K, P)
