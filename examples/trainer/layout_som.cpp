@@ -345,8 +345,8 @@ void write_som(const std::string& dir, const DycheckScene& s) {
   layout_io::write_file(dir, "extra.json", "{\"fps\": 30.0, \"factor\": 1}\n");  // SoM reads fps from it
   // Cameras, twice as a SoM scene has them: the original Nerfies camera/ JSON and the refined
   // COLMAP model (one PINHOLE camera per frame; the reader takes these). The COLMAP model is in
-  // units of 1 / kColmapScale metres, as a COLMAP reconstruction is in its own units, and
-  // colmap/scale.npy says so. Both back to SoM's integer pixel centres.
+  // units of kColmapScale metres (metres = units x scale), as a COLMAP reconstruction is in its
+  // own units, and colmap/scale.npy says so. Both back to SoM's integer pixel centres.
   constexpr double kColmapScale = 2.0;  // a power of two: the round trip through it is exact
   std::vector<colmap::CameraRecord> colmap_cameras;
   std::vector<colmap::ImageRecord> colmap_images;
