@@ -8,9 +8,8 @@ usage: PYTHONPATH=<smg_torch built with CUDA> python3 bench/torch/bench_cuda.py 
 
 Energies: the scene of bench_torch.py (N = 5000 nodes, T = 100 frames, K = 16, gaps 1,2,4,
 float32), loss = C-ARAP + LRM + ARAP with node confidences computed first, backward to the
-positions and raw quaternions; each operator is also timed alone. Every energy smg_torch runs on
-CUDA is included (smg_torch._C lists them: cuda_carap, cuda_arap, cuda_lrm, ...); one it lacks
-is left out of both sides and named in the output. The PyTorch baseline is
+positions and raw quaternions, through the four operators and through the fused step
+(smg_torch.regularizers); each operator is also timed alone. The PyTorch baseline is
 tests/torch/torch_reference.py (vectorised autograd implementations of docs/math/energy.md)
 on the same device, run eagerly and through torch.compile (timed after its first call, which
 compiles and is reported on its own; without torch.compile, torch 1.x, the row says so).
@@ -38,8 +37,8 @@ sys.path.insert(0, HERE)
 
 import smg_torch as smg  # noqa: E402
 import torch_reference as ref  # noqa: E402
-from bench_torch import (SCALING_QUICK, SCALING_SIZES, compiled_peer, energy_ref, energy_scene,  # noqa: E402
-                         energy_smg, fwd_bwd, print_scaling, scaling_json, scaling_scene,
+from bench_torch import (SCALING_QUICK, SCALING_SIZES, compiled_peer, energy_fused, energy_ref,  # noqa: E402
+                         energy_scene, energy_smg, fwd_bwd, print_scaling, scaling_json, scaling_scene,
                          scaling_table, skin_scene)
 
 
@@ -134,7 +133,10 @@ def main():
         return 0
     dev = torch.device("cuda")
     name = torch.cuda.get_device_name(dev)
-    has = {op: hasattr(smg._C, "cuda_" + op) for op in ("carap", "arap", "lrm", "dqb_forward")}
+    # A CUDA build of smg_torch registers every operator's CUDA launch (smg_torch_cuda.cu's
+    # register_cuda); the per-operator "cuda_*" attributes this once read are gone, and reading
+    # them left LRM, DQB and the per-operator rows out of every run.
+    has = {op: bool(smg.has_cuda) for op in ("carap", "arap", "lrm", "dqb_forward", "regularizers")}
     if args.scaling:
         cuda_scaling(args, dev, name, has["lrm"])
         return 0
@@ -162,6 +164,11 @@ def main():
     t_smg = timed(lambda: run(smg), args.repeat)
     t_ref = timed(lambda: run(ref), args.repeat)
     rows.append((f"energies fwd+bwd ({terms}), N={N} T={T} K={K} float32", t_smg, t_ref))
+    if has["regularizers"] and has["lrm"]:
+        # The same sum through the fused step (smg::cuda::regularizers), against the same eager peer.
+        t_fused = timed(lambda: fwd_bwd(energy_fused, x, q, idx, w), args.repeat)
+        rows.append((f"the same, fused (smg_torch.regularizers), N={N} T={T} K={K} float32",
+                     t_fused, t_ref))
     # torch.compile of the same PyTorch code (energy_ref is loss(ref, ...) as a function of leaves)
     def e_ref(xs, qs, idx, w):  # a plain function for torch.compile to trace
         return energy_ref(xs, qs, idx, w, lrm=has["lrm"])
@@ -171,6 +178,10 @@ def main():
     e2, gx2, gq2 = run(ref)
     agree = (f"float32, smg CUDA vs PyTorch autograd CUDA: energy {abs(float(e1 - e2)) / abs(float(e2)):.1e}, "
              f"grad x {rel(gx1, gx2):.1e}, grad q {rel(gq1, gq2):.1e}")
+    if has["regularizers"] and has["lrm"]:
+        e3, gx3, gq3 = fwd_bwd(energy_fused, x, q, idx, w)
+        agree += (f"; fused step vs PyTorch autograd: energy {abs(float(e3 - e2)) / abs(float(e2)):.1e}, "
+                  f"grad x {rel(gx3, gx2):.1e}, grad q {rel(gq3, gq2):.1e}")
     # Against float64 on the CPU (the library's reference precision) on the same inputs.
     xd, qd, wd = x.double().cpu(), q.double().cpu(), w.double().cpu()
     xs, qs = xd.clone().requires_grad_(), qd.clone().requires_grad_()

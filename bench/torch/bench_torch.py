@@ -153,7 +153,7 @@ def fwd_bwd(energy, x, q, idx, w):
 
 
 def energy_fused(xs, qs, idx, w):
-    """The same sum through the fused step, smg_torch.regularizers (one pass; CPU tensors)."""
+    """The same sum through the fused step, smg_torch.regularizers (one pass; CPU or CUDA)."""
     return smg.regularizers(xs, qs, (idx, w), None, confidence=True, carap=True, arap=True, lrm=True).total
 
 

@@ -103,6 +103,11 @@ struct CudaOps {
                       const at::Tensor& gq) = nullptr;
   at::Tensor (*lrm)(const EnergyInputs&, const smg::LrmOptions&, bool validate,
                     const at::Tensor& gx) = nullptr;
+  // The fused step: energies [3] (float64: carap, arap, lrm) overwritten; conf, gx, gq filled or
+  // added to when defined.
+  void (*regularizers)(const EnergyInputs&, const smg::RegularizerOptions&, bool validate,
+                       const at::Tensor& energies, const at::Tensor& conf, const at::Tensor& gx,
+                       const at::Tensor& gq) = nullptr;
   void (*dqb_forward)(const SkinInputs&, const smg::SkinOptions&, const at::Tensor& drivers,
                       const at::Tensor& weights, const at::Tensor& out_x,
                       const at::Tensor& out_q) = nullptr;

@@ -1,5 +1,5 @@
 // examples/torch/smg_torch_cuda.cu — the CUDA launches of smg_torch's operators: node
-// confidences, C-ARAP, plain ARAP, LRM and DQB/LBS skinning through smg/cuda/ (the same
+// confidences, C-ARAP, plain ARAP, LRM, the fused step (regularizers) and DQB/LBS skinning through smg/cuda/ (the same
 // per-element maths as the CPU operators), on the current stream of the tensors' device. Built
 // when torch has CUDA and nvcc is available (setup.py); smg_torch._C.has_cuda says whether it was.
 //
@@ -18,6 +18,7 @@
 #include "smg/cuda/confidence.cuh"
 #include "smg/cuda/dqb.cuh"
 #include "smg/cuda/lrm.cuh"
+#include "smg/cuda/regularizers.cuh"
 #include "smg/cuda/skin_weights.cuh"
 #include "smg/cuda/validate.cuh"
 #include "smg_torch_common.hpp"
@@ -170,6 +171,40 @@ void dqb_backward_cuda(const SkinInputs& in, const smg::SkinOptions& opt, const 
   });
 }
 
+// regularizers: smg::cuda::regularizers (the fused step) into energies [3] (float64: the
+// RegularizerResult<S> of either dtype is three doubles), c, gx and gq when defined.
+void regularizers_cuda(const EnergyInputs& in, const smg::RegularizerOptions& o, bool validate,
+                       const at::Tensor& energies, const at::Tensor& c, const at::Tensor& gx,
+                       const at::Tensor& gq) {
+  const c10::cuda::CUDAGuard guard(in.ref.device);
+  const cudaStream_t stream = stream_of(in.ref);
+  const bool rigid = o.terms.carap || o.terms.arap;
+  dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
+    using S = decltype(s);
+    using I = decltype(i);
+    static_assert(sizeof(smg::RegularizerResult<S>) == 3 * sizeof(double),
+                  "RegularizerResult<S> must be the three doubles of the energies tensor");
+    const auto gv = graph_view<S, I>(in.g);
+    const smg::PositionsView<const S> xv(cptr<S>(in.x), in.T, in.N);
+    const smg::QuaternionsView<const S> qv =
+        rigid ? smg::QuaternionsView<const S>(cptr<S>(in.q), in.T, in.N) : smg::QuaternionsView<const S>();
+    smg::VisibilityView<const std::uint8_t> vv;
+    if (in.vis.defined()) vv = {cptr<std::uint8_t>(in.vis), in.vis.size(0), in.vis.size(1)};
+    const smg::FrameScalarsView<S> cv =
+        c.defined() ? smg::FrameScalarsView<S>(mptr<S>(c), in.T, in.N) : smg::FrameScalarsView<S>();
+    const auto gxv = grad_view<S>(in, gx);
+    smg::RotationGradientView<S> gqv;
+    if (gq.defined()) gqv = smg::QuaternionsView<S>(mptr<S>(gq), in.T, in.N);
+    if (validate)
+      ok(smg::cuda::validate_regularizers<S, I>(xv, qv, vv, gv, o, cv, gxv, gqv, stream), kEnergyNames);
+    smg::cuda::ReverseGraph rev;
+    ok(smg::cuda::build_reverse_graph(cptr<I>(in.g.indices), in.N, in.g.k, stream, rev));
+    auto* r = reinterpret_cast<smg::RegularizerResult<S>*>(energies.data_ptr<double>());
+    ok(smg::cuda::regularizers<S, I>(xv, qv, vv, gv, o, rev, r, cv, gxv, gqv, stream), kEnergyNames);
+    return 0;
+  });
+}
+
 // smg's scratch from PyTorch's CUDA caching allocator (stream-aware: a block freed on a stream
 // is reused on it without synchronisation).
 void* torch_allocate(std::size_t bytes, cudaStream_t stream, void*) {
@@ -191,6 +226,7 @@ void register_cuda(py::module_& m) {
   ops.node_confidences = &confidences_cuda;
   ops.carap = &carap_cuda;
   ops.lrm = &lrm_cuda;
+  ops.regularizers = &regularizers_cuda;
   ops.dqb_forward = &dqb_forward_cuda;
   ops.dqb_backward = &dqb_backward_cuda;
 }

@@ -157,8 +157,8 @@ py::tuple lrm_impl(const at::Tensor& positions, const at::Tensor& indices, const
 // smg::regularizers, the fused step (confidences, C-ARAP, ARAP, LRM in one pass). `terms` is a
 // dict of four bools; conf, carap, arap and lrm are dicts with every option of that term (the
 // Python wrapper fills the defaults). Each term's options are checked on their own first, so that
-// a message names the term ("carap.alpha: ..."). CPU tensors only: there is no fused CUDA kernel
-// yet, so a CUDA tensor raises NotImplementedError (use the separate operators on CUDA).
+// a message names the term ("carap.alpha: ..."). CUDA tensors run smg::cuda::regularizers
+// (smg/cuda/regularizers.cuh) on the tensors' current stream.
 py::tuple regularizers_impl(const at::Tensor& positions, const OptTensor& quats,
                             const at::Tensor& indices, const at::Tensor& weights,
                             const OptTensor& visibility, const py::dict& terms,
@@ -210,12 +210,13 @@ py::tuple regularizers_impl(const at::Tensor& positions, const OptTensor& quats,
   if (rigid && !quats) value_error("quats: needed for carap or arap");
   const EnergyInputs in = prepare(positions, rigid ? quats : std::nullopt, indices, weights,
                                   std::nullopt, visibility, validate);
-  if (in.ref.cuda())
-    not_implemented("regularizers: not yet on CUDA tensors (no fused CUDA kernel, issue 24); "
-                    "use node_confidences, carap, arap and lrm on CUDA");
   const at::Tensor gx = zeros_if(grad_x, in, 3), gq = zeros_if(grad_q && rigid, in, 4);
   const at::Tensor c = o.terms.confidence ? at::empty({in.T, in.N}, in.ref.options()) : at::Tensor();
   at::Tensor energies = at::zeros({3}, in.ref.options().dtype(at::kDouble));
+  if (in.ref.cuda()) {
+    cuda(cuda_ops().regularizers)(in, o, validate, energies, c, gx, gq);
+    return py::make_tuple(energies.to(in.ref.options().dtype()), opt(c), opt(gx), opt(gq));
+  }
   dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
     using S = decltype(s);
     using I = decltype(i);

@@ -18,10 +18,12 @@
 #include <string>
 #include <vector>
 
+#include "energy/fused_options.hpp"
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
 #include "support/prelude.hpp"
 
+using smg::test::fused_options;
 using smg::test::Scene;
 
 namespace {
@@ -41,19 +43,6 @@ struct FusedOut {
   smg::RegularizerResult<S> e;
   std::vector<S> conf, gx, gr;
 };
-
-smg::RegularizerOptions fused_options(unsigned mask) {
-  smg::RegularizerOptions o;
-  o.terms.confidence = (mask & 1u) != 0;
-  o.terms.carap = (mask & 2u) != 0;
-  o.terms.arap = (mask & 4u) != 0;
-  o.terms.lrm = (mask & 8u) != 0;
-  o.arap.gaps = {{1, 1.0}, {3, 0.5}};
-  o.arap.lambda_l = 0.7;
-  o.lrm.huber_delta = 0.03;
-  o.lrm.weight = 2.0;
-  return o;
-}
 
 // The fused step; raw: rotation gradient as raw quaternions [T][N][4].
 template <class S>

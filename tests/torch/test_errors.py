@@ -102,9 +102,9 @@ def test_cuda_not_implemented():
     if smg.has_cuda:  # the energies run on CUDA (tests/torch/test_cuda.py); the graph does not
         with pytest.raises(NotImplementedError, match="CPU only"):
             smg.build_graph(x.cuda())
-        # The fused step has no CUDA kernel yet: one clear line pointing to the separate operators.
-        with pytest.raises(NotImplementedError, match="regularizers: not yet on CUDA"):
-            smg.regularizers(x.cuda(), q.cuda(), (idx.cuda(), w.cuda()))
+        # The fused step runs on CUDA (tests/torch/test_cuda.py); mixed devices are refused.
+        with pytest.raises(ValueError, match="graph.weights"):
+            smg.regularizers(x.cuda(), q.cuda(), (idx.cuda(), w))
     else:
         with pytest.raises(NotImplementedError, match="built with CUDA"):
             smg.carap(x.cuda(), q.cuda(), (idx.cuda(), w.cuda()), c.cuda())

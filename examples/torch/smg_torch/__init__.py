@@ -298,8 +298,8 @@ def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: Grap
     arap, lrm, confidence): `total` is differentiable w.r.t. positions and the raw quats (the
     confidences are constants, as with the separate operators); the per-term energies are detached.
     The same values as node_confidences + carap + arap + lrm to rounding (1e-12 relative in
-    float64, tests/torch/test_energy.py). CPU tensors; a CUDA tensor raises NotImplementedError
-    (no fused CUDA kernel yet: use the separate operators on CUDA)."""
+    float64, tests/torch/test_energy.py). CPU and CUDA tensors (smg::cuda::regularizers on the
+    current stream; tests/torch/test_cuda.py)."""
     idx, w = _graph(g)
     _check(positions=positions, quats=quats, indices=idx, weights=w, visibility=visibility)
     terms, opts = {}, {}

@@ -55,13 +55,14 @@ struct LrmKernelArgs {
 
 // Step 1, element e = t·N + i (< T·N). The kernels below are thin wrappers of these host-device
 // per-element steps (which also lets a host loop run them, e.g. to check the scheme on a machine
-// without a GPU).
+// without a GPU). energy_terms, gx_edges and gu_edges hold the elements from e = base on (the
+// fused step, cuda/regularizers.cuh, keeps one chunk of frames at a time).
 template <class S, class I, int KMax>
 SMG_HOST_DEVICE inline void lrm_term_at(Index e, PositionsView<const S> x,
                                         FrameScalarsView<const S> conf,
                                         NeighborsView<S, I> graph, const LrmKernelArgs<S>& args,
                                         Accumulator<S>* energy_terms, S* gx_edges, S* gu_edges,
-                                        TangentsView<S> omega) {
+                                        TangentsView<S> omega, Index base = 0) {
   const Index T = x.frames(), N = x.nodes(), K = graph.k();
   const Index t = e / N, i = e % N;
   S xs[3 * KMax], us[3 * KMax], a[KMax], gx[3 * KMax], gu[3 * KMax], om[3];
@@ -83,7 +84,7 @@ SMG_HOST_DEVICE inline void lrm_term_at(Index e, PositionsView<const S> x,
   }
   const S ev =
       smg::detail::lrm_neighborhood<S, S>(K, xs, us, a, args.p, scratch, gx, gu, om);
-  if (energy_terms) energy_terms[e] = Accumulator<S>(ev);
+  if (energy_terms) energy_terms[e - base] = Accumulator<S>(ev);
   if (omega.data()) {
     S* o = omega.ptr(t, i);
     for (int c = 0; c < 3; ++c) o[c] = om[c];
@@ -92,8 +93,8 @@ SMG_HOST_DEVICE inline void lrm_term_at(Index e, PositionsView<const S> x,
   const Literal<S> scale = args.gradient_scale();
   for (Index k = 0; k < K; ++k) {
     if (graph.indices(i, k) < 0) break;
-    S* dx = gx_edges + 3 * (e * K + k);
-    S* du = gu_edges + 3 * (e * K + k);
+    S* dx = gx_edges + 3 * ((e - base) * K + k);
+    S* du = gu_edges + 3 * ((e - base) * K + k);
     for (int c = 0; c < 3; ++c) {
       dx[c] = scale * gx[c * K + k];
       du[c] = scale * gu[c * K + k];

@@ -226,4 +226,18 @@ inline CarapOptions carap_options_for_arap(const ArapOptions& o) {
   return c;
 }
 
+// The options of every term of the fused step that is on (regularizers(), CPU and CUDA); the
+// first bad one's message.
+inline Status validate_options(const RegularizerOptions& o) {
+  if (o.terms.confidence)
+    if (Status s = validate_options(o.confidence); !s) return s;
+  if (o.terms.carap)
+    if (Status s = validate_options(o.carap); !s) return s;
+  if (o.terms.arap)
+    if (Status s = validate_options(o.arap); !s) return s;
+  if (o.terms.lrm)
+    if (Status s = validate_options(o.lrm); !s) return s;
+  return Status::ok();
+}
+
 }  // namespace smg

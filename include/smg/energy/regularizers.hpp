@@ -99,14 +99,7 @@ Status validate_regularizers(detail::NonDeducedT<PositionsView<const S>> positio
   if (visibility.data() != nullptr)
     if (Status s = validate_visibility<std::uint8_t>(visibility, T, N, "visibility"); !s) return s;
   if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
-  if (on.confidence)
-    if (Status s = validate_options(options.confidence); !s) return s;
-  if (on.carap)
-    if (Status s = validate_options(options.carap); !s) return s;
-  if (on.arap)
-    if (Status s = validate_options(options.arap); !s) return s;
-  if (on.lrm)
-    if (Status s = validate_options(options.lrm); !s) return s;
+  if (Status s = validate_options(options); !s) return s;
   if (confidence.data() != nullptr && !on.confidence)
     return Status::error("confidence: an output was given but options.terms.confidence is off");
   if (Status s = validate_optional_output(confidence, T, N, "confidence"); !s) return s;

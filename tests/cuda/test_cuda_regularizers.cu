@@ -1,0 +1,457 @@
+// The fused regulariser step on the GPU (smg/cuda/regularizers.cuh) against the CPU
+// smg::regularizers().
+//
+// Suite "cuda-host" (runs without a GPU): the kernels' per-element steps (fused_*_at,
+// lrm_term_at, lrm_gather_at) run in host loops in the launcher's phase order, with chunks of
+// 1, 2, 3 frames and the whole sequence, for every subset of the terms, float and double, int32
+// and int64 indices, tangent and raw rotation gradients, mean normalisation and hard cases; the
+// plan's memory bound; the host-side argument checks. Double agrees to 1e-11 relative to the
+// largest value (sums associated differently: the rigid gradient of a node is summed over its
+// out-edges then in-edges, the CPU's per block and frame), float to 1e-5; the confidences are
+// bit-identical (same element functions in the same order).
+// Default suite (needs a GPU): the launcher itself against the CPU, and repeat runs bitwise.
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "cuda/cuda_test_support.cuh"
+#include "energy/fused_options.hpp"
+#include "energy/scene.hpp"
+#include "smg/cuda/regularizers.cuh"
+#include "smg/energy/regularizers.hpp"
+
+namespace fused_cuda_test {
+
+using smg::Index;
+
+// A scene in scalar S with indices I (the shared test scene is double / int32).
+template <class S, class I>
+struct Case {
+  Index T, N, K;
+  std::vector<S> x, q, w;
+  std::vector<std::uint8_t> v;
+  std::vector<I> idx;
+  explicit Case(const smg::test::Scene<double>& s)
+      : T(s.T), N(s.N), K(s.K), x(s.x.begin(), s.x.end()), q(s.q.begin(), s.q.end()),
+        w(s.w.begin(), s.w.end()), v(s.v), idx(s.idx.begin(), s.idx.end()) {}
+  smg::PositionsView<const S> positions() const { return {x.data(), T, N}; }
+  smg::QuaternionsView<const S> rotations() const { return {q.data(), T, N}; }
+  smg::VisibilityView<const std::uint8_t> visibility() const { return {v.data(), T, N}; }
+  smg::NeighborsView<S, I> graph() const { return {idx.data(), w.data(), N, K}; }
+};
+
+template <class S>
+struct Out {
+  smg::RegularizerResult<S> e;
+  std::vector<S> conf, gx, gr;
+};
+
+struct Flags {
+  bool raw = false, grad_x = true, grad_r = true, vis = true, conf_out = true;
+};
+
+template <class S>
+smg::RotationGradientView<S> rotation_view(std::vector<S>& g, Index T, Index N, const Flags& f) {
+  if (!f.grad_r) return {};
+  return f.raw ? smg::RotationGradientView<S>(smg::QuaternionsView<S>(g.data(), T, N))
+               : smg::RotationGradientView<S>(smg::TangentsView<S>(g.data(), T, N));
+}
+
+template <class S>
+Out<S> outputs(Index T, Index N, const Flags& f) {
+  Out<S> r;
+  const std::size_t TN = static_cast<std::size_t>(T * N);
+  r.conf.assign(TN, S(-1));
+  r.gx.assign(TN * 3, S(0.25));  // gradients are added to what is there
+  r.gr.assign(TN * (f.raw ? 4 : 3), S(-0.5));
+  return r;
+}
+
+// The CPU fused step (one thread).
+template <class S, class I>
+Out<S> cpu(const Case<S, I>& s, const smg::RegularizerOptions& o, const Flags& f) {
+  Out<S> r = outputs<S>(s.T, s.N, f);
+  const bool c_out = f.conf_out && o.terms.confidence;
+  smg::ParallelOptions par;
+  par.threads = 1;
+  r.e = smg::regularizers<S, I>(
+      s.positions(), s.rotations(), f.vis ? s.visibility() : smg::VisibilityView<const std::uint8_t>(),
+      s.graph(), o, c_out ? smg::FrameScalarsView<S>(r.conf.data(), s.T, s.N) : smg::FrameScalarsView<S>(),
+      f.grad_x ? smg::PositionsView<S>(r.gx.data(), s.T, s.N) : smg::PositionsView<S>(),
+      rotation_view(r.gr, s.T, s.N, f), nullptr, par);
+  return r;
+}
+
+// The in-edges of every node, as build_reverse_graph orders them (increasing slot).
+template <class I>
+void host_reverse(const std::vector<I>& idx, Index N, std::vector<std::int32_t>& off,
+                  std::vector<std::int64_t>& ent) {
+  off.assign(static_cast<std::size_t>(N + 1), 0);
+  for (const I j : idx)
+    if (j >= 0) ++off[static_cast<std::size_t>(j) + 1];
+  for (Index j = 0; j < N; ++j) off[static_cast<std::size_t>(j + 1)] += off[static_cast<std::size_t>(j)];
+  ent.assign(static_cast<std::size_t>(off.back()), 0);
+  std::vector<std::int32_t> fill(off.begin(), off.end() - 1);
+  for (std::size_t e = 0; e < idx.size(); ++e)
+    if (idx[e] >= 0) ent[static_cast<std::size_t>(fill[static_cast<std::size_t>(idx[e])]++)] = std::int64_t(e);
+}
+
+// The launcher's three phases in host loops over the kernels' per-element steps; chunk lengths
+// given (0: the plan's).
+template <class S, class I>
+Out<S> host_scheme(const Case<S, I>& s, const smg::RegularizerOptions& o, const Flags& f,
+                   Index conf_chunk, Index lrm_chunk) {
+  namespace cd = smg::cuda::detail;
+  using Acc = smg::Accumulator<S>;
+  Out<S> r = outputs<S>(s.T, s.N, f);
+  const Index T = s.T, N = s.N, K = s.K;
+  const bool c_out = f.conf_out && o.terms.confidence;
+  cd::FusedPlan p = cd::fused_plan<S, I>(T, N, K, o, f.grad_x, f.grad_r, true, f.vis, c_out);
+  if (conf_chunk > 0) p.conf_chunk = conf_chunk;
+  if (lrm_chunk > 0) p.lrm_chunk = lrm_chunk;
+  const auto graph = s.graph();
+  const auto x = s.positions();
+  std::vector<std::int32_t> off;
+  std::vector<std::int64_t> ent;
+  host_reverse(s.idx, N, off, ent);
+  const std::int32_t edges = off.back();
+  std::vector<S> conf_scratch(static_cast<std::size_t>(T * N), S(-1));
+  S* conf = c_out ? r.conf.data() : conf_scratch.data();
+  if (p.confidence) {
+    std::vector<S> inv_w(static_cast<std::size_t>(N));
+    for (Index i = 0; i < N; ++i) inv_w[static_cast<std::size_t>(i)] = smg::inverse_row_weight(graph, i);
+    const smg::ConfidenceConstants<S> cp(o.confidence);
+    for (Index c0 = 0; c0 < T; c0 += p.conf_chunk) {
+      const Index nf = std::min(p.conf_chunk, T - c0);
+      std::vector<S> u(static_cast<std::size_t>(3 * N * nf)), e(static_cast<std::size_t>(N * nf));
+      for (Index l = 0; l < nf; ++l)
+        for (Index i = 0; i < N; ++i)
+          cd::fused_confidence_inputs_at(l, i, c0, x, graph, inv_w.data(), u.data(), e.data());
+      for (Index l = 0; l < nf; ++l)
+        for (Index i = 0; i < N; ++i)
+          cd::fused_confidence_at(l, i, c0, graph, inv_w.data(), u.data(), e.data(), cp,
+                                  f.vis ? s.v.data() : nullptr, conf);
+    }
+  }
+  const S* conf_in = (p.confidence && (p.rigid || p.lrm)) ? conf : nullptr;
+  S* gx = p.want_x ? r.gx.data() : nullptr;
+  if (p.rigid) {
+    const cd::FusedRigidConstants<S> c = cd::fused_rigid_constants<S>(o, T, &edges);
+    S* gt = p.want_r && !f.raw ? r.gr.data() : nullptr;
+    S* graw = p.want_r && f.raw ? r.gr.data() : nullptr;
+    for (Index t = 0; t < T; ++t)
+      for (Index n = 0; n < N; ++n) {
+        S e[2] = {S(0), S(0)};
+        cd::fused_rigid_node_at(t, n, c, x, s.rotations(), conf_in, graph, off.data(), ent.data(),
+                                gx, gt, graw, e);
+        r.e.carap += Acc(e[0]);
+        r.e.arap += Acc(e[1]);
+      }
+  }
+  if (p.lrm) {
+    const cd::LrmKernelArgs<S> args = cd::fused_lrm_args<S>(o, T, p.want_x, &edges);
+    const smg::FrameScalarsView<const S> cv =
+        conf_in ? smg::FrameScalarsView<const S>(conf_in, T, N) : smg::FrameScalarsView<const S>();
+    Acc sum(0);
+    for (Index c0 = 0; c0 < T; c0 += p.lrm_chunk) {
+      const Index nf = std::min(p.lrm_chunk, T - c0), c1 = c0 + nf, n = nf * N;
+      std::vector<Acc> terms(static_cast<std::size_t>(n));
+      std::vector<S> ge(static_cast<std::size_t>(6 * n * K), S(0)), gn(static_cast<std::size_t>(6 * n));
+      S* gxe = p.want_x ? ge.data() : nullptr;
+      S* gue = p.want_x ? ge.data() + 3 * n * K : nullptr;
+      for (Index e = 0; e < n; ++e)
+        cd::lrm_term_at<S, I, 32>(c0 * N + e, x, cv, graph, args, terms.data(), gxe, gue, {},
+                                  c0 * N);
+      for (const Acc& v : terms) sum += v;
+      if (!p.want_x) continue;
+      for (Index e = 0; e < n; ++e)
+        cd::lrm_gather_at(e, N, K, off.data(), ent.data(), gxe, gue, gn.data(), gn.data() + 3 * n);
+      const Index s0 = c0 > 0 ? c0 - 1 : 0, s1 = std::min(T, c1 + 1);
+      for (Index t = s0; t < s1; ++t)
+        for (Index j = 0; j < N; ++j)
+          cd::fused_lrm_velocity_at(t, j, c0, c1, T, N, gn.data(), gn.data() + 3 * n,
+                                    smg::PositionsView<S>(r.gx.data(), T, N));
+    }
+    double scale = o.lrm.weight;
+    if (o.lrm.normalization == smg::Normalization::mean)
+      scale = T * edges > 0 ? scale / double(T * edges) : 0.0;
+    r.e.lrm = sum * Acc(scale);
+  }
+  return r;
+}
+
+template <class S>
+double rel(const std::vector<S>& a, const std::vector<S>& b) {
+  double d = 0, m = 1e-300;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    d = std::max(d, std::abs(double(a[k]) - double(b[k])));
+    m = std::max(m, std::abs(double(b[k])));
+  }
+  return d / m;
+}
+
+double rel(double a, double b) { return std::abs(a - b) / std::max(std::abs(b), 1e-300); }
+
+template <class S>
+constexpr double tol() {
+  return sizeof(S) == 8 ? 1e-11 : 1e-5;
+}
+
+template <class S>
+void check_same(const Out<S>& a, const Out<S>& b, const smg::RegularizerOptions& o,
+                const Flags& f, const std::string& what) {
+  INFO(what);
+  CHECK(rel(double(a.e.carap), double(b.e.carap)) <= tol<S>());
+  CHECK(rel(double(a.e.arap), double(b.e.arap)) <= tol<S>());
+  CHECK(rel(double(a.e.lrm), double(b.e.lrm)) <= tol<S>());
+  if (f.conf_out && o.terms.confidence)
+    CHECK(std::memcmp(a.conf.data(), b.conf.data(), a.conf.size() * sizeof(S)) == 0);
+  CHECK(rel(a.gx, b.gx) <= tol<S>());
+  CHECK(rel(a.gr, b.gr) <= tol<S>());
+}
+
+smg::RegularizerOptions options(unsigned mask) { return smg::test::fused_options(mask); }
+
+smg::test::Scene<double> scene(Index T, Index N, Index K, std::uint64_t seed) {
+  smg::test::Rng rng(seed);
+  return smg::test::random_scene(T, N, K, rng);
+}
+
+template <class S, class I>
+void subsets_case(std::uint64_t seed) {
+  CAPTURE(seed);
+  CAPTURE(sizeof(S));
+  CAPTURE(sizeof(I));
+  const Case<S, I> s(scene(9, 23, 6, seed));
+  for (unsigned mask = 1; mask < 16; ++mask) {
+    CAPTURE(mask);
+    const smg::RegularizerOptions o = options(mask);
+    for (const bool raw : {false, true}) {
+      Flags f;
+      f.raw = raw;
+      const Out<S> ref = cpu(s, o, f);
+      for (const Index chunk : {Index(1), Index(2), Index(3), Index(0)}) {
+        CAPTURE(chunk);
+        check_same(host_scheme(s, o, f, chunk, chunk), ref, o, f, "subset");
+      }
+    }
+  }
+}
+
+}  // namespace fused_cuda_test
+
+TEST_SUITE("cuda-host") {
+  TEST_CASE("cuda regularizers: host scheme equals the CPU fused step for every subset of terms") {
+    using namespace fused_cuda_test;
+    subsets_case<double, std::int32_t>(11);
+    subsets_case<double, std::int64_t>(12);
+    subsets_case<float, std::int32_t>(13);
+  }
+
+  TEST_CASE("cuda regularizers: host scheme, outputs left out, mean normalisation, no visibility") {
+    using namespace fused_cuda_test;
+    const Case<double, std::int32_t> s(scene(12, 31, 8, 21));
+    smg::RegularizerOptions o = options(15);
+    o.carap.normalization = smg::Normalization::mean;
+    o.arap.normalization = smg::Normalization::mean;
+    o.lrm.normalization = smg::Normalization::mean;
+    o.lrm.detach_omega = true;
+    for (int variant = 0; variant < 5; ++variant) {
+      CAPTURE(variant);
+      Flags f;
+      f.grad_x = variant != 1;
+      f.grad_r = variant != 2;
+      f.vis = variant != 3;
+      f.conf_out = variant != 4;
+      check_same(host_scheme(s, o, f, 4, 5), cpu(s, o, f), o, f, "variant");
+    }
+  }
+
+  TEST_CASE("cuda regularizers: host scheme on hard cases") {
+    using namespace fused_cuda_test;
+    const smg::RegularizerOptions o = options(15);
+    Flags f;
+    SUBCASE("one frame: no pairs, LRM without velocity") {
+      const Case<double, std::int32_t> s(scene(1, 12, 4, 31));
+      const auto ref = cpu(s, o, f);
+      CHECK(double(ref.e.carap) == 0.0);
+      check_same(host_scheme(s, o, f, 1, 1), ref, o, f, "T=1");
+    }
+    SUBCASE("T below the largest gap; K = 1") {
+      const Case<double, std::int32_t> s(scene(3, 10, 1, 32));
+      check_same(host_scheme(s, o, f, 1, 2), cpu(s, o, f), o, f, "T=3, K=1");
+    }
+    SUBCASE("an isolated node, zero weights, coincident nodes (zero-length edges)") {
+      smg::test::Scene<double> sc = scene(7, 14, 5, 33);
+      for (Index k = 0; k < sc.K; ++k) {
+        sc.idx[static_cast<std::size_t>(4 * sc.K + k)] = -1;  // node 4: no out-edges
+        sc.w[static_cast<std::size_t>(4 * sc.K + k)] = 0;
+      }
+      sc.w[static_cast<std::size_t>(2 * sc.K)] = 0;  // a zero-weight edge
+      const Index j = sc.idx[static_cast<std::size_t>(6 * sc.K)];
+      for (Index t = 0; t < sc.T; ++t) sc.set_pos(t, j, sc.pos(t, 6));  // edge 6 -> j has length 0
+      const Case<double, std::int32_t> s(sc);
+      const auto ref = cpu(s, o, f);
+      check_same(host_scheme(s, o, f, 2, 3), ref, o, f, "hard");
+      for (const double v : ref.gx) CHECK(std::isfinite(v));
+    }
+    SUBCASE("all confidences zero (nothing visible)") {
+      smg::test::Scene<double> sc = scene(6, 11, 4, 34);
+      std::fill(sc.v.begin(), sc.v.end(), std::uint8_t(0));
+      const Case<double, std::int32_t> s(sc);
+      check_same(host_scheme(s, o, f, 2, 2), cpu(s, o, f), o, f, "invisible");
+    }
+  }
+
+  TEST_CASE("cuda regularizers: scratch within the inputs' bytes for long sequences") {
+    using namespace fused_cuda_test;
+    const smg::RegularizerOptions o = options(15);
+    for (const Index N : {Index(5000), Index(50000)}) {
+      CAPTURE(N);
+      const Index T = 400, K = 16;
+      const std::size_t in = smg::detail::regularizer_input_bytes<float, std::int32_t>(T, N, K, true, true);
+      const std::size_t extra = smg::cuda::regularizers_extra_bytes<float, std::int32_t>(
+          T, N, K, o, true, true, true, true, false);
+      CHECK(extra <= in);
+      CHECK(extra > 0);
+      const auto p = smg::cuda::detail::fused_plan<float, std::int32_t>(T, N, K, o, true, true, true,
+                                                                        true, false);
+      CHECK(p.lrm_chunk >= 2);  // more than one frame per launch at this size
+      CHECK(p.conf_chunk >= p.lrm_chunk);
+    }
+    // Energies only: no per-edge scratch at all, so far fewer chunks.
+    const auto e = smg::cuda::detail::fused_plan<float, std::int32_t>(400, 5000, 16, o, false,
+                                                                      false, true, true, false);
+    const auto g = smg::cuda::detail::fused_plan<float, std::int32_t>(400, 5000, 16, o, true,
+                                                                      true, true, true, false);
+    CHECK(e.lrm_chunk > 10 * g.lrm_chunk);
+  }
+
+  TEST_CASE("cuda regularizers: host-side argument checks name the argument") {
+    using namespace fused_cuda_test;
+    const Case<float, std::int32_t> s(scene(5, 9, 4, 41));
+    smg::cuda::ReverseGraph rev;  // host-side checks read only its shape
+    rev.nodes = s.N;
+    rev.k = s.K;
+    const smg::RegularizerOptions o = options(15);
+    auto msg = [](const smg::Status& st) { return std::string(st.message()); };
+    CHECK(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+        s.positions(), s.rotations(), s.visibility(), s.graph(), o, rev));
+    CHECK(msg(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+                  s.positions(), smg::QuaternionsView<const float>(), s.visibility(), s.graph(), o,
+                  rev))
+              .rfind("rotations:", 0) == 0);
+    smg::cuda::ReverseGraph other;
+    other.nodes = s.N + 1;
+    other.k = s.K;
+    CHECK(msg(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+                  s.positions(), s.rotations(), s.visibility(), s.graph(), o, other))
+              .rfind("reverse:", 0) == 0);
+    std::vector<float> c(static_cast<std::size_t>(s.T * s.N));
+    smg::RegularizerOptions no_conf = o;
+    no_conf.terms.confidence = false;
+    CHECK(msg(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+                  s.positions(), s.rotations(), s.visibility(), s.graph(), no_conf, rev,
+                  smg::FrameScalarsView<float>(c.data(), s.T, s.N)))
+              .rfind("confidence:", 0) == 0);
+    std::vector<float> g(static_cast<std::size_t>((s.T + 1) * s.N * 3));
+    CHECK(msg(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+                  s.positions(), s.rotations(), s.visibility(), s.graph(), o, rev, {},
+                  smg::PositionsView<float>(g.data(), s.T + 1, s.N)))
+              .rfind("grad_positions:", 0) == 0);
+    // K above the CUDA LRM kernel's maximum: refused with LRM on, taken without it.
+    const Index K = smg::cuda::kLrmMaxK + 1;
+    std::vector<std::int32_t> idx(static_cast<std::size_t>(s.N * K), -1);
+    std::vector<float> w(static_cast<std::size_t>(s.N * K), 0.f);
+    const smg::NeighborsView<float, std::int32_t> wide(idx.data(), w.data(), s.N, K);
+    smg::cuda::ReverseGraph rw;
+    rw.nodes = s.N;
+    rw.k = K;
+    CHECK(msg(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+                  s.positions(), s.rotations(), s.visibility(), wide, o, rw))
+              .rfind("graph:", 0) == 0);
+    smg::RegularizerOptions no_lrm = o;
+    no_lrm.terms.lrm = false;
+    CHECK(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+        s.positions(), s.rotations(), s.visibility(), wide, no_lrm, rw));
+    smg::RegularizerOptions bad = o;
+    bad.carap.alpha = 2.0;
+    CHECK(msg(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+                  s.positions(), s.rotations(), s.visibility(), s.graph(), bad, rev))
+              .find("alpha") != std::string::npos);
+  }
+}
+
+// ---- On a GPU: the launcher against the CPU, and repeat runs bitwise. ----
+namespace fused_cuda_test {
+
+template <class S, class I>
+Out<S> gpu(const Case<S, I>& s, const smg::RegularizerOptions& o, const Flags& f) {
+  using smg::test::cuda::DeviceArray;
+  Out<S> r = outputs<S>(s.T, s.N, f);
+  const bool c_out = f.conf_out && o.terms.confidence;
+  smg::test::cuda::Stream stream;
+  DeviceArray<S> x(s.x), q(s.q), w(s.w), conf(r.conf), gx(r.gx), gr(r.gr);
+  DeviceArray<I> idx(s.idx);
+  DeviceArray<std::uint8_t> vis(s.v);
+  DeviceArray<smg::RegularizerResult<S>> res;
+  res.resize(1);
+  smg::cuda::ReverseGraph rev;
+  REQUIRE(smg::cuda::build_reverse_graph(idx.get(), s.N, s.K, stream.s, rev));
+  const smg::NeighborsView<S, I> g(idx.get(), w.get(), s.N, s.K);
+  const smg::RotationGradientView<S> grv = rotation_view(r.gr, s.T, s.N, f).empty()
+      ? smg::RotationGradientView<S>()
+      : f.raw ? smg::RotationGradientView<S>(smg::QuaternionsView<S>(gr.get(), s.T, s.N))
+              : smg::RotationGradientView<S>(smg::TangentsView<S>(gr.get(), s.T, s.N));
+  const smg::Status st = smg::cuda::regularizers<S, I>(
+      smg::PositionsView<const S>(x.get(), s.T, s.N), smg::QuaternionsView<const S>(q.get(), s.T, s.N),
+      f.vis ? smg::VisibilityView<const std::uint8_t>(vis.get(), s.T, s.N)
+            : smg::VisibilityView<const std::uint8_t>(),
+      g, o, rev, res.get(),
+      c_out ? smg::FrameScalarsView<S>(conf.get(), s.T, s.N) : smg::FrameScalarsView<S>(),
+      f.grad_x ? smg::PositionsView<S>(gx.get(), s.T, s.N) : smg::PositionsView<S>(),
+      grv,
+      stream.s);
+  REQUIRE_MESSAGE(st, st.message());
+  stream.sync();
+  r.e = res.download()[0];
+  r.conf = conf.download();
+  r.gx = gx.download();
+  r.gr = gr.download();
+  return r;
+}
+
+template <class S, class I>
+void gpu_case(std::uint64_t seed, Index T, Index N, Index K) {
+  CAPTURE(seed);
+  CAPTURE(sizeof(S));
+  const Case<S, I> s(scene(T, N, K, seed));
+  for (const unsigned mask : {15u, 11u, 5u, 8u, 3u}) {
+    CAPTURE(mask);
+    const smg::RegularizerOptions o = options(mask);
+    for (const bool raw : {false, true}) {
+      Flags f;
+      f.raw = raw;
+      const Out<S> a = gpu(s, o, f);
+      check_same(a, cpu(s, o, f), o, f, "gpu vs cpu");
+      const Out<S> b = gpu(s, o, f);
+      CHECK(std::memcmp(&a.e, &b.e, sizeof(a.e)) == 0);
+      CHECK(std::memcmp(a.gx.data(), b.gx.data(), a.gx.size() * sizeof(S)) == 0);
+      CHECK(std::memcmp(a.gr.data(), b.gr.data(), a.gr.size() * sizeof(S)) == 0);
+    }
+  }
+}
+
+}  // namespace fused_cuda_test
+
+TEST_CASE("cuda regularizers: GPU equals the CPU fused step; repeat runs bitwise") {
+  using namespace fused_cuda_test;
+  gpu_case<double, std::int32_t>(51, 14, 200, 8);
+  gpu_case<double, std::int64_t>(52, 9, 150, 16);
+  gpu_case<float, std::int32_t>(53, 20, 300, 16);
+}
