@@ -351,23 +351,6 @@ void compare_bad_queries(DqbCase c) {
   }
 }
 
-// The in-edge lists of a table on the host (what build_driver_incidence ran there before it
-// moved to the device): target j's slots in increasing order, entries outside [0, nodes) skipped.
-template <class I>
-void host_in_edges(const std::vector<I>& table, Index nodes, std::vector<std::int32_t>& off,
-                   std::vector<std::int64_t>& ent) {
-  auto valid = [&](I j) { return j >= 0 && Index(j) < nodes; };
-  off.assign(static_cast<std::size_t>(nodes + 1), 0);
-  for (const I j : table)
-    if (valid(j)) ++off[static_cast<std::size_t>(j) + 1];
-  for (Index j = 0; j < nodes; ++j) off[static_cast<std::size_t>(j + 1)] += off[static_cast<std::size_t>(j)];
-  ent.assign(static_cast<std::size_t>(off.back()), 0);
-  std::vector<std::int32_t> fill(off.begin(), off.end() - 1);
-  for (std::size_t e = 0; e < table.size(); ++e)
-    if (valid(table[e]))
-      ent[static_cast<std::size_t>(fill[static_cast<std::size_t>(table[e])]++)] = std::int64_t(e);
-}
-
 // A random table [rows][width] over `nodes` targets (−1 padding, entries out of range, a heavy
 // target 0) through build_driver_incidence (or build_reverse_graph when rows == nodes), twice:
 // offsets and entries equal the host construction and the two builds.

@@ -22,6 +22,8 @@
 #include "smg/energy/lrm.hpp"
 #include "smg/skin/blend.hpp"
 
+#include "cuda/cuda_test_support.cuh"
+
 namespace {
 
 using smg::Index;
@@ -33,23 +35,6 @@ double uniform(std::mt19937_64& rng, double a = -1, double b = 1) {
 template <class T>
 bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
-}
-
-// The host construction of the in-edge lists (what build_driver_incidence did on the host before
-// it moved to the device): for target j in [0, nodes), the slots e with table[e] == j in
-// increasing e; entries outside [0, nodes) skipped.
-template <class I>
-void in_edges_reference(const std::vector<I>& table, Index nodes, std::vector<std::int32_t>& off,
-                        std::vector<std::int64_t>& ent) {
-  auto valid = [&](I j) { return j >= 0 && Index(j) < nodes; };
-  off.assign(static_cast<std::size_t>(nodes + 1), 0);
-  for (const I j : table)
-    if (valid(j)) ++off[static_cast<std::size_t>(j) + 1];
-  for (Index j = 0; j < nodes; ++j) off[static_cast<std::size_t>(j + 1)] += off[static_cast<std::size_t>(j)];
-  ent.assign(static_cast<std::size_t>(off.back()), 0);
-  std::vector<std::int32_t> fill(off.begin(), off.end() - 1);
-  for (std::size_t e = 0; e < table.size(); ++e)
-    if (valid(table[e])) ent[static_cast<std::size_t>(fill[static_cast<std::size_t>(table[e])]++)] = std::int64_t(e);
 }
 
 // The device builder (detail::build_in_edges) run by its per-element steps in host loops: the
@@ -126,7 +111,7 @@ void in_edges_case(Index rows, Index width, Index nodes, bool out_of_range, bool
   const std::vector<I> table = random_table<I>(rows, width, nodes, out_of_range, heavy, rng);
   std::vector<std::int32_t> off_ref, off;
   std::vector<std::int64_t> ent_ref, ent;
-  in_edges_reference(table, nodes, off_ref, ent_ref);
+  smg::test::cuda::host_in_edges(table, nodes, off_ref, ent_ref);
   in_edges(table, nodes, off, ent);
   CHECK(off == off_ref);
   CHECK(ent == ent_ref);
