@@ -6,9 +6,11 @@
 // Everything else is shared with the CPU operators (smg_torch_common.hpp): each operator's .cpp
 // checks the arguments (all on positions' device), builds the options, allocates the outputs and
 // calls the function registered here in cuda_ops() when positions is a CUDA tensor. Array contents
-// (NaN, index range, confidences in [0, 1]) are checked here only with validate=True, by the CPU
-// validators on a host copy (one synchronising copy per call); dqb's index ranges and sigma are
-// always checked, by the shared code.
+// (NaN, index range, confidences in [0, 1]) are checked only with validate=True: the energies'
+// here, by the CPU validators on a host copy (one synchronising copy per call); dqb's index
+// ranges, sigma and incoming gradients by the shared code (smg_torch_skin.cpp). Without
+// validate=True nothing is read back to the host: dqb's launches, its driver incidence included,
+// are stream-ordered and never synchronise.
 // smg's scratch memory comes from PyTorch's caching allocator (smg::cuda::set_allocator).
 #include <c10/cuda/CUDACachingAllocator.h>
 #include <c10/cuda/CUDAGuard.h>
@@ -148,7 +150,9 @@ void dqb_forward_cuda(const SkinInputs& in, const smg::SkinOptions& opt, const a
   });
 }
 
-// dqb backward: smg::cuda::skin_blend_backward into the gradients that are defined.
+// dqb backward: smg::cuda::skin_blend_backward into the gradients that are defined; the driver
+// incidence (for the node gradients) is built on the device. Nothing is read back or
+// synchronised: t_query is read by the kernels (a frame out of range is skipped there).
 void dqb_backward_cuda(const SkinInputs& in, const smg::SkinOptions& opt, const at::Tensor& drivers,
                        const at::Tensor& weights, const at::Tensor& grad_x, const at::Tensor& grad_q,
                        const at::Tensor& gx, const at::Tensor& gq, const at::Tensor& gp,

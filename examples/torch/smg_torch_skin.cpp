@@ -5,9 +5,15 @@
 //
 // CPU or CUDA tensors (node_positions' device decides): the checks, outputs and memory estimate
 // here are shared; the CUDA launches are in smg_torch_cuda.cu.
-// Copies: anchor, t_ref and t_query are narrowed to int32 (after a range check in their own
-// dtype), the driver table [P, K+1] int32 and the weights [P, K+1] are new tensors (saved for
-// backward).
+// Contents (index ranges, sigma > 0, finite incoming gradients) are checked on CPU tensors
+// always, and on CUDA tensors only with validate=True: each check reads the device back, which
+// synchronises the stream. Without it nothing of a CUDA call is read on the host (shapes, dtypes
+// and devices are metadata); the kernels then take the contents as a precondition, except that
+// a t_query entry out of range gives NaN outputs and adds nothing to the gradients instead of an
+// out-of-bounds read (smg/cuda/dqb.cuh).
+// Copies: anchor, t_ref and t_query are narrowed to int32 (after the range check in their own
+// dtype when there is one: unchecked int64 values beyond int32 wrap), the driver table [P, K+1]
+// int32 and the weights [P, K+1] are new tensors (saved for backward).
 #include <optional>
 #include <string>
 
@@ -77,7 +83,8 @@ void check_skin_inputs(const SkinInputs& in) {
   }
 }
 
-// sigma [N]: finite and > 0, by the library's validator on a host copy (none on CPU).
+// sigma [N]: finite and > 0, by the library's validator on a host copy (a copy only on CUDA,
+// where it synchronises: only with validate=True).
 void check_sigma(const SkinInputs& in) {
   const at::Tensor host = in.sigma.cpu();
   dispatch(in.ref.st, false, [&](auto s, auto) {
@@ -92,7 +99,7 @@ py::tuple dqb_forward(const at::Tensor& node_positions, const at::Tensor& node_q
                       const at::Tensor& indices, const at::Tensor& gweights,
                       const at::Tensor& points, const OptTensor& point_quats,
                       const at::Tensor& anchor, const at::Tensor& t_ref, const at::Tensor& t_query,
-                      const at::Tensor& sigma, bool lbs) {
+                      const at::Tensor& sigma, bool lbs, bool validate) {
   SkinInputs in = prepare(node_positions, node_quats, points, point_quats, t_ref, t_query);
   in.g = graph_input(indices, gweights, in.ref);
   if (in.g.n != in.N)
@@ -111,11 +118,13 @@ py::tuple dqb_forward(const at::Tensor& node_positions, const at::Tensor& node_q
   const std::string outputs = "t_query: Q = " + std::to_string(in.Q) + " query frames x P = " +
                               std::to_string(in.P) + " points of blended outputs [Q, P, 7]";
   check_memory(double(in.Q) * double(in.P) * 7 * s + double(in.P) * double(D) * (4 + s), outputs);
-  check_index_ranges({{in.g.indices, "graph", -1, in.N, "N", true},
-                      {in.anchor, "anchor", 0, in.N, "N"},
-                      {in.t_ref, "t_ref", 0, in.T, "T"},
-                      {in.t_query, "t_query", 0, in.T, "T"}});
-  check_sigma(in);
+  if (!in.ref.cuda() || validate) {  // on CUDA tensors these read the device back
+    check_index_ranges({{in.g.indices, "graph", -1, in.N, "N", true},
+                        {in.anchor, "anchor", 0, in.N, "N"},
+                        {in.t_ref, "t_ref", 0, in.T, "T"},
+                        {in.t_query, "t_query", 0, in.T, "T"}});
+    check_sigma(in);
+  }
   int32_indices(in);
   at::Tensor drivers, weights, out_x, out_q;
   allocating(outputs, [&] {
@@ -175,7 +184,7 @@ py::tuple dqb_backward(const at::Tensor& node_positions, const at::Tensor& node_
                        const at::Tensor& t_ref, const at::Tensor& t_query, const at::Tensor& drivers,
                        const at::Tensor& weights, const OptTensor& grad_positions,
                        const OptTensor& grad_quats, bool lbs, bool need_x, bool need_q,
-                       bool need_p, bool need_pq) {
+                       bool need_p, bool need_pq, bool validate) {
   SkinInputs in = prepare(node_positions, node_quats, points, point_quats, t_ref, t_query);
   // drivers and weights are the forward's outputs (their contents are trusted).
   const at::Tensor drv = on_device(drivers, "drivers", in.ref);
@@ -196,12 +205,15 @@ py::tuple dqb_backward(const at::Tensor& node_positions, const at::Tensor& node_
     if (goq.size(0) != in.Q || goq.size(1) != in.P)
       value_error("grad_quats: expected shape [Q, P, 4], got " + shape_of(goq));
   }
-  // The incoming gradients' contents on CPU tensors (on CUDA tensors it would synchronise).
-  if (!in.ref.cuda() && gop.defined() && !at::isfinite(gop).all().item<bool>())
-    value_error("grad_positions: has a value that is not finite");
-  if (!in.ref.cuda() && goq.defined() && !at::isfinite(goq).all().item<bool>())
-    value_error("grad_quats: has a value that is not finite");
-  check_index_ranges({{in.t_ref, "t_ref", 0, in.T, "T"}, {in.t_query, "t_query", 0, in.T, "T"}});
+  // The contents: on CPU tensors always, on CUDA tensors only with validate (each check reads
+  // the device back, which synchronises the stream).
+  if (!in.ref.cuda() || validate) {
+    if (gop.defined() && !at::isfinite(gop).all().item<bool>())
+      value_error("grad_positions: has a value that is not finite");
+    if (goq.defined() && !at::isfinite(goq).all().item<bool>())
+      value_error("grad_quats: has a value that is not finite");
+    check_index_ranges({{in.t_ref, "t_ref", 0, in.T, "T"}, {in.t_query, "t_query", 0, in.T, "T"}});
+  }
   int32_indices(in);
   const auto o = in.ref.options();
   const at::Tensor gx = need_x ? at::zeros({in.T, in.N, 3}, o) : at::Tensor();
@@ -235,10 +247,12 @@ py::tuple dqb_backward(const at::Tensor& node_positions, const at::Tensor& node_
 void register_skin(py::module_& m) {
   using namespace pybind11::literals;
   m.def("dqb_forward", &dqb_forward, "node_positions"_a, "node_quats"_a, "indices"_a, "weights"_a,
-        "points"_a, "point_quats"_a, "anchor"_a, "t_ref"_a, "t_query"_a, "sigma"_a, "lbs"_a);
+        "points"_a, "point_quats"_a, "anchor"_a, "t_ref"_a, "t_query"_a, "sigma"_a, "lbs"_a,
+        "validate"_a = false);
   m.def("dqb_backward", &dqb_backward, "node_positions"_a, "node_quats"_a, "points"_a,
         "point_quats"_a, "t_ref"_a, "t_query"_a, "drivers"_a, "weights"_a, "grad_positions"_a,
-        "grad_quats"_a, "lbs"_a, "need_x"_a, "need_q"_a, "need_p"_a, "need_pq"_a);
+        "grad_quats"_a, "lbs"_a, "need_x"_a, "need_q"_a, "need_p"_a, "need_pq"_a,
+        "validate"_a = false);
 }
 
 }  // namespace smg_torch

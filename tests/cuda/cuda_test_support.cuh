@@ -1,7 +1,7 @@
 // tests/cuda/cuda_test_support.cuh — small helpers of the CUDA tests: owned device arrays
-// uploaded from / downloaded to std::vector, a stream, and comparisons that print where and by
+// uploaded from / downloaded to std::vector, a stream, comparisons that print where and by
 // how much two results differ (the GPU runs happen after merging, on another machine, so a
-// failure must say enough on its own).
+// failure must say enough on its own), and the host construction of in-edge lists.
 #pragma once
 
 #include <doctest/doctest.h>
@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -125,6 +126,25 @@ bool check_bitwise(const std::vector<T>& a, const std::vector<T>& b, const std::
     FAIL_CHECK(what << ": two runs differ (first at element " << at << " of " << a.size() << ")");
   }
   return same;
+}
+
+// The in-edge lists of an index table on the host, the reference for build_reverse_graph and
+// build_driver_incidence (what build_driver_incidence ran on the host before it moved to the
+// device): for target j in [0, nodes), the slots e with table[e] == j in increasing e, at
+// ent[off[j] .. off[j+1]); entries outside [0, nodes) (−1 padding) skipped.
+template <class I>
+void host_in_edges(const std::vector<I>& table, std::int64_t nodes, std::vector<std::int32_t>& off,
+                   std::vector<std::int64_t>& ent) {
+  auto valid = [&](I j) { return j >= 0 && std::int64_t(j) < nodes; };
+  off.assign(static_cast<std::size_t>(nodes + 1), 0);
+  for (const I j : table)
+    if (valid(j)) ++off[static_cast<std::size_t>(j) + 1];
+  for (std::size_t j = 0; j < static_cast<std::size_t>(nodes); ++j) off[j + 1] += off[j];
+  ent.assign(static_cast<std::size_t>(off.back()), 0);
+  std::vector<std::int32_t> fill(off.begin(), off.end() - 1);
+  for (std::size_t e = 0; e < table.size(); ++e)
+    if (valid(table[e]))
+      ent[static_cast<std::size_t>(fill[static_cast<std::size_t>(table[e])]++)] = std::int64_t(e);
 }
 
 // A double array converted to S (the scalar a case runs in).

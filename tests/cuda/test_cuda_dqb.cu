@@ -1,7 +1,9 @@
 // Tests of smg/cuda/dqb.cuh: smg::cuda::skin_blend and skin_blend_backward against the CPU
 // smg::skin_blend / smg::skin_blend_backward on random and hard cases (double within 1e-12 of
-// the largest magnitude of each output, float within 1e-5), two GPU runs bit-identical, and the
-// host-side validation.
+// the largest magnitude of each output, float within 1e-5), two GPU runs bit-identical, query
+// frames out of range (NaN outputs, skipped in the backward), the in-edge lists that
+// build_driver_incidence and build_reverse_graph build on the device against the host
+// construction, and the host-side validation.
 #include <algorithm>
 #include <doctest/doctest.h>
 
@@ -296,6 +298,105 @@ void compare(const DqbCase& c) {
   }
 }
 
+// The rows [Q][P][dim] of `a` for the queries in `keep`.
+template <class S>
+std::vector<S> query_rows(const std::vector<S>& a, Index Q, const std::vector<Index>& keep) {
+  const std::size_t row = Q > 0 ? a.size() / static_cast<std::size_t>(Q) : 0;
+  std::vector<S> r;
+  for (const Index q : keep)
+    r.insert(r.end(), a.begin() + std::ptrdiff_t(std::size_t(q) * row),
+             a.begin() + std::ptrdiff_t(std::size_t(q + 1) * row));
+  return r;
+}
+
+// `c` with query frames outside [0, T) inserted: on the GPU their forward outputs are NaN and
+// the backward skips them, so the rest equals the CPU run on c.
+template <class S>
+void compare_bad_queries(DqbCase c) {
+  const std::string tag = std::string(c.method == smg::SkinMethod::dqb ? "dqb" : "lbs") +
+                          (sizeof(S) == 8 ? " [double]" : " [float]");
+  CAPTURE(tag);
+  DqbCase bad = c;
+  bad.t_query.insert(bad.t_query.begin() + 1, -1);
+  bad.t_query.push_back(std::int32_t(c.T));
+  bad.t_query.push_back(std::int32_t(1) << 30);
+  const Index Qb = Index(bad.t_query.size());
+  std::vector<Index> good, skipped;
+  for (Index q = 0; q < Qb; ++q)
+    (bad.t_query[static_cast<std::size_t>(q)] >= 0 && bad.t_query[static_cast<std::size_t>(q)] < c.T
+         ? good
+         : skipped)
+        .push_back(q);
+  REQUIRE(Index(good.size()) == Index(c.t_query.size()));
+  const Inputs<S> in_bad = make_inputs<S>(bad);
+  Inputs<S> in = in_bad;  // the same output gradients for the good queries
+  in.go_pos = query_rows(in_bad.go_pos, Qb, good);
+  in.go_rot = query_rows(in_bad.go_rot, Qb, good);
+  in.go_quat = query_rows(in_bad.go_quat, Qb, good);
+  Arrays<S> cpu = run_cpu<S>(c, in);
+  Arrays<S> gpu = run_gpu<S>(bad, in_bad);
+  double gradient_scale = 1e-30;
+  for (int i = 4; i < kArrays; ++i)
+    for (const S v : *array(cpu, i)) gradient_scale = std::max(gradient_scale, std::abs(double(v)));
+  for (int i = 0; i < kArrays; ++i) {
+    const std::vector<S>& g = *array(gpu, i);
+    if (i < 4) {
+      check_close(query_rows(g, Qb, good), *array(cpu, i), tolerance<S>(), tag + " " + kNames[i]);
+      bool nan = true;
+      for (const S v : query_rows(g, Qb, skipped)) nan = nan && v != v;
+      CHECK_MESSAGE(nan, tag << " " << kNames[i] << ": a query frame out of range gives NaN");
+    } else {
+      check_close(g, *array(cpu, i), tolerance<S>(), tag + " " + kNames[i], gradient_scale);
+    }
+  }
+}
+
+// A random table [rows][width] over `nodes` targets (−1 padding, entries out of range, a heavy
+// target 0) through build_driver_incidence (or build_reverse_graph when rows == nodes), twice:
+// offsets and entries equal the host construction and the two builds.
+template <class I>
+void check_device_in_edges(Index rows, Index width, Index nodes, std::uint64_t seed) {
+  CAPTURE(rows);
+  CAPTURE(width);
+  CAPTURE(nodes);
+  CAPTURE(sizeof(I));
+  smg::test::Rng rng(seed);
+  std::vector<I> table(static_cast<std::size_t>(rows * width));
+  for (auto& v : table) {
+    const double u = rng.uniform(0, 1);
+    v = u < 0.15 ? I(-1)
+        : u < 0.2 ? I(nodes + rng.integer(0, 2))
+        : u < 0.25 ? I(-2 - rng.integer(0, 2))
+        : u < 0.5 ? I(0)
+                  : I(rng.integer(0, int(nodes) - 1));
+  }
+  std::vector<std::int32_t> off_ref;
+  std::vector<std::int64_t> ent_ref;
+  host_in_edges(table, nodes, off_ref, ent_ref);
+  Stream st;
+  DeviceArray<I> d(table);
+  for (int run = 0; run < 2; ++run) {
+    smg::cuda::ReverseGraph g;
+    const smg::Status s =
+        rows == nodes && run == 1
+            ? smg::cuda::build_reverse_graph(d.get(), nodes, width, st.s, g)
+            : smg::cuda::build_driver_incidence(d.get(), rows, width, nodes, st.s, g);
+    REQUIRE_MESSAGE(s.is_ok(), s.message());
+    CHECK(g.nodes == nodes);
+    CHECK(g.k == width);
+    st.sync();
+    std::vector<std::int32_t> off(static_cast<std::size_t>(nodes + 1));
+    SMG_TEST_CUDA(cudaMemcpy(off.data(), g.offsets.get(), off.size() * sizeof(std::int32_t),
+                             cudaMemcpyDeviceToHost));
+    std::vector<std::int64_t> ent(static_cast<std::size_t>(off.back()));
+    if (!ent.empty())
+      SMG_TEST_CUDA(cudaMemcpy(ent.data(), g.entries.get(), ent.size() * sizeof(std::int64_t),
+                               cudaMemcpyDeviceToHost));
+    CHECK(off == off_ref);
+    CHECK(ent == ent_ref);
+  }
+}
+
 void compare_all(DqbCase c) {
   for (const smg::SkinMethod m : {smg::SkinMethod::dqb, smg::SkinMethod::lbs}) {
     c.method = m;
@@ -363,6 +464,23 @@ TEST_CASE("cuda dqb: hard cases (antipodal quaternions, single drivers, zero wei
         c.qn[static_cast<std::size_t>((t * c.N + n) * 4 + k)] = c.qn[static_cast<std::size_t>(n * 4 + k)];
     }
   compare_all(c);
+}
+
+TEST_CASE("cuda dqb: query frames out of range give NaN outputs and add nothing to the gradients") {
+  for (const smg::SkinMethod m : {smg::SkinMethod::dqb, smg::SkinMethod::lbs}) {
+    DqbCase c = random_case("bad queries", 3, 15, 90, 5, 3, 401, true);
+    c.method = m;
+    compare_bad_queries<double>(c);
+    compare_bad_queries<float>(c);
+  }
+}
+
+TEST_CASE("cuda in-edges: build_driver_incidence and build_reverse_graph equal the host construction") {
+  check_device_in_edges<std::int32_t>(300, 17, 25, 501);    // driver table, rows > nodes
+  check_device_in_edges<std::int64_t>(300, 9, 25, 502);
+  check_device_in_edges<std::int32_t>(7, 32, 600, 503);     // rows < nodes, nodes > scan threads
+  check_device_in_edges<std::int64_t>(40, 16, 40, 504);     // a graph: rows == nodes
+  check_device_in_edges<std::int32_t>(2000, 17, 300, 505);  // long lists (target 0: ~8500 edges)
 }
 
 TEST_CASE("cuda dqb: validation before launch") {

@@ -235,6 +235,7 @@ def test_cuda_dqb_errors():
         t[i] = v
         return t
 
+    # (CUDA tensors' contents are checked with validate=True; CPU tensors' always)
     bad = [(6, 7, 10 ** 6), (8, 1, -1), (7, 3, 99), (9, 2, -1.0), (2, 0, 10 ** 4)]
     for k, i, v in bad:
         ts_cpu, ts_gpu = list(cpu), list(scene)
@@ -242,8 +243,65 @@ def test_cuda_dqb_errors():
         with pytest.raises(ValueError) as e_cpu:
             smg.dqb(**args(ts_cpu))
         with pytest.raises(ValueError) as e_gpu:
-            smg.dqb(**args(ts_gpu))
+            smg.dqb(**args(ts_gpu), validate=True)
         assert str(e_gpu.value) == str(e_cpu.value)
+    # the backward's checks (t_query, finite incoming gradients), with validate=True
+    _, _, drivers, weights = smg._C.dqb_forward(x, q, idx, w, pts, pq, anchor, t_ref, t_query,
+                                                sigma, False)
+    gx = torch.ones(t_query.numel(), pts.shape[0], 3, dtype=x.dtype, device=x.device)
+    for needle, tq, g in [("t_query", t_query + 100, gx), ("grad_positions", t_query, gx * float("nan"))]:
+        with pytest.raises(ValueError, match=needle):
+            smg._C.dqb_backward(x, q, pts, pq, t_ref, tq, drivers, weights, g, None, False, True, True,
+                                True, True, True)
+
+
+def test_cuda_dqb_reads_nothing_back_without_validate():
+    """Without validate=True the CUDA dqb, forward and backward, makes no synchronising torch call
+    (torch's sync debug mode raises on one: .cpu(), .item(), ...); with validate=True it does."""
+    scene = [t.cuda() for t in _skin_scene(torch.float32)]
+    x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma = scene
+
+    def fwd_bwd(validate):
+        leaves = [t.clone().requires_grad_() for t in (x, q, pts, pq)]
+        px, pqo = smg.dqb(leaves[0], leaves[1], (idx, w), leaves[2], leaves[3], anchor, t_ref,
+                          t_query, sigma, validate=validate)
+        (px.sum() + pqo.sum()).backward()
+        return px, leaves[0].grad
+
+    torch.cuda.synchronize()
+    torch.cuda.set_sync_debug_mode("error")
+    try:
+        px, gx = fwd_bwd(False)
+        with pytest.raises(RuntimeError):
+            fwd_bwd(True)
+    finally:
+        torch.cuda.set_sync_debug_mode("default")
+    px_v, gx_v = fwd_bwd(True)
+    assert torch.equal(px, px_v) and torch.equal(gx, gx_v)
+
+
+def test_cuda_dqb_query_frames_out_of_range_without_validate():
+    """Without validate=True a t_query entry out of range is not caught, but the kernels do not
+    read out of bounds: that query's outputs are NaN and it adds nothing to the gradients (the
+    rest equals the CPU run without it)."""
+    scene = _skin_scene(torch.float64)
+    x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma = scene
+    T, Q, P = x.shape[0], t_query.numel(), pts.shape[0]
+    bad_tq = torch.cat([t_query[:1], torch.tensor([T, -1]), t_query[1:]])
+    good = torch.tensor([0] + list(range(3, Q + 2)))
+    g = torch.Generator().manual_seed(3)
+    gx = torch.randn(Q + 2, P, 3, generator=g, dtype=torch.float64)
+    gq = torch.randn(Q + 2, P, 4, generator=g, dtype=torch.float64)
+    cpu = _dqb_run(scene, "cpu", False, gx[good], gq[good])
+    bad_scene = list(scene)
+    bad_scene[8] = bad_tq
+    gpu = _dqb_run(bad_scene, "cuda", False, gx, gq)
+    assert torch.isnan(gpu[0][1:3]).all() and torch.isnan(gpu[1][1:3]).all()
+    assert _rel(gpu[0][good], cpu[0]) <= 1e-12 and _rel(gpu[1][good], cpu[1]) <= 1e-12
+    scale = max(float(b.abs().max()) for b in cpu[2])
+    for a, b in zip(gpu[2], cpu[2]):
+        assert float((a - b).abs().max()) <= 1e-12 * scale
+
 
 
 @pytest.mark.parametrize("dtype,tol", [(torch.float64, 1e-11), (torch.float32, 1e-5)])

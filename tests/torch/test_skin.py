@@ -145,3 +145,39 @@ def test_dqb_errors_leave_inputs_untouched():
             f()
         assert needle in str(info.value), str(info.value)
     assert all(torch.equal(a, b) for a, b in zip(before, (x, q, pts, pq)))
+
+
+def test_dqb_validate_flag_on_cpu():
+    """CPU tensors are always validated: validate=False turns no check off (forward and the
+    backward's own checks), and validate=True changes no result."""
+    scene = skin_scene(P=12, Q=3)
+    x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma = scene
+    for validate in (False, True):
+        for f, needle in [
+                (lambda: smg.dqb(x, q, (idx, w), pts, pq, anchor, t_ref, t_query + 100, sigma,
+                                 validate=validate), "t_query"),
+                (lambda: smg.dqb(x, q, (idx, w), pts, pq, anchor + 100, t_ref, t_query, sigma,
+                                 validate=validate), "anchor"),
+                (lambda: smg.dqb(x, q, (idx, w), pts, pq, anchor, t_ref, t_query, -sigma,
+                                 validate=validate), "sigma")]:
+            with pytest.raises(ValueError, match=needle):
+                f()
+    _, _, drivers, weights = smg._C.dqb_forward(x, q, idx, w, pts, pq, anchor, t_ref, t_query, sigma,
+                                                False)
+    Q, P = t_query.numel(), pts.shape[0]
+    gx = torch.randn(Q, P, 3, dtype=x.dtype)
+    for validate in (False, True):
+        with pytest.raises(ValueError, match="t_query"):
+            smg._C.dqb_backward(x, q, pts, pq, t_ref, t_query - 100, drivers, weights, gx, None,
+                                False, True, True, True, True, validate)
+        with pytest.raises(ValueError, match="grad_positions"):
+            smg._C.dqb_backward(x, q, pts, pq, t_ref, t_query, drivers, weights, gx * float("nan"),
+                                None, False, True, True, True, True, validate)
+    a = loss_grads(run(scene), leaves(scene), gx, torch.ones(Q, P, 4, dtype=x.dtype))
+
+    def validated(a_, b_, c_, d_):
+        return smg.dqb(a_, b_, (idx, w), c_, d_, anchor, t_ref, t_query, sigma, validate=True)
+
+    b = loss_grads(validated, leaves(scene), gx, torch.ones(Q, P, 4, dtype=x.dtype))
+    assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
+    assert all(torch.equal(u, v) for u, v in zip(a[2], b[2]))

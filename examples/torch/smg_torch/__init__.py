@@ -327,31 +327,34 @@ def _library_seconds(op: str, positions: torch.Tensor, quats: Optional[torch.Ten
 class _DqbFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx, node_positions, node_quats, points, point_quats, idx, w, anchor, t_ref, t_query,
-                sigma, lbs):
+                sigma, lbs, validate):
         xs, qs, ps = node_positions.detach(), node_quats.detach(), points.detach()
         pqs = None if point_quats is None else point_quats.detach()
         out_x, out_q, drivers, weights = _C.dqb_forward(xs, qs, idx, w.detach(), ps, pqs, anchor,
-                                                        t_ref, t_query, sigma.detach(), lbs)
+                                                        t_ref, t_query, sigma.detach(), lbs,
+                                                        validate)
         # The backward recomputes the blend (as cheap as reading a cache, per the library).
         # saved through autograd, so that an in-place change before backward raises
         ctx.save_for_backward(node_positions, node_quats, points, point_quats)
-        ctx.inputs = (t_ref, t_query, drivers, weights, lbs)
+        ctx.inputs = (t_ref, t_query, drivers, weights, lbs, validate)
         return out_x, out_q
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, grad_x, grad_q):
         xs, qs, ps, pqs = (None if t is None else t.detach() for t in ctx.saved_tensors)
-        t_ref, t_query, drivers, weights, lbs = ctx.inputs
+        t_ref, t_query, drivers, weights, lbs, validate = ctx.inputs
         nx, nq, np_, npq = ctx.needs_input_grad[:4]
         gx, gq, gp, gpq = _C.dqb_backward(xs, qs, ps, pqs, t_ref, t_query, drivers, weights, grad_x,
-                                          grad_q, lbs, nx, nq, np_, npq and pqs is not None)
-        return (gx, gq, gp, gpq) + (None,) * 7
+                                          grad_q, lbs, nx, nq, np_, npq and pqs is not None,
+                                          validate)
+        return (gx, gq, gp, gpq) + (None,) * 8
 
 
 def dqb(node_positions: torch.Tensor, node_quats: torch.Tensor, g: GraphLike, points: torch.Tensor,
         point_quats: Optional[torch.Tensor], anchor: torch.Tensor, t_ref: torch.Tensor,
-        t_query: torch.Tensor, sigma: torch.Tensor, *, lbs: bool = False):
+        t_query: torch.Tensor, sigma: torch.Tensor, *, lbs: bool = False,
+        validate: bool = False):
     """Dual-quaternion blending (docs/math/skin.md S1-S18; LBS with lbs=True) of points [P, 3]
     (reference poses at frames t_ref [P], rotations point_quats [P, 4] or None = identity), each
     driven by its anchor node [P] and the anchor's graph neighbours with distance-aware weights
@@ -359,16 +362,19 @@ def dqb(node_positions: torch.Tensor, node_quats: torch.Tensor, g: GraphLike, po
     Returns positions [Q, P, 3] and unit quaternions [Q, P, 4]; differentiable w.r.t.
     node_positions, the raw node_quats, points and the raw point_quats.
     CUDA tensors (all on node_positions' device; index arrays of any integer dtype; the other
-    float tensors of node_positions' dtype) run on the device's current stream: index ranges and
-    sigma > 0 are checked with one synchronising copy; the backward synchronises the stream (it
-    reads t_query and the driver table on the host)."""
+    float tensors of node_positions' dtype) run on the device's current stream, forward and
+    backward, without reading anything back to the host (no synchronisation). Their contents
+    (index ranges, sigma > 0, finite incoming gradients) are checked only with validate=True
+    (one synchronising copy in forward and one in backward); without it they are the caller's
+    precondition, except that a t_query entry out of range gives NaN outputs and no gradient
+    instead of an out-of-bounds read. CPU tensors are always validated."""
     idx, w = _graph(g)
     tensors = dict(node_positions=node_positions, node_quats=node_quats, points=points,
                    point_quats=point_quats, indices=idx, weights=w, anchor=anchor, t_ref=t_ref,
                    t_query=t_query, sigma=sigma)
     _check(**tensors)
     return _DqbFunction.apply(node_positions, node_quats, points, point_quats, idx, w, anchor, t_ref,
-                              t_query, sigma, bool(lbs))
+                              t_query, sigma, bool(lbs), bool(validate))
 
 
 class _RenderFunction(torch.autograd.Function):

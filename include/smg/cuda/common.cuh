@@ -249,75 +249,98 @@ Status deterministic_sum(const In* in, Index n, T* out, cudaStream_t stream, T s
   return Status::ok();
 }
 
-// The in-edges of every node of a graph [N][K] (row i lists the out-edges i -> j): for node j,
-// the slots e = i·K + k with indices(i, k) = j, in increasing e, at entries[offsets[j] ..
-// offsets[j+1]). Kernels use it to gather, in a fixed order, what the edges into a node
-// contribute to its gradient (instead of scattering with float atomics). offsets[N] is the
-// number of valid entries Σ_i |N(i)| (edge_count of the CPU side), kept on the device.
+// The in-edges of the targets of an index table [rows][width] whose entries index `nodes`
+// targets: for target j, the slots e = r·width + c with table(r, c) = j, in increasing e, at
+// entries[offsets[j] .. offsets[j+1]); entries outside [0, nodes) (−1 padding) are not edges.
+// For a graph [N][K] (row i lists the out-edges i -> j; rows = nodes = N, width = K) these are
+// the in-edges of every node (build_reverse_graph); for a driver table [P][D] the (point, driver)
+// edges of every node (build_driver_incidence, cuda/dqb.cuh). Kernels use it to gather, in a
+// fixed order, what the edges into a target contribute to its gradient (instead of scattering
+// with float atomics). offsets[nodes] is the number of edges (for a graph Σ_i |N(i)|, edge_count
+// of the CPU side), kept on the device.
 struct ReverseGraph {
-  DeviceBuffer<std::int32_t> offsets;  // [N + 1]
-  DeviceBuffer<std::int64_t> entries;  // [N·K], the first offsets[N] used
-  Index nodes = 0;
-  Index k = 0;
+  DeviceBuffer<std::int32_t> offsets;  // [nodes + 1]
+  DeviceBuffer<std::int64_t> entries;  // [rows·width] (at least 1), the first offsets[nodes] used
+  Index nodes = 0;                     // targets
+  Index k = 0;                         // width of the table (K of a graph, D of a driver table)
   const std::int32_t* edge_count() const { return offsets.get() + nodes; }
 };
 
 namespace detail {
-template <class I>
-__global__ void reverse_count_kernel(const I* indices, Index slots, Index nodes,
-                                     std::int32_t* counts) {
-  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (e >= slots) return;
-  const I j = indices[e];
-  if (j >= 0 && j < nodes) atomicAdd(counts + j, 1);  // integer: the order does not matter
+// The per-element steps of build_in_edges (host-device: the kernels below are thin wrappers, and
+// tests/cuda/test_cuda_host_steps.cu runs the steps in host loops without a GPU).
+
+// counter += 1, returning the old value: an integer atomic on the device (the order of the
+// increments does not matter to the result: the counts are sums, and each node's entries are
+// sorted afterwards); a plain increment on the host, where the steps run one at a time.
+SMG_HOST_DEVICE inline std::int32_t in_edges_increment(std::int32_t* counter) {
+#if defined(__CUDA_ARCH__)
+  return atomicAdd(counter, 1);
+#else
+  return (*counter)++;
+#endif
 }
 
-// offsets[0] = 0, offsets[j + 1] = offsets[j] + counts[j]: one block, a fixed sequential scan
-// of per-thread partial sums (N is at most a few million; this is not the hot path). A template
-// only so that a header can define it (a __global__ function cannot be inline).
-template <int = 0>
-__global__ void reverse_scan_kernel(const std::int32_t* counts, Index nodes,
-                                           std::int32_t* offsets) {
-  __shared__ std::int32_t part[kThreads];
-  const Index per = (nodes + kThreads - 1) / kThreads;
-  const Index b = threadIdx.x * per, e = b + per < nodes ? b + per : nodes;
+// The target of slot e of the table, or −1 when the entry is no edge (outside [0, nodes)).
+template <class I>
+SMG_HOST_DEVICE inline Index in_edge_target(const I* table, Index e, Index nodes) {
+  const I j = table[e];
+  return j >= 0 && static_cast<Index>(j) < nodes ? static_cast<Index>(j) : Index(-1);
+}
+
+// Count step of slot e: counts[j] += 1 for its target j.
+template <class I>
+SMG_HOST_DEVICE inline void in_edges_count_at(Index e, const I* table, Index nodes,
+                                              std::int32_t* counts) {
+  const Index j = in_edge_target(table, e, nodes);
+  if (j >= 0) in_edges_increment(counts + j);
+}
+
+// The scan splits the targets into `threads` fixed, contiguous chunks: chunk of `thread`.
+SMG_HOST_DEVICE inline void in_edges_chunk(int thread, int threads, Index nodes, Index& begin,
+                                           Index& end) {
+  const Index per = (nodes + threads - 1) / threads;
+  begin = thread * per;
+  end = begin + per < nodes ? begin + per : nodes;
+  if (begin > end) begin = end;
+}
+
+// Scan step 1 of `thread`: the sum of the counts of its chunk.
+SMG_HOST_DEVICE inline std::int32_t in_edges_chunk_sum(int thread, int threads,
+                                                       const std::int32_t* counts, Index nodes) {
+  Index b, e;
+  in_edges_chunk(thread, threads, nodes, b, e);
   std::int32_t sum = 0;
   for (Index j = b; j < e; ++j) sum += counts[j];
-  part[threadIdx.x] = sum;
-  __syncthreads();
-  if (threadIdx.x == 0) {
-    std::int32_t run = 0;
-    for (int t = 0; t < kThreads; ++t) {
-      const std::int32_t v = part[t];
-      part[t] = run;
-      run += v;
-    }
-    offsets[nodes] = run;
-  }
-  __syncthreads();
-  std::int32_t run = part[threadIdx.x];
+  return sum;
+}
+
+// Scan step 2 of `thread`, given `start` (the sum of the chunks before it): the offsets of its
+// chunk, offsets[j] = start + Σ counts of the chunk before j.
+SMG_HOST_DEVICE inline void in_edges_chunk_offsets(int thread, int threads,
+                                                   const std::int32_t* counts, Index nodes,
+                                                   std::int32_t start, std::int32_t* offsets) {
+  Index b, e;
+  in_edges_chunk(thread, threads, nodes, b, e);
   for (Index j = b; j < e; ++j) {
-    offsets[j] = run;
-    run += counts[j];
+    offsets[j] = start;
+    start += counts[j];
   }
 }
 
+// Fill step of slot e: entries[cursor[j]++] = e for its target j (cursor starts as a copy of
+// the offsets; the position within j depends on the order of the steps).
 template <class I>
-__global__ void reverse_fill_kernel(const I* indices, Index slots, Index nodes,
-                                    std::int32_t* cursor, std::int64_t* entries) {
-  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (e >= slots) return;
-  const I j = indices[e];
-  if (j >= 0 && j < nodes) entries[atomicAdd(cursor + j, 1)] = e;
+SMG_HOST_DEVICE inline void in_edges_fill_at(Index e, const I* table, Index nodes,
+                                             std::int32_t* cursor, std::int64_t* entries) {
+  const Index j = in_edge_target(table, e, nodes);
+  if (j >= 0) entries[in_edges_increment(cursor + j)] = e;
 }
 
-// The fill order within a node depends on scheduling: sort each node's few entries, so that
-// the gathers sum in increasing slot order (deterministic).
-template <int = 0>
-__global__ void reverse_sort_kernel(const std::int32_t* offsets, Index nodes,
-                                           std::int64_t* entries) {
-  const Index j = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (j >= nodes) return;
+// Sort step of target j: its few entries in increasing slot order (insertion sort), so that the
+// result does not depend on the order of the fill steps and the gathers sum in the CPU's order.
+SMG_HOST_DEVICE inline void in_edges_sort_at(Index j, const std::int32_t* offsets,
+                                             std::int64_t* entries) {
   for (std::int32_t a = offsets[j] + 1; a < offsets[j + 1]; ++a) {
     const std::int64_t v = entries[a];
     std::int32_t b = a;
@@ -325,40 +348,103 @@ __global__ void reverse_sort_kernel(const std::int32_t* offsets, Index nodes,
     entries[b] = v;
   }
 }
-}  // namespace detail
 
-// Builds the reverse adjacency of device indices [N][K] (int32 or int64) on `stream`, entirely
-// on the device (no synchronisation). Indices must be -1 or in [0, N) (validate_neighbors);
-// others are skipped. Build it once per graph and pass it to every energy over that graph.
 template <class I>
-Status build_reverse_graph(const I* indices_device, Index nodes, Index k, cudaStream_t stream,
-                           ReverseGraph& out) {
+__global__ void in_edges_count_kernel(const I* table, Index slots, Index nodes,
+                                      std::int32_t* counts) {
+  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (e < slots) in_edges_count_at(e, table, nodes, counts);
+}
+
+// offsets[0] = 0, offsets[j + 1] = offsets[j] + counts[j]: one block, a fixed sequential scan
+// of per-thread chunk sums (the targets are at most a few million; this is not the hot path). A
+// template only so that a header can define it (a __global__ function cannot be inline).
+template <int = 0>
+__global__ void in_edges_scan_kernel(const std::int32_t* counts, Index nodes,
+                                     std::int32_t* offsets) {
+  __shared__ std::int32_t part[kThreads];
+  const int t = static_cast<int>(threadIdx.x);
+  part[t] = in_edges_chunk_sum(t, kThreads, counts, nodes);
+  __syncthreads();
+  if (t == 0) {
+    std::int32_t run = 0;
+    for (int u = 0; u < kThreads; ++u) {
+      const std::int32_t v = part[u];
+      part[u] = run;
+      run += v;
+    }
+    offsets[nodes] = run;
+  }
+  __syncthreads();
+  in_edges_chunk_offsets(t, kThreads, counts, nodes, part[t], offsets);
+}
+
+template <class I>
+__global__ void in_edges_fill_kernel(const I* table, Index slots, Index nodes,
+                                     std::int32_t* cursor, std::int64_t* entries) {
+  const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (e < slots) in_edges_fill_at(e, table, nodes, cursor, entries);
+}
+
+template <int = 0>
+__global__ void in_edges_sort_kernel(const std::int32_t* offsets, Index nodes,
+                                     std::int64_t* entries) {
+  const Index j = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
+  if (j < nodes) in_edges_sort_at(j, offsets, entries);
+}
+
+// The in-edges of a device table [rows][width] (int32 or int64) over `nodes` targets into `out`
+// (the struct's comment), on `stream`, entirely on the device: count (integer atomics), one-block
+// scan, fill, per-target sort. Nothing is read back or synchronised. `what` names the caller in
+// messages. rows·width must fit the 32-bit offsets (checked on the host).
+template <class I>
+Status build_in_edges(const I* table_device, Index rows, Index width, Index nodes,
+                      cudaStream_t stream, ReverseGraph& out, const char* what) {
   out.nodes = nodes;
-  out.k = k;
-  const Index slots = nodes * k;
+  out.k = width;
+  if (rows < 0 || width < 0 || nodes < 0)
+    return Status::error(std::string(what) + ": negative size");
+  const Index slots = rows * width;
+  if (slots >= (Index(1) << 31))
+    return Status::error(std::string(what) + ": " + std::to_string(slots) +
+                         " table entries exceed the 32-bit offsets (2^31 - 1)");
+  if (slots > 0 && table_device == nullptr)
+    return Status::error(std::string(what) + ": null data pointer");
   DeviceBuffer<std::int32_t> counts;
   if (Status s = out.offsets.allocate(static_cast<std::size_t>(nodes + 1), stream); !s) return s;
   if (Status s = out.entries.allocate(static_cast<std::size_t>(slots > 0 ? slots : 1), stream); !s)
     return s;
   if (Status s = counts.allocate(static_cast<std::size_t>(nodes + 1), stream); !s) return s;
-  SMG_CUDA_TRY(cudaMemsetAsync(counts.get(), 0, sizeof(std::int32_t) * (nodes + 1), stream),
-               "build_reverse_graph");
+  SMG_CUDA_TRY(cudaMemsetAsync(counts.get(), 0, sizeof(std::int32_t) * (nodes + 1), stream), what);
   if (slots > 0)
-    detail::reverse_count_kernel<I><<<grid_for(slots), kThreads, 0, stream>>>(indices_device, slots, nodes,
-                                                                               counts.get());
-  detail::reverse_scan_kernel<><<<1, kThreads, 0, stream>>>(counts.get(), nodes, out.offsets.get());
+    in_edges_count_kernel<I><<<grid_for(slots), kThreads, 0, stream>>>(table_device, slots, nodes,
+                                                                      counts.get());
+  in_edges_scan_kernel<><<<1, kThreads, 0, stream>>>(counts.get(), nodes, out.offsets.get());
   // counts becomes the fill cursor: a copy of the offsets.
   SMG_CUDA_TRY(cudaMemcpyAsync(counts.get(), out.offsets.get(), sizeof(std::int32_t) * (nodes + 1),
                                cudaMemcpyDeviceToDevice, stream),
-               "build_reverse_graph");
+               what);
   if (slots > 0) {
-    detail::reverse_fill_kernel<I><<<grid_for(slots), kThreads, 0, stream>>>(
-        indices_device, slots, nodes, counts.get(), out.entries.get());
-    detail::reverse_sort_kernel<><<<grid_for(nodes), kThreads, 0, stream>>>(out.offsets.get(), nodes,
-                                                                          out.entries.get());
+    in_edges_fill_kernel<I><<<grid_for(slots), kThreads, 0, stream>>>(
+        table_device, slots, nodes, counts.get(), out.entries.get());
+    if (nodes > 0)
+      in_edges_sort_kernel<><<<grid_for(nodes), kThreads, 0, stream>>>(out.offsets.get(), nodes,
+                                                                       out.entries.get());
   }
-  SMG_CUDA_TRY(cudaGetLastError(), "build_reverse_graph launch");
+  SMG_CUDA_TRY(cudaGetLastError(), (std::string(what) + " launch").c_str());
   return Status::ok();
+}
+}  // namespace detail
+
+// Builds the reverse adjacency of device indices [N][K] (int32 or int64) on `stream`, entirely
+// on the device (no synchronisation): detail::build_in_edges with rows = nodes = N. Indices must
+// be -1 or in [0, N) (validate_neighbors); others are skipped. Build it once per graph and pass
+// it to every energy over that graph.
+template <class I>
+Status build_reverse_graph(const I* indices_device, Index nodes, Index k, cudaStream_t stream,
+                           ReverseGraph& out) {
+  return detail::build_in_edges(indices_device, nodes, k, nodes, stream, out,
+                                "build_reverse_graph");
 }
 
 }  // namespace smg::cuda

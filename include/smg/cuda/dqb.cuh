@@ -6,21 +6,23 @@
 //   forward: one thread per (query q, point p) loads its drivers with the CPU's loaders
 //     (detail::skin_load_ref / skin_load_query) and calls detail::skin_blend_forward (and
 //     skin_blend_jacobian_rows for the Jacobians) — the functions the CPU loop calls;
-//   backward, for each query frame in turn (as the CPU): one thread per point recomputes the
-//     forward, calls detail::skin_blend_backward, adds the point and weight gradients (each
-//     owned by its point) and writes the per-edge node contributions (∂L/∂x_t, ∂L/∂x_ref, ∂L/∂φ_t)
-//     to scratch [P·D][9]; then one thread per node gathers its edges through the driver
-//     incidence (build_driver_incidence: edges p·D + k in increasing order, the CPU's order) and
-//     adds them to its rows of the node gradients.
+//   backward, for each query q in turn (as the CPU; the host passes q, the kernels read the
+//     frame t_query[q]: nothing is read back): one thread per point recomputes the forward,
+//     calls detail::skin_blend_backward, adds the point and weight gradients (each owned by its
+//     point) and writes the per-edge node contributions (∂L/∂x_t, ∂L/∂x_ref, ∂L/∂φ_t) to scratch
+//     [P·D][9]; then one thread per node gathers its edges through the driver incidence
+//     (build_driver_incidence, built on the device: edges p·D + k in increasing order, the CPU's
+//     order) and adds them to its rows of the node gradients.
+// Nothing here synchronises the stream or reads device memory on the host.
 // Up to kSkinMaxD = 32 drivers per point (local arrays sized at compile time: 8, 16 or 32).
 #pragma once
 
 #include "smg/cuda/common.cuh"
 
 #include <cstdint>
+#include <limits>
 #include <sstream>
 #include <string>
-#include <vector>
 
 #include "smg/core/rotation_gradient.hpp"
 #include "smg/skin/blend.hpp"
@@ -33,44 +35,16 @@ namespace smg::cuda {
 constexpr Index kSkinMaxD = 32;
 
 // The edges (point p, driver column k) of a driver table [P][D] grouped by driven node: for node
-// n, the edges e = p·D + k with drivers(p, k) = n, in increasing e, at entries[offsets[n] ..
-// offsets[n+1]) (a ReverseGraph with nodes = N and k = D, over a table of P rows). Build it once
-// per driver table from DEVICE memory (copies the table to the host, orders it there, uploads
-// the result; synchronises `stream`). Entries outside [0, N) (−1 padding) are skipped.
-inline Status build_driver_incidence(const std::int32_t* drivers_device, Index points, Index width,
-                                     Index nodes, cudaStream_t stream, ReverseGraph& out) {
-  out.nodes = nodes;
-  out.k = width;
-  std::vector<std::int32_t> d(static_cast<std::size_t>(points * width));
-  if (!d.empty()) {
-    SMG_CUDA_TRY(cudaMemcpyAsync(d.data(), drivers_device, d.size() * sizeof(std::int32_t),
-                                 cudaMemcpyDeviceToHost, stream),
-                 "build_driver_incidence: copy of the driver table");
-    SMG_CUDA_TRY(cudaStreamSynchronize(stream), "build_driver_incidence: synchronise");
-  }
-  std::vector<std::int32_t> offsets(static_cast<std::size_t>(nodes + 1), 0);
-  for (const std::int32_t n : d)
-    if (n >= 0 && n < nodes) ++offsets[static_cast<std::size_t>(n) + 1];
-  for (Index n = 0; n < nodes; ++n)
-    offsets[static_cast<std::size_t>(n + 1)] += offsets[static_cast<std::size_t>(n)];
-  std::vector<std::int64_t> entries(static_cast<std::size_t>(offsets.back()));
-  std::vector<std::int32_t> fill(offsets.begin(), offsets.end() - 1);
-  for (std::size_t e = 0; e < d.size(); ++e)
-    if (d[e] >= 0 && d[e] < nodes)
-      entries[static_cast<std::size_t>(fill[static_cast<std::size_t>(d[e])]++)] =
-          static_cast<std::int64_t>(e);
-  if (Status s = out.offsets.allocate(offsets.size(), stream); !s) return s;
-  if (Status s = out.entries.allocate(entries.size(), stream); !s) return s;
-  SMG_CUDA_TRY(cudaMemcpyAsync(out.offsets.get(), offsets.data(),
-                               offsets.size() * sizeof(std::int32_t), cudaMemcpyHostToDevice, stream),
-               "build_driver_incidence: upload");
-  if (!entries.empty())
-    SMG_CUDA_TRY(cudaMemcpyAsync(out.entries.get(), entries.data(),
-                                 entries.size() * sizeof(std::int64_t), cudaMemcpyHostToDevice,
-                                 stream),
-                 "build_driver_incidence: upload");
-  SMG_CUDA_TRY(cudaStreamSynchronize(stream), "build_driver_incidence: synchronise");
-  return Status::ok();
+// n, the edges e = p·D + k with drivers(p, k) = n, in increasing e (the CPU's order), at
+// entries[offsets[n] .. offsets[n+1]) (a ReverseGraph with nodes = N and k = D, over a table of
+// P rows: detail::build_in_edges, the builder of build_reverse_graph). Build it once per driver
+// table (int32, or int64) from DEVICE memory, on `stream`, entirely on the device: nothing is
+// read back or synchronised. Entries outside [0, N) (−1 padding) are skipped. P·D < 2^31.
+template <class I>
+Status build_driver_incidence(const I* drivers_device, Index points, Index width, Index nodes,
+                              cudaStream_t stream, ReverseGraph& out) {
+  return detail::build_in_edges(drivers_device, points, width, nodes, stream, out,
+                                "build_driver_incidence");
 }
 
 namespace detail {
@@ -156,20 +130,52 @@ Status check_skin_shapes(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
   return Status::ok();
 }
 
+// The frame of query q, t_query[q] read where the kernels run (on the device: the launchers
+// never read t_query back); −1 when it is outside [0, T). The forward then writes NaN outputs
+// for query q, and both passes of the backward skip query q (it adds nothing to any gradient)
+// rather than clamp it: a clamped frame would add a wrong gradient silently, and a device-side
+// error flag would have to be read back. Such a t_query breaks the precondition
+// (validate_skin_blend / validate_skin_blend_backward on the CPU and smg_torch's validate=True
+// report it); skipping only keeps the device from reading out of bounds.
+SMG_HOST_DEVICE inline Index skin_query_frame(SkinIndexView t_query, Index q, Index T) {
+  const Index t = t_query(q, 0);
+  return t >= 0 && t < T ? t : Index(-1);
+}
+
+// Writes NaN to every requested output of element (q, p): its query frame is out of range
+// (skin_query_frame), so that the broken precondition shows in the outputs.
+template <class S>
+SMG_HOST_DEVICE inline void skin_store_nan(const SkinBlendOutputs<S>& out, Index q, Index p) {
+  const S nan = std::numeric_limits<S>::quiet_NaN();
+  auto fill = [&](S* o, Index n) {
+    for (Index i = 0; i < n; ++i) o[i] = nan;
+  };
+  if (out.positions.data()) fill(out.positions.ptr(q, p), 3);
+  if (out.quaternions.data()) fill(out.quaternions.ptr(q, p), 4);
+  if (out.J_drivers.data()) fill(out.J_drivers.ptr(q, p), out.J_drivers.dim());
+  if (out.J_point.data()) fill(out.J_point.ptr(q, p), out.J_point.dim());
+}
+
 // Forward, element e = q·P + p (< Q·P). The kernels are thin wrappers of these host-device
-// per-element steps (which also lets a host loop run them without a GPU).
+// per-element steps (which also lets a host loop run them without a GPU). A query frame out of
+// range gives NaN outputs (skin_query_frame), not an out-of-bounds read.
 template <class S, int DMax>
 SMG_HOST_DEVICE inline void skin_forward_at(Index e, const SkinNodes<S>& nodes,
                                             const SkinPoints<S>& points, SkinIndexView t_query,
                                             const SkinBlendOutputs<S>& out, SkinMethod method) {
   const Index P = points.count(), Dmax = points.width();
   const Index q = e / P, p = e % P;
+  const Index t = skin_query_frame(t_query, q, nodes.frames());
+  if (t < 0) {
+    skin_store_nan(out, q, p);
+    return;
+  }
   SkinDriver<S> d[DMax];
   smg::detail::SkinBlendState<S> st;
   const Index D = smg::detail::skin_load_ref(nodes, points, p, true, d);
   const Vector3<S> x = points.positions.row(p);
   const Quaternion<S> qp = smg::detail::skin_point_quaternion(points.quaternions, p);
-  smg::detail::skin_load_query(nodes, points, p, Index(t_query(q, 0)), D, d);
+  smg::detail::skin_load_query(nodes, points, p, t, D, d);
   smg::detail::skin_blend_forward(method, d, D, x, qp, st);
   smg::detail::skin_store_outputs(method, d, D, Dmax, x, qp, st, out, q, p);
 }
@@ -185,12 +191,14 @@ __global__ void skin_forward_kernel(SkinNodes<S> nodes, SkinPoints<S> points,
 
 using smg::detail::kSkinEdgeStride;  // per edge: ∂L/∂x_t (3), ∂L/∂x_ref (3), ∂L/∂φ_t (3)
 
-// Backward, point pass of query q (frame t), point p (< P).
+// Backward, point pass of query q (frame t_query[q]; skipped when out of range), point p (< P).
 template <class S, int DMax>
 SMG_HOST_DEVICE inline void skin_backward_point_at(
-    Index p, const SkinNodes<S>& nodes, const SkinPoints<S>& points, Index q, Index t,
-    const SkinBlendOutputGradients<S>& grad_out, const SkinBlendGradients<S>& grads,
+    Index p, const SkinNodes<S>& nodes, const SkinPoints<S>& points, SkinIndexView t_query,
+    Index q, const SkinBlendOutputGradients<S>& grad_out, const SkinBlendGradients<S>& grads,
     SkinMethod method, S* edge_buf) {
+  const Index t = skin_query_frame(t_query, q, nodes.frames());
+  if (t < 0) return;
   const Index Dmax = points.width();
   SkinDriver<S> d[DMax];
   smg::detail::SkinBlendState<S> st;
@@ -202,22 +210,28 @@ SMG_HOST_DEVICE inline void skin_backward_point_at(
 }
 
 template <class S, int DMax>
-__global__ void skin_backward_point_kernel(SkinNodes<S> nodes, SkinPoints<S> points, Index q,
-                                           Index t, SkinBlendOutputGradients<S> grad_out,
+__global__ void skin_backward_point_kernel(SkinNodes<S> nodes, SkinPoints<S> points,
+                                           SkinIndexView t_query, Index q,
+                                           SkinBlendOutputGradients<S> grad_out,
                                            SkinBlendGradients<S> grads, SkinMethod method,
                                            S* edge_buf) {
   const Index p = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
   if (p < points.count())
-    skin_backward_point_at<S, DMax>(p, nodes, points, q, t, grad_out, grads, method, edge_buf);
+    skin_backward_point_at<S, DMax>(p, nodes, points, t_query, q, grad_out, grads, method,
+                                    edge_buf);
 }
 
-// Backward, node pass of query frame t, node n: its edges in increasing p·D + k.
+// Backward, node pass of query q (frame t_query[q]; skipped when out of range, as the point pass
+// of q, whose edge records it would read), node n: its edges in increasing p·D + k.
 template <class S>
 SMG_HOST_DEVICE inline void skin_backward_node_at(Index n, const SkinNodes<S>& nodes,
-                                                  const SkinPoints<S>& points, Index t,
+                                                  const SkinPoints<S>& points,
+                                                  SkinIndexView t_query, Index q,
                                                   const SkinBlendGradients<S>& grads,
                                                   const std::int32_t* offsets,
                                                   const std::int64_t* entries, const S* edge_buf) {
+  const Index t = skin_query_frame(t_query, q, nodes.frames());
+  if (t < 0) return;
   const Index Dmax = points.width();
   using V3 = Eigen::Map<const Vector3<S>>;
   Vector3<S> gx_t = Vector3<S>::Zero(), gphi_t = Vector3<S>::Zero();
@@ -244,20 +258,23 @@ SMG_HOST_DEVICE inline void skin_backward_node_at(Index n, const SkinNodes<S>& n
 }
 
 template <class S>
-__global__ void skin_backward_node_kernel(SkinNodes<S> nodes, SkinPoints<S> points, Index t,
+__global__ void skin_backward_node_kernel(SkinNodes<S> nodes, SkinPoints<S> points,
+                                          SkinIndexView t_query, Index q,
                                           SkinBlendGradients<S> grads, const std::int32_t* offsets,
                                           const std::int64_t* entries, const S* edge_buf) {
   const Index n = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
-  if (n < nodes.nodes()) skin_backward_node_at(n, nodes, points, t, grads, offsets, entries, edge_buf);
+  if (n < nodes.nodes())
+    skin_backward_node_at(n, nodes, points, t_query, q, grads, offsets, entries, edge_buf);
 }
 
 template <class S, int DMax>
-Status skin_backward_points(const SkinNodes<S>& nodes, const SkinPoints<S>& points, Index q,
-                            Index t, const SkinBlendOutputGradients<S>& grad_out,
+Status skin_backward_points(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
+                            SkinIndexView t_query, Index q,
+                            const SkinBlendOutputGradients<S>& grad_out,
                             const SkinBlendGradients<S>& grads, SkinMethod method, S* edge_buf,
                             cudaStream_t stream) {
   skin_backward_point_kernel<S, DMax><<<grid_for(points.count()), kThreads, 0, stream>>>(
-      nodes, points, q, t, grad_out, grads, method, edge_buf);
+      nodes, points, t_query, q, grad_out, grads, method, edge_buf);
   SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::skin_blend_backward: point kernel launch");
   return Status::ok();
 }
@@ -271,8 +288,9 @@ Status skin_backward_points(const SkinNodes<S>& nodes, const SkinPoints<S>& poin
 // [T][N][4], normalised on load), points (drivers [P][D] int32 −1 padded, weights [P][D], t_ref
 // [P], positions [P][3], quaternions [P][4] or empty), t_query [Q] and the outputs — is over
 // DEVICE memory. D <= kSkinMaxD. Shapes are checked on the host (the contents are the caller's
-// precondition, as validate_skin_blend checks them on the CPU); CUDA errors come back as the
-// Status. Stream-ordered, nothing synchronised; deterministic.
+// precondition, as validate_skin_blend checks them on the CPU; a t_query entry outside [0, T)
+// gives NaN outputs for that query instead of an out-of-bounds read); CUDA errors come back as
+// the Status. Stream-ordered, nothing read back or synchronised; deterministic.
 template <class S>
 Status skin_blend(const SkinNodes<S>& nodes, const SkinPoints<S>& points, SkinIndexView t_query,
                   const SkinBlendOutputs<S>& out, const SkinOptions& options,
@@ -303,9 +321,12 @@ Status skin_blend(const SkinNodes<S>& nodes, const SkinPoints<S>& points, SkinIn
 // grad_out ([Q][P][3] positions, [Q][P][3] right-tangent rotations and/or [Q][P][4] raw
 // quaternions; each optional). All views over DEVICE memory. `incidence`:
 // build_driver_incidence(points.drivers.data(), P, D, N, stream, incidence) for this driver
-// table (needed only when a node gradient is requested; may be empty otherwise). Per query frame
-// one point pass and one node pass, in the CPU's order. Copies t_query [Q] to the host first
-// (synchronises `stream` once); then stream-ordered. Deterministic.
+// table (needed only when a node gradient is requested; may be empty otherwise). Per query q,
+// in increasing q, one point pass and one node pass (the CPU's order; 2·Q launches): the
+// kernels read the frame t_query[q] themselves, so nothing is read back or synchronised —
+// stream-ordered throughout. A t_query entry outside [0, T) is skipped on the device (that query
+// adds nothing: detail::skin_query_frame); the other contents are the caller's precondition, as
+// for skin_blend. Deterministic.
 template <class S>
 Status skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& points,
                            SkinIndexView t_query, const SkinBlendOutputGradients<S>& grad_out,
@@ -332,31 +353,27 @@ Status skin_blend_backward(const SkinNodes<S>& nodes, const SkinPoints<S>& point
     return Status::error(s.str());
   }
   if (Q == 0 || P == 0) return Status::ok();
-  // Each query frame is one point pass and one node pass (the frame picks the node rows the node
-  // pass writes): the frames are copied to the host once.
-  std::vector<std::int32_t> frames(static_cast<std::size_t>(Q));
-  SMG_CUDA_TRY(cudaMemcpyAsync(frames.data(), t_query.data(), frames.size() * sizeof(std::int32_t),
-                               cudaMemcpyDeviceToHost, stream),
-               "smg::cuda::skin_blend_backward: copy of t_query");
-  SMG_CUDA_TRY(cudaStreamSynchronize(stream), "smg::cuda::skin_blend_backward: synchronise");
+  // Each query is one point pass and one node pass; the node pass of q reads the edge records
+  // the point pass of q wrote (one scratch for every q: the passes are stream-ordered), and the
+  // frame t_query[q] picks the node rows it writes: the kernels read it, the host passes q.
   DeviceBuffer<S> edge_buf;
   if (to_nodes)
     if (Status s = edge_buf.allocate(static_cast<std::size_t>(P * D * detail::kSkinEdgeStride), stream);
         !s)
       return s;
   for (Index q = 0; q < Q; ++q) {
-    const Index t = frames[static_cast<std::size_t>(q)];
     const Status s =
-        D <= 8 ? detail::skin_backward_points<S, 8>(nodes, points, q, t, grad_out, grads,
+        D <= 8 ? detail::skin_backward_points<S, 8>(nodes, points, t_query, q, grad_out, grads,
                                                     options.method, edge_buf.get(), stream)
-        : D <= 16 ? detail::skin_backward_points<S, 16>(nodes, points, q, t, grad_out, grads,
+        : D <= 16 ? detail::skin_backward_points<S, 16>(nodes, points, t_query, q, grad_out, grads,
                                                         options.method, edge_buf.get(), stream)
-                  : detail::skin_backward_points<S, 32>(nodes, points, q, t, grad_out, grads,
+                  : detail::skin_backward_points<S, 32>(nodes, points, t_query, q, grad_out, grads,
                                                         options.method, edge_buf.get(), stream);
     if (!s) return s;
     if (!to_nodes || N == 0) continue;
     detail::skin_backward_node_kernel<S><<<grid_for(N), kThreads, 0, stream>>>(
-        nodes, points, t, grads, incidence.offsets.get(), incidence.entries.get(), edge_buf.get());
+        nodes, points, t_query, q, grads, incidence.offsets.get(), incidence.entries.get(),
+        edge_buf.get());
     SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::skin_blend_backward: node kernel launch");
   }
   return Status::ok();
