@@ -313,22 +313,18 @@ __global__ void fused_rigid_kernel(FusedRigidConstants<S> c, PositionsView<const
   }
 }
 
-template <class S, class I>
+// KMax sizes lrm_term_at's local arrays (8, 16 or 32), picked at launch from K as cuda::lrm
+// does: a runtime choice inside one kernel would give every K the 32-entry stack frame.
+template <class S, class I, int KMax>
 __global__ void fused_lrm_term_kernel(Index c0, Index frames, PositionsView<const S> x,
                                       FrameScalarsView<const S> conf, NeighborsView<S, I> graph,
                                       LrmKernelArgs<S> args, Accumulator<S>* terms, S* gx_edges,
-                                      S* gu_edges, int kmax) {
+                                      S* gu_edges) {
   const Index n = frames * x.nodes();
   const Index e = blockIdx.x * static_cast<Index>(blockDim.x) + threadIdx.x;
   if (e >= n) return;
   const Index base = c0 * x.nodes();
-  // kmax picks the local arrays' size (8, 16 or 32), as lrm_launch does.
-  if (kmax <= 8)
-    lrm_term_at<S, I, 8>(base + e, x, conf, graph, args, terms, gx_edges, gu_edges, {}, base);
-  else if (kmax <= 16)
-    lrm_term_at<S, I, 16>(base + e, x, conf, graph, args, terms, gx_edges, gu_edges, {}, base);
-  else
-    lrm_term_at<S, I, 32>(base + e, x, conf, graph, args, terms, gx_edges, gu_edges, {}, base);
+  lrm_term_at<S, I, KMax>(base + e, x, conf, graph, args, terms, gx_edges, gu_edges, {}, base);
 }
 
 template <class S>
@@ -655,8 +651,15 @@ Status regularizers(smg::detail::NonDeducedT<PositionsView<const S>> positions,
       const Index nf = std::min(chunk, T - c0), c1 = c0 + nf, n = nf * N;
       S* gxe = edges.get();
       S* gue = gxe ? gxe + 3 * n * K : nullptr;
-      detail::fused_lrm_term_kernel<S, I><<<grid_for(n), kThreads, 0, stream>>>(
-          c0, nf, positions, cv, graph, args, terms.get(), gxe, gue, static_cast<int>(K));
+      if (K <= 8)
+        detail::fused_lrm_term_kernel<S, I, 8><<<grid_for(n), kThreads, 0, stream>>>(
+            c0, nf, positions, cv, graph, args, terms.get(), gxe, gue);
+      else if (K <= 16)
+        detail::fused_lrm_term_kernel<S, I, 16><<<grid_for(n), kThreads, 0, stream>>>(
+            c0, nf, positions, cv, graph, args, terms.get(), gxe, gue);
+      else
+        detail::fused_lrm_term_kernel<S, I, 32><<<grid_for(n), kThreads, 0, stream>>>(
+            c0, nf, positions, cv, graph, args, terms.get(), gxe, gue);
       SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::regularizers: LRM kernel launch");
       if (Status s = deterministic_sum(terms.get(), n, &result_device->lrm, stream,
                                        Acc(options.lrm.weight), c0 > 0,
