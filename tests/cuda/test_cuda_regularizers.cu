@@ -1,8 +1,9 @@
 // The fused regulariser step on the GPU (smg/cuda/regularizers.cuh) against the CPU
 // smg::regularizers().
 //
-// Suite "cuda-host" (runs without a GPU): the kernels' per-element steps (fused_*_at,
-// lrm_term_at, lrm_gather_at) run in host loops in the launcher's phase order, with chunks of
+// Suite "cuda-host" (runs without a GPU): the kernels' per-element steps (confidence_inputs_at,
+// confidence_at, fused_rigid_node_at, lrm_term_at, lrm_gather_at, lrm_velocity_chunk_at) run in
+// host loops in the launcher's phase order, with chunks of
 // 1, 2, 3 frames and the whole sequence, for every subset of the terms, float and double, int32
 // and int64 indices, tangent and raw rotation gradients, mean normalisation and hard cases; the
 // plan's memory bound; the host-side argument checks. Double agrees to 1e-11 relative to the
@@ -131,11 +132,12 @@ Out<S> host_scheme(const Case<S, I>& s, const smg::RegularizerOptions& o, const 
       std::vector<S> u(static_cast<std::size_t>(3 * N * nf)), e(static_cast<std::size_t>(N * nf));
       for (Index l = 0; l < nf; ++l)
         for (Index i = 0; i < N; ++i)
-          cd::fused_confidence_inputs_at(l, i, c0, x, graph, inv_w.data(), u.data(), e.data());
+          cd::confidence_inputs_at(l, i, c0, x, graph, inv_w.data(), u.data(), e.data());
       for (Index l = 0; l < nf; ++l)
         for (Index i = 0; i < N; ++i)
-          cd::fused_confidence_at(l, i, c0, graph, inv_w.data(), u.data(), e.data(), cp,
-                                  f.vis ? s.v.data() : nullptr, conf);
+          cd::confidence_at(l, i, c0, graph, inv_w.data(), u.data(), e.data(), cp,
+                            f.vis ? s.v.data() : nullptr, conf, static_cast<S*>(nullptr),
+                            static_cast<S*>(nullptr));
     }
   }
   const S* conf_in = (p.confidence && (p.rigid || p.lrm)) ? conf : nullptr;
@@ -174,7 +176,7 @@ Out<S> host_scheme(const Case<S, I>& s, const smg::RegularizerOptions& o, const 
       const Index s0 = c0 > 0 ? c0 - 1 : 0, s1 = std::min(T, c1 + 1);
       for (Index t = s0; t < s1; ++t)
         for (Index j = 0; j < N; ++j)
-          cd::fused_lrm_velocity_at(t, j, c0, c1, T, N, gn.data(), gn.data() + 3 * n,
+          cd::lrm_velocity_chunk_at(t, j, c0, c1, T, N, gn.data(), gn.data() + 3 * n,
                                     smg::PositionsView<S>(r.gx.data(), T, N));
     }
     double scale = o.lrm.weight;

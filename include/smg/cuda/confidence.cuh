@@ -17,16 +17,36 @@
 namespace smg::cuda {
 
 namespace detail {
-template <class S>
-__global__ void velocities_kernel(PositionsView<const S> x, S* u) {
-  const Index T = x.frames(), N = x.nodes();
-  const int i = frame_item(N);
-  if (i < 0) return;
-  SMG_CUDA_FOR_FRAMES(t, T) {
-    const VelocityFrames f = velocity_frames(t, T);  // (E1)
-    S* out = u + (t * N + i) * 3;
-    for (int c = 0; c < 3; ++c) out[c] = f.moving ? x.ptr(f.plus, i)[c] - x.ptr(f.minus, i)[c] : S(0);
-  }
+// Element (l, i) of the frames c0 … (all of them: c0 = 0, or one chunk of the fused step,
+// cuda/regularizers.cuh): the velocity u_i^{c0+l} (E1) into u [frames][N][3] and the edge change
+// e_i^{c0+l} (E4) into e [frames][N].
+template <class S, class I>
+SMG_HOST_DEVICE inline void confidence_inputs_at(Index l, Index i, Index c0, PositionsView<const S> x,
+                                                 const NeighborsView<S, I>& graph, const S* inv_w,
+                                                 S* u, S* e) {
+  const Index T = x.frames(), N = x.nodes(), t = c0 + l;
+  const VelocityFrames f = velocity_frames(t, T);  // (E1)
+  S* out = u + (l * N + i) * 3;
+  for (int c = 0; c < 3; ++c) out[c] = f.moving ? S(x.ptr(f.plus, i)[c] - x.ptr(f.minus, i)[c]) : S(0);
+  e[l * N + i] = confidence_edge_change(x, graph, inv_w[i], t, i);  // (E4)
+}
+
+// Element (l, i): c_{c0+l, i} (E2)-(E6) into conf [T][N] from confidence_inputs_at's u and e,
+// and c^m, c^r into motion and rigidity [T][N] when they are not null; visibility [T][N] (0/1)
+// or null (all visible).
+template <class S, class I>
+SMG_HOST_DEVICE inline void confidence_at(Index l, Index i, Index c0,
+                                          const NeighborsView<S, I>& graph, const S* inv_w,
+                                          const S* u, const S* e, const ConfidenceConstants<S>& p,
+                                          const std::uint8_t* visibility, S* conf, S* motion,
+                                          S* rigidity) {
+  const Index item = (c0 + l) * graph.nodes() + i;
+  S m(0), r(0);
+  const S c = confidence_node(u, e, graph, inv_w[i], l, i, p, motion ? &m : nullptr,
+                              rigidity ? &r : nullptr);  // (E2)-(E5)
+  if (motion) motion[item] = m;
+  if (rigidity) rigidity[item] = r;
+  if (conf) conf[item] = (visibility == nullptr || visibility[item] ? S(1) : S(0)) * c;  // (E6)
 }
 
 template <class S, class I>
@@ -37,33 +57,22 @@ __global__ void inverse_row_weight_kernel(NeighborsView<S, I> graph, S* inv_w) {
 }
 
 template <class S, class I>
-__global__ void edge_change_kernel(PositionsView<const S> x, NeighborsView<S, I> graph,
-                                   const S* inv_w, S* edge_change) {
-  const Index N = x.nodes();
-  const int i = frame_item(N);
+__global__ void confidence_inputs_kernel(Index c0, Index frames, PositionsView<const S> x,
+                                         NeighborsView<S, I> graph, const S* inv_w, S* u, S* e) {
+  const int i = frame_item(x.nodes());
   if (i < 0) return;
-  SMG_CUDA_FOR_FRAMES(t, x.frames()) {
-    edge_change[t * N + i] = confidence_edge_change(x, graph, inv_w[i], t, i);  // (E4)
-  }
+  SMG_CUDA_FOR_FRAMES(l, frames) confidence_inputs_at(l, Index(i), c0, x, graph, inv_w, u, e);
 }
 
 template <class S, class I>
-__global__ void confidence_kernel(const S* u, const S* edge_change, NeighborsView<S, I> graph,
-                                  const S* inv_w, Index T, ConfidenceConstants<S> p,
-                                  const std::uint8_t* visibility, S* confidence, S* motion,
+__global__ void confidence_kernel(Index c0, Index frames, NeighborsView<S, I> graph,
+                                  const S* inv_w, const S* u, const S* e, ConfidenceConstants<S> p,
+                                  const std::uint8_t* visibility, S* conf, S* motion,
                                   S* rigidity) {
-  const Index N = graph.nodes();
-  const int i = frame_item(N);
+  const int i = frame_item(graph.nodes());
   if (i < 0) return;
-  SMG_CUDA_FOR_FRAMES(t, T) {
-    const Index item = t * N + i;
-    S m(0), r(0);
-    const S c = confidence_node(u, edge_change, graph, inv_w[i], t, i, p, motion ? &m : nullptr,
-                                rigidity ? &r : nullptr);  // (E2)-(E5)
-    if (motion) motion[item] = m;
-    if (rigidity) rigidity[item] = r;
-    if (confidence) confidence[item] = (visibility == nullptr || visibility[item] ? S(1) : S(0)) * c;  // (E6)
-  }
+  SMG_CUDA_FOR_FRAMES(l, frames)
+  confidence_at(l, Index(i), c0, graph, inv_w, u, e, p, visibility, conf, motion, rigidity);
 }
 }  // namespace detail
 
@@ -99,12 +108,12 @@ Status node_confidences(smg::detail::NonDeducedT<PositionsView<const S>> positio
   if (Status s = inv_w.allocate(static_cast<std::size_t>(N), stream); !s) return s;
   if (Status s = e.allocate(static_cast<std::size_t>(T * N), stream); !s) return s;
   const dim3 grid = frame_grid(N, T);
-  detail::velocities_kernel<S><<<grid, kThreads, 0, stream>>>(positions, u.get());
   detail::inverse_row_weight_kernel<S, I><<<grid_for(N), kThreads, 0, stream>>>(graph, inv_w.get());
-  detail::edge_change_kernel<S, I><<<grid, kThreads, 0, stream>>>(positions, graph, inv_w.get(), e.get());
+  detail::confidence_inputs_kernel<S, I><<<grid, kThreads, 0, stream>>>(0, T, positions, graph,
+                                                                          inv_w.get(), u.get(), e.get());
   detail::confidence_kernel<S, I><<<grid, kThreads, 0, stream>>>(
-      u.get(), e.get(), graph, inv_w.get(), T, ConfidenceConstants<S>(options), visibility.data(),
-      confidence.data(), motion.data(), rigidity.data());
+      0, T, graph, inv_w.get(), u.get(), e.get(), ConfidenceConstants<S>(options),
+      visibility.data(), confidence.data(), motion.data(), rigidity.data());
   SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::node_confidences launch");
   return Status::ok();
 }

@@ -142,24 +142,36 @@ __global__ void lrm_gather_kernel(Index T, Index N, Index K, const std::int32_t*
   if (e < T * N) lrm_gather_at(e, N, K, offsets, entries, gx_edges, gu_edges, gx_nodes, gu_nodes);
 }
 
-// Step 3, element e = s·N + j: grad(s, j) += ∂L/∂x^s_j + the velocity parts, u^t = x^{t+1} − x^t
-// (t < T − 1), u^{T−1} = x^{T−1} − x^{T−2} (E1, E16). Same operation order as the CPU pass.
+// Step 3 for the frames [c0, c1) (the whole sequence, or one chunk of the fused step,
+// cuda/regularizers.cuh), element (s, j) for the frames s they reach, c0 − 1 ≤ s ≤ c1 (within
+// [0, T)): adds to grad(s, j) ∂L/∂x^s_j (s in the chunk) and the velocity parts of the chunk's
+// frames t: u^t = x^{t+1} − x^t for t < T − 1 and u^{T−1} = x^{T−1} − x^{T−2} (E1, E16), in the
+// CPU pass's order. gx_nodes, gu_nodes: [c1 − c0][N][3].
 template <class S>
-SMG_HOST_DEVICE inline void lrm_velocity_at(Index e, Index T, Index N, const S* gx_nodes,
-                                            const S* gu_nodes, PositionsView<S> grad) {
-  const Index s = e / N, j = e % N;
+SMG_HOST_DEVICE inline void lrm_velocity_chunk_at(Index s, Index j, Index c0, Index c1, Index T,
+                                                  Index N, const S* gx_nodes, const S* gu_nodes,
+                                                  PositionsView<S> grad) {
   S* dst = grad.ptr(s, j);
-  auto gu = [&](Index t, int c) { return gu_nodes[3 * (t * N + j) + c]; };
+  const auto in = [&](Index t) { return t >= c0 && t < c1; };
+  const auto at = [&](const S* a, Index t, int c) { return a[3 * ((t - c0) * N + j) + c]; };
   for (int c = 0; c < 3; ++c) {
-    S v = dst[c] + gx_nodes[3 * e + c];
+    S v = dst[c];
+    if (in(s)) v += at(gx_nodes, s, c);
     if (T >= 2) {
-      if (s >= 1) v += gu(s - 1, c);
-      if (s < T - 1) v -= gu(s, c);
-      if (s == T - 1) v += gu(T - 1, c);
-      if (s == T - 2) v -= gu(T - 1, c);
+      if (s >= 1 && in(s - 1) && s - 1 < T - 1) v += at(gu_nodes, s - 1, c);
+      if (in(s) && s < T - 1) v -= at(gu_nodes, s, c);
+      if (in(T - 1) && s == T - 1) v += at(gu_nodes, T - 1, c);
+      if (in(T - 1) && s == T - 2) v -= at(gu_nodes, T - 1, c);
     }
     dst[c] = v;
   }
+}
+
+// Step 3 over the whole sequence, element e = s·N + j.
+template <class S>
+SMG_HOST_DEVICE inline void lrm_velocity_at(Index e, Index T, Index N, const S* gx_nodes,
+                                            const S* gu_nodes, PositionsView<S> grad) {
+  lrm_velocity_chunk_at(e / N, e % N, Index(0), T, T, N, gx_nodes, gu_nodes, grad);
 }
 
 template <class S>

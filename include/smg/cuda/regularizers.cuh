@@ -25,7 +25,9 @@
 // much). Every equation is the element functions' (confidence_term.hpp, carap_term.hpp,
 // lrm_term.hpp, common.hpp's confidence_edge_weight), as on the CPU.
 //
-// The per-element steps are host-device functions (fused_*_at): the kernels are thin wrappers,
+// The per-element steps are host-device functions (fused_rigid_node_at here; confidence_inputs_at
+// and confidence_at in cuda/confidence.cuh; lrm_term_at, lrm_gather_at and lrm_velocity_chunk_at
+// in cuda/lrm.cuh, shared with the separate launchers): the kernels are thin wrappers,
 // and tests/cuda/test_cuda_regularizers.cu runs the same steps in host loops against the CPU
 // smg::regularizers() on machines without a GPU.
 #pragma once
@@ -84,6 +86,17 @@ struct FusedRigidConstants {
   }
 };
 
+// gamma(en, g) of every gap and energy, formed once per thread (it reads the device edge count
+// and divides in double) instead of once per edge, gap and direction.
+template <class S>
+struct RigidGammas {
+  Literal<S> v[2][2 * GapList::kCapacity];
+  SMG_HOST_DEVICE explicit RigidGammas(const FusedRigidConstants<S>& c) {
+    for (int en = 0; en < 2; ++en)
+      for (int g = 0; g < c.n_gaps; ++g) v[en][g] = c.gamma(en, g);
+  }
+};
+
 // The rotated edge vector of edge i -> j at frame s (E8): R (row-major, from q_i^s), e = x_j − x_i,
 // d = Rᵀ e and ‖e‖ (= ‖d‖).
 template <class S>
@@ -114,6 +127,7 @@ SMG_HOST_DEVICE inline void fused_rigid_edge_at(PositionsView<const S> x,
 // E10). conf: c [T][N] (row-major) or null (c ≡ 1).
 template <class S>
 SMG_HOST_DEVICE inline void fused_rigid_edge(const FusedRigidConstants<S>& c,
+                                             const RigidGammas<S>& gamma,
                                              PositionsView<const S> x, QuaternionsView<const S> q,
                                              const S* conf, Index t, Index i, Index j, S w,
                                              bool grad, S* energy, S* F, S* Rg) {
@@ -134,7 +148,7 @@ SMG_HOST_DEVICE inline void fused_rigid_edge(const FusedRigidConstants<S>& c,
       RigidEdge<S> es;
       fused_rigid_edge_at(x, q, t + delta, i, j, es);
       for (int en = 0; en < 2; ++en) {
-        const L gm = c.gamma(en, g);
+        const L gm = gamma.v[en][g];
         if (gm == L(0)) continue;
         const S ev = carap_term(S(gm * weight(t, en)), es.dx - e0.dx, es.dy - e0.dy,
                                 es.dz - e0.dz, es.len - e0.len, c.lambda_c[en], c.lambda_l[en],
@@ -150,7 +164,7 @@ SMG_HOST_DEVICE inline void fused_rigid_edge(const FusedRigidConstants<S>& c,
       RigidEdge<S> ep;
       fused_rigid_edge_at(x, q, t - delta, i, j, ep);
       for (int en = 0; en < 2; ++en) {
-        const L gm = c.gamma(en, g);
+        const L gm = gamma.v[en][g];
         if (gm == L(0)) continue;
         carap_term(S(gm * weight(t - delta, en)), e0.dx - ep.dx, e0.dy - ep.dy, e0.dz - ep.dz,
                    e0.len - ep.len, c.lambda_c[en], c.lambda_l[en], px, py, pz, pq);
@@ -181,6 +195,7 @@ SMG_HOST_DEVICE inline void fused_rigid_node_at(
   const Index N = x.nodes(), K = graph.k();
   const bool want_r = grad_tangent != nullptr || grad_raw != nullptr;
   const bool grad = grad_x != nullptr || want_r;
+  const RigidGammas<S> gamma(c);
   S g[3] = {S(0), S(0), S(0)}, r[3] = {S(0), S(0), S(0)};
   for (Index k = 0; k < K; ++k) {
     const Index j = graph.indices(n, k);
@@ -188,7 +203,7 @@ SMG_HOST_DEVICE inline void fused_rigid_node_at(
     const S w = graph.weights(n, k);
     if (!(w > S(0))) continue;  // a zero weight contributes exactly nothing
     S F[3], Rg[3];
-    fused_rigid_edge(c, x, q, conf, t, n, j, w, grad, energy, F, Rg);
+    fused_rigid_edge(c, gamma, x, q, conf, t, n, j, w, grad, energy, F, Rg);
     if (!grad) continue;
     for (int a = 0; a < 3; ++a) {
       g[a] -= F[a];
@@ -201,7 +216,7 @@ SMG_HOST_DEVICE inline void fused_rigid_node_at(
       const S w = graph.weights(i, k);
       if (!(w > S(0))) continue;
       S F[3], Rg[3];
-      fused_rigid_edge(c, x, q, conf, t, i, n, w, true, static_cast<S*>(nullptr), F, Rg);
+      fused_rigid_edge(c, gamma, x, q, conf, t, i, n, w, true, static_cast<S*>(nullptr), F, Rg);
       for (int b = 0; b < 3; ++b) g[b] += F[b];
     }
     S* dst = grad_x + (t * N + n) * 3;
@@ -211,78 +226,6 @@ SMG_HOST_DEVICE inline void fused_rigid_node_at(
     for (int b = 0; b < 3; ++b) grad_tangent[(t * N + n) * 3 + b] += r[b];
   if (grad_raw != nullptr)
     add_quaternion_gradient_from_tangent(q.ptr(t, n), r, grad_raw + (t * N + n) * 4);  // (Q5)
-}
-
-// Phase 1a, element (l, i) of the chunk of frames c0 … : the velocity u_i^{c0+l} (E1) into
-// u [chunk][N][3] and the edge change e_i^{c0+l} (E4) into e [chunk][N].
-template <class S, class I>
-SMG_HOST_DEVICE inline void fused_confidence_inputs_at(Index l, Index i, Index c0,
-                                                       PositionsView<const S> x,
-                                                       const NeighborsView<S, I>& graph,
-                                                       const S* inv_w, S* u, S* e) {
-  const Index T = x.frames(), N = x.nodes(), t = c0 + l;
-  const VelocityFrames f = velocity_frames(t, T);  // (E1)
-  S* out = u + (l * N + i) * 3;
-  for (int c = 0; c < 3; ++c) out[c] = f.moving ? S(x.ptr(f.plus, i)[c] - x.ptr(f.minus, i)[c]) : S(0);
-  e[l * N + i] = confidence_edge_change(x, graph, inv_w[i], t, i);  // (E4)
-}
-
-// Phase 1b, element (l, i): c_{c0+l, i} (E2)-(E6) into conf [T][N] from the chunk's u and e;
-// visibility [T][N] (0/1) or null (all visible).
-template <class S, class I>
-SMG_HOST_DEVICE inline void fused_confidence_at(Index l, Index i, Index c0,
-                                                const NeighborsView<S, I>& graph, const S* inv_w,
-                                                const S* u, const S* e,
-                                                const ConfidenceConstants<S>& p,
-                                                const std::uint8_t* visibility, S* conf) {
-  const Index N = graph.nodes(), item = (c0 + l) * N + i;
-  const S c = confidence_node(u, e, graph, inv_w[i], l, i, p, static_cast<S*>(nullptr),
-                              static_cast<S*>(nullptr));
-  conf[item] = (visibility == nullptr || visibility[item] ? S(1) : S(0)) * c;  // (E6)
-}
-
-// Phase 3, the velocity step of one LRM chunk [c0, c1): element (s, j) for the frames s the
-// chunk reaches, c0 − 1 ≤ s ≤ c1 (within [0, T)): adds to grad(s, j) ∂L/∂x^s_j (s in the chunk)
-// and the velocity parts of the chunk's frames t: u^t = x^{t+1} − x^t for t < T − 1 and
-// u^{T−1} = x^{T−1} − x^{T−2} (E1, E16), in lrm_velocity_at's order. gx, gu: [c1 − c0][N][3].
-template <class S>
-SMG_HOST_DEVICE inline void fused_lrm_velocity_at(Index s, Index j, Index c0, Index c1, Index T,
-                                                  Index N, const S* gx, const S* gu,
-                                                  PositionsView<S> grad) {
-  S* dst = grad.ptr(s, j);
-  const auto in = [&](Index t) { return t >= c0 && t < c1; };
-  const auto at = [&](const S* a, Index t, int c) { return a[3 * ((t - c0) * N + j) + c]; };
-  for (int c = 0; c < 3; ++c) {
-    S v = dst[c];
-    if (in(s)) v += at(gx, s, c);
-    if (T >= 2) {
-      if (s >= 1 && in(s - 1) && s - 1 < T - 1) v += at(gu, s - 1, c);
-      if (in(s) && s < T - 1) v -= at(gu, s, c);
-      if (in(T - 1) && s == T - 1) v += at(gu, T - 1, c);
-      if (in(T - 1) && s == T - 2) v -= at(gu, T - 1, c);
-    }
-    dst[c] = v;
-  }
-}
-
-template <class S, class I>
-__global__ void fused_confidence_inputs_kernel(Index c0, Index frames, PositionsView<const S> x,
-                                               NeighborsView<S, I> graph, const S* inv_w, S* u,
-                                               S* e) {
-  const int i = frame_item(x.nodes());
-  if (i < 0) return;
-  SMG_CUDA_FOR_FRAMES(l, frames) fused_confidence_inputs_at(l, Index(i), c0, x, graph, inv_w, u, e);
-}
-
-template <class S, class I>
-__global__ void fused_confidence_kernel(Index c0, Index frames, NeighborsView<S, I> graph,
-                                        const S* inv_w, const S* u, const S* e,
-                                        ConfidenceConstants<S> p, const std::uint8_t* visibility,
-                                        S* conf) {
-  const int i = frame_item(graph.nodes());
-  if (i < 0) return;
-  SMG_CUDA_FOR_FRAMES(l, frames)
-  fused_confidence_at(l, Index(i), c0, graph, inv_w, u, e, p, visibility, conf);
 }
 
 // Phase 2: one thread per node, frames along y; per-block energy partials [2][blocks] (C-ARAP,
@@ -333,7 +276,7 @@ __global__ void fused_lrm_velocity_kernel(Index s0, Index frames, Index c0, Inde
                                           PositionsView<S> grad) {
   const int j = frame_item(N);
   if (j < 0) return;
-  SMG_CUDA_FOR_FRAMES(l, frames) fused_lrm_velocity_at(s0 + l, Index(j), c0, c1, T, N, gx, gu, grad);
+  SMG_CUDA_FOR_FRAMES(l, frames) lrm_velocity_chunk_at(s0 + l, Index(j), c0, c1, T, N, gx, gu, grad);
 }
 
 // The rigid constants of a call over T frames; edge_count: Σ_i |N(i)| where the kernels read it
@@ -600,10 +543,11 @@ Status regularizers(smg::detail::NonDeducedT<PositionsView<const S>> positions,
     for (Index c0 = 0; c0 < T; c0 += p.conf_chunk) {
       const Index nf = std::min(p.conf_chunk, T - c0);
       const dim3 grid = frame_grid(N, nf);
-      detail::fused_confidence_inputs_kernel<S, I><<<grid, kThreads, 0, stream>>>(
+      detail::confidence_inputs_kernel<S, I><<<grid, kThreads, 0, stream>>>(
           c0, nf, positions, graph, inv_w.get(), u.get(), e.get());
-      detail::fused_confidence_kernel<S, I><<<grid, kThreads, 0, stream>>>(
-          c0, nf, graph, inv_w.get(), u.get(), e.get(), cp, visibility.data(), conf);
+      detail::confidence_kernel<S, I><<<grid, kThreads, 0, stream>>>(
+          c0, nf, graph, inv_w.get(), u.get(), e.get(), cp, visibility.data(), conf,
+          static_cast<S*>(nullptr), static_cast<S*>(nullptr));
     }
     SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::regularizers: confidence kernel launch");
   }
