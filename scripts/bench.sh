@@ -55,7 +55,7 @@ if [ "$smoke" = 1 ] && [ "$publish" = 1 ]; then
   echo "scripts/bench.sh: --smoke results are not publishable" >&2
   exit 2
 fi
-scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev zlib1g-dev python3
+scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev zlib1g-dev libpng-dev libjpeg62-turbo-dev python3
 build=${SMG_BUILD_DIR:-build/release}
 # -DSMG_BUILD_BENCH=ON: build/release may have been configured first by scripts/example.sh without it.
 cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DSMG_WERROR=ON -DSMG_BUILD_BENCH=ON >/dev/null

@@ -7,7 +7,7 @@
 # the same folder. Used by scripts/example.sh, ladder.sh, data_ladder.sh and carap_study.py.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/deps.sh cmake make g++ libeigen3-dev libstb-dev zlib1g-dev
+scripts/deps.sh cmake make g++ libeigen3-dev libstb-dev zlib1g-dev libpng-dev libjpeg62-turbo-dev
 build=${SMG_BUILD_DIR:-build/release}
 first=()
 [ -f "$build/CMakeCache.txt" ] || first=(-DSMG_BUILD_TESTS=OFF -DSMG_BUILD_BENCH=OFF)

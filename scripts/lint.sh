@@ -6,7 +6,7 @@
 # records no -std flag, but clang-tidy's default is C++14.)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev zlib1g-dev cppcheck clang-tidy
+scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev zlib1g-dev libpng-dev libjpeg62-turbo-dev cppcheck clang-tidy
 build=${SMG_BUILD_DIR:-build/lint}
 cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Debug -DCMAKE_EXPORT_COMPILE_COMMANDS=ON -DSMG_BUILD_BENCH=OFF \
       -DSMG_BUILD_TORCH=OFF -DSMG_BUILD_CUDA=OFF >/dev/null

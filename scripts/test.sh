@@ -21,7 +21,7 @@ for arg in "$@"; do
     *) echo "usage: scripts/test.sh [--sanitize]" >&2; exit 2 ;;
   esac
 done
-scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev zlib1g-dev
+scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev zlib1g-dev libpng-dev libjpeg62-turbo-dev
 # Headless Chromium for the view.html test (tests/pipeline/test_view_html.py); optional: without
 # it (not root, or no package) that test prints one "skipped" line.
 scripts/deps.sh chromium >/dev/null 2>&1 || echo "smg: chromium is not installed: the view.html browser test will be skipped"

@@ -348,6 +348,37 @@ inline Array read(const std::string& path, std::uint64_t max_bytes = 0) {
   return a;
 }
 
+// The size of the whole .npy image (preamble + header + the data its dtype and shape declare)
+// whose first `size` bytes are at `data`, from its header alone; 0 while those bytes do not yet
+// hold the whole header. Lets a reader that produces an image piece by piece (an .npz member
+// being inflated) check the size it was told before producing the rest. Throws
+// Error("<what>: ...") on a bad magic, version or header, or a size that overflows.
+inline std::uint64_t declared_size(const unsigned char* data, std::size_t size, const std::string& what) {
+  if (std::memcmp(data, "\x93NUMPY", std::min<std::size_t>(size, 6)) != 0) throw Error(what + ": not an .npy file (bad magic)");
+  if (size < 12) return 0;
+  const int major = data[6];
+  std::uint64_t header_len = 0, preamble = 0;
+  if (major == 1) {
+    header_len = data[8] | (data[9] << 8);
+    preamble = 10;
+  } else if (major == 2 || major == 3) {
+    header_len = data[8] | (data[9] << 8) | (data[10] << 16) | (static_cast<std::uint64_t>(data[11]) << 24);
+    preamble = 12;
+  } else {
+    throw Error(what + ": unsupported npy version " + std::to_string(major));
+  }
+  if (preamble + header_len > size) return 0;
+  const std::string header(reinterpret_cast<const char*>(data) + preamble, static_cast<std::size_t>(header_len));
+  Array a;
+  detail::parse_header_dict(header, what, a);
+  const std::int64_t count = detail::checked_count(a.shape, dtype_size(a.dtype), what);
+  std::uint64_t total = 0;
+  if (!detail::mul_u64(static_cast<std::uint64_t>(count), dtype_size(a.dtype), total) ||
+      total > std::numeric_limits<std::uint64_t>::max() - preamble - header_len)
+    throw Error(what + ": shape " + shape_string(a.shape) + " overflows the byte count");
+  return preamble + header_len + total;
+}
+
 // Parses a whole .npy image held in memory (`size` bytes at `data`, e.g. an .npz member), with
 // the same checks as read(); messages are "<what>: <problem>".
 inline Array parse(const unsigned char* data, std::size_t size, const std::string& what) {

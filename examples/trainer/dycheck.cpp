@@ -94,15 +94,16 @@ class SceneReader {
     const std::vector<unsigned char> b = bytes(rel);
     return labelled([&] { return npy::parse(b.data(), b.size(), rel); });
   }
-  files::Pixels8 png(const std::string& rel) const {
+  // `limits`: the sizes the image may have, checked from its header before it is decoded.
+  files::Pixels8 png(const std::string& rel, const files::ImageLimits& limits) const {
     const std::vector<unsigned char> b = bytes(rel);
-    return labelled([&] { return files::decode_png(b, rel); });
+    return labelled([&] { return files::decode_png(b, rel, limits); });
   }
   // A photograph: JPEG where the name says so (MoSca's images/*.jpg), else PNG.
-  files::Pixels8 photo(const std::string& rel) const {
-    if (!files::is_jpeg_name(rel)) return png(rel);
+  files::Pixels8 photo(const std::string& rel, const files::ImageLimits& limits) const {
+    if (!files::is_jpeg_name(rel)) return png(rel, limits);
     const std::vector<unsigned char> b = bytes(rel);
-    return labelled([&] { return files::decode_jpeg(b, rel); });
+    return labelled([&] { return files::decode_jpeg(b, rel, limits); });
   }
 
  private:
@@ -240,9 +241,7 @@ std::vector<DycheckFrame> read_split(const SceneReader& in, const std::string& r
 
 // A 0/255 one-channel PNG (see the file comment) as 0/1, checked against the expected size.
 std::vector<std::uint8_t> read_binary_png(const SceneReader& in, const std::string& rel, int width, int height) {
-  const files::Pixels8 png = in.png(rel);
-  if (png.width != width || png.height != height)
-    fail(rel, "image is " + size_str(png.width, png.height) + ", expected " + size_str(width, height));
+  const files::Pixels8 png = in.png(rel, files::image_of_size(width, height));  // refused unless width x height
   const int C = png.channels;
   const int colour = (C == 2 || C == 4) ? C - 1 : C;
   std::vector<std::uint8_t> out(static_cast<std::size_t>(width) * static_cast<std::size_t>(height));
@@ -264,12 +263,11 @@ std::vector<std::uint8_t> read_binary_png(const SceneReader& in, const std::stri
 // only words the size message.
 Image read_rgb(const SceneReader& in, const std::string& rel, const Camera& cam, const std::string& camera_rel,
                const char* scale = "2x") {
-  const files::Pixels8 png = in.photo(rel);
+  // Refused before decoding unless of the camera's size.
+  const files::Pixels8 png =
+      in.photo(rel, files::image_of_size(cam.width, cam.height, camera_rel + " gives " + size_str(cam.width, cam.height) + " at " + scale));
   if (png.channels != 3 && png.channels != 4)
     fail(rel, "expected an RGB or RGBA image, found " + std::to_string(png.channels) + " channel(s)");
-  if (png.width != cam.width || png.height != cam.height)
-    fail(rel, "image is " + size_str(png.width, png.height) + ", " + camera_rel + " gives " +
-                  size_str(cam.width, cam.height) + " at " + scale);
   Image im(png.width, png.height, 3);
   const std::size_t n = static_cast<std::size_t>(png.width) * static_cast<std::size_t>(png.height);
   for (std::size_t i = 0; i < n; ++i)
@@ -504,8 +502,12 @@ bool has_folder(const std::string& root, const std::string& rel) {
 std::vector<unsigned char> read_bytes(const std::string& root, const std::string& rel) { return SceneReader(root).bytes(rel); }
 json::Value read_json(const std::string& root, const std::string& rel) { return SceneReader(root).json(rel); }
 npy::Array read_npy(const std::string& root, const std::string& rel) { return SceneReader(root).npy_file(rel); }
-files::Pixels8 read_png(const std::string& root, const std::string& rel) { return SceneReader(root).png(rel); }
-files::Pixels8 read_photo(const std::string& root, const std::string& rel) { return SceneReader(root).photo(rel); }
+files::Pixels8 read_png(const std::string& root, const std::string& rel, const files::ImageLimits& limits) {
+  return SceneReader(root).png(rel, limits);
+}
+files::Pixels8 read_photo(const std::string& root, const std::string& rel, const files::ImageLimits& limits) {
+  return SceneReader(root).photo(rel, limits);
+}
 std::map<std::string, npy::Array> read_npz(const std::string& root, const std::string& rel) {
   const std::vector<unsigned char> b = SceneReader(root).bytes(rel);
   return labelled([&] { return files::parse_npz(b, rel); });

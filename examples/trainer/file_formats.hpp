@@ -1,6 +1,8 @@
 // examples/trainer/file_formats.hpp — the file formats of a scene on disk (docs/data.md) below
-// the layout: whole-file reading, 8-bit PNG decoding (stb_image) and .npz archives (ZIP, as
-// numpy.savez and numpy.savez_compressed write them; deflated members inflated by zlib).
+// the layout: whole-file reading, 8-bit PNG decoding (libpng), JPEG decoding (libjpeg-turbo) and
+// .npz archives (ZIP, as numpy.savez and numpy.savez_compressed write them; deflated members
+// inflated by zlib). Every reader faces files that users bring: each size is checked before
+// anything is allocated for it (docs/data.md, "Files from users").
 //
 // Every reading function takes a `label` (the file as the caller wants it named, e.g.
 // "priors/tracks.npz") and throws std::runtime_error("<label>: <problem>") — npy::Error for the
@@ -23,17 +25,37 @@ namespace trainer::files {
 std::vector<unsigned char> read_bytes(const std::string& path, const std::string& label);
 
 // Pixels of an 8-bit image: [height][width][channels], channels 1 (grey), 2 (grey + alpha),
-// 3 (RGB) or 4 (RGBA); a palette PNG comes as RGB(A). A PNG's exactly as stored.
+// 3 (RGB) or 4 (RGBA); a palette PNG comes as RGB(A), a PNG's tRNS colour as an alpha channel.
 struct Pixels8 {
   int width = 0, height = 0, channels = 0;
   std::vector<std::uint8_t> pixels;
 };
-// Decodes a PNG image held in memory; 16-bit PNGs and other formats (JPEG included) are refused.
-Pixels8 decode_png(const std::vector<unsigned char>& bytes, const std::string& label);
-// Decodes a baseline or progressive JPEG held in memory (stb_image's decoder: within the usual
-// one or two levels of libjpeg's integer IDCT); other formats are refused. Only readers of
-// photographs use it (MoSca's images/): masks and maps stay lossless PNG.
-Pixels8 decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& label);
+
+// The most pixels (width x height) an image may have: 2^26 = 67 108 864 (8192 x 8192; 256 MiB as
+// RGBA 8-bit), far above any camera the trainer reads (Dycheck's iPhone frames are 720 x 960 at 1x).
+constexpr std::uint64_t kMaxImagePixels = std::uint64_t{1} << 26;
+
+// What the caller knows of an image before decoding it. The decoders read the header first and
+// refuse an image whose width x height is not one of `sizes` (when given), or has more than
+// `max_pixels` pixels, before a pixel buffer is allocated: a 300-byte file cannot claim gigabytes.
+struct ImageLimits {
+  std::vector<std::pair<int, int>> sizes;  // allowed {width, height}; empty: any within max_pixels
+  std::string expected;                    // the refusal's tail after "image is WxH, " (empty:
+                                           // "expected WxH" from `sizes`)
+  std::uint64_t max_pixels = kMaxImagePixels;
+};
+// Limits for exactly one size.
+ImageLimits image_of_size(int width, int height, std::string expected = {});
+
+// Decodes an 8-bit PNG held in memory with libpng; 16-bit PNGs and other formats (JPEG included)
+// are refused, as is any libpng error or a file that ends early: "<label>: corrupt PNG (libpng:
+// ...)". libpng's warnings (a bad ancillary chunk) are not printed; the image is read.
+Pixels8 decode_png(const std::vector<unsigned char>& bytes, const std::string& label, const ImageLimits& limits = {});
+// Decodes a baseline or progressive JPEG held in memory with libjpeg-turbo (integer IDCT, as
+// `djpeg -dct int`): grey gives 1 channel, colour 3; CMYK is refused. Any libjpeg warning (corrupt
+// or truncated data, which libjpeg would paper over) is an error, as are more than 1000 scans.
+// Only readers of photographs use it (MoSca's images/): masks and maps stay lossless PNG.
+Pixels8 decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& label, const ImageLimits& limits = {});
 // Whether a file name ends in .jpg or .jpeg (any case): the readers that accept JPEG pick the
 // decoder by the name, as MoSca's glob does.
 bool is_jpeg_name(const std::string& name);
@@ -49,6 +71,11 @@ std::uint32_t crc32(const unsigned char* data, std::size_t n, std::uint32_t crc 
 // numpy's ZIP64 extra field in the local header) are followed. Encrypted members, other methods,
 // members that are not .npy files, duplicate names and any inconsistency of the archive are
 // errors "<label>: member '<name>': <problem>" or "<label>: <problem>".
+// Bounds, checked before a member's buffer is allocated (a deflate bomb is refused, not inflated):
+// a deflated member's recorded size at most 1032 x its compressed size + 1 KiB (DEFLATE's largest
+// ratio) and at most kMaxNpzMemberBytes; the recorded size equal to what the member's own .npy
+// header (inflated first) declares; the output never grows past the recorded size.
+constexpr std::uint64_t kMaxNpzMemberBytes = std::uint64_t{1} << 32;  // 4 GiB
 std::map<std::string, npy::Array> parse_npz(const std::vector<unsigned char>& bytes, const std::string& label);
 
 // An uncompressed .npz archive (every member stored, like numpy.savez) from (key, .npy file

@@ -30,9 +30,11 @@ bool has_folder(const std::string& root, const std::string& rel);
 std::vector<unsigned char> read_bytes(const std::string& root, const std::string& rel);
 json::Value read_json(const std::string& root, const std::string& rel);
 npy::Array read_npy(const std::string& root, const std::string& rel);
-files::Pixels8 read_png(const std::string& root, const std::string& rel);
+// Images: `limits` gives the sizes the image may have, checked from its header before anything
+// is decoded (file_formats.hpp).
+files::Pixels8 read_png(const std::string& root, const std::string& rel, const files::ImageLimits& limits);
 // A photograph: JPEG where the name ends in .jpg / .jpeg (any case), else PNG.
-files::Pixels8 read_photo(const std::string& root, const std::string& rel);
+files::Pixels8 read_photo(const std::string& root, const std::string& rel, const files::ImageLimits& limits);
 std::map<std::string, npy::Array> read_npz(const std::string& root, const std::string& rel);
 // A float array as float32 values (any float dtype, either memory order); non-float refused.
 std::vector<float> float_values(const npy::Array& a, const std::string& rel);

@@ -18,8 +18,12 @@
 //   is outside the image (as Saved2D); x, y kept sub-pixel (Saved2D truncates them). The query
 //   frame is `queries`[:, 0] where present (TAPIR's (t, y, x)), else the first visible frame.
 //   Saved2D's min_valid_cnt (4) filter is left to stage 0's own track rules.
-// - Dynamic masks: epi/error/<stem>.npy [H, W] > epi_th (0.001, MoSca's iPhone setting). Without
-//   epi/error every pixel is dynamic (said in one stderr line).
+// - Dynamic masks: epi/error/*.npy [H, W] > epi_th (0.001, MoSca's iPhone setting), read as
+//   lib_prior/epi_error/epi_analysis.py::load_epi_error reads them: sorted by name, one per image,
+//   in the images' order. MoSca's writer (`thread` there) names each `<image file name>.npy`
+//   (`0_00000.png.npy`); `<stem>.npy` is accepted too; a map whose name belongs to another image,
+//   or a count that differs from the images', is refused. Without epi/error every pixel is
+//   dynamic (said in one stderr line).
 // - Semantics: vos_deva/Annotations/<stem>.png instance ids (R + 256 G + 65536 B, 0 unknown)
 //   become one-hot descriptors (one channel per non-zero id, at most 64) on a grid subsampled to
 //   at most 128 px on its long side; our priors/features/ take precedence when present.
@@ -71,31 +75,34 @@ DycheckFrame mosca_frame(const std::string& stem, int index) {
   return f;
 }
 
-// The images of <rel>/: *.png, *.jpg, *.jpeg (any case of the extension), sorted by stem, as
-// {stem, file name}. A stem with two files (a.png and a.jpg) is refused: which one is the frame?
+// The images of <rel>/: *.png, *.jpg, *.jpeg (any case of the extension), sorted by file name as
+// Saved2D.load_rgb sorts them (lib_prior/prior_loading.py), as {stem, file name}. A stem with two
+// files (a.png and a.jpg) is refused: which one is the frame?
 std::vector<std::pair<std::string, std::string>> mosca_images(const std::string& root, const std::string& rel) {
-  std::map<std::string, std::string> by_stem;
+  std::map<std::string, std::string> by_stem, by_file;
   for (const char* ext : {".png", ".PNG", ".jpg", ".JPG", ".jpeg", ".JPEG"})
     for (const std::string& n : mosca_list(root, rel, ext)) {
       const std::string stem = n.substr(0, n.size() - std::char_traits<char>::length(ext));
       const auto [it, fresh] = by_stem.emplace(stem, n);
       if (!fresh) fail_at(rel + "/" + n, "two images of frame " + stem + " (" + it->second + " too)");
+      by_file.emplace(n, stem);
     }
-  return {by_stem.begin(), by_stem.end()};
+  std::vector<std::pair<std::string, std::string>> out;
+  for (const auto& [file, stem] : by_file) out.emplace_back(stem, file);
+  return out;
 }
 
 // A camera from a Nerfies JSON, at the factor that matches its image (module comment), moved to
 // the trainer's pixel centres.
 Camera mosca_read_camera(const std::string& root, const std::string& rel, const std::string& image_rel) {
-  const files::Pixels8 png = layout_io::read_photo(root, image_rel);
   Camera c = layout_io::read_nerfies_camera(root, rel, 1);
-  if (c.width != png.width || c.height != png.height) {
-    const Camera half = layout_io::read_nerfies_camera(root, rel, 2);
-    if (half.width != png.width || half.height != png.height)
-      fail_at(image_rel, "image is " + std::to_string(png.width) + "x" + std::to_string(png.height) + ", but " + rel + " says " +
-                             std::to_string(c.width) + "x" + std::to_string(c.height) + " (nor half of it)");
-    c = half;
-  }
+  const Camera half = layout_io::read_nerfies_camera(root, rel, 2);
+  // The image may only be of either size: refused from its header, before it is decoded.
+  files::ImageLimits limits;
+  limits.sizes = {{c.width, c.height}, {half.width, half.height}};
+  limits.expected = "but " + rel + " says " + std::to_string(c.width) + "x" + std::to_string(c.height) + " (nor half of it)";
+  const files::Pixels8 png = layout_io::read_photo(root, image_rel, limits);
+  if (c.width != png.width || c.height != png.height) c = half;
   c.cx += 0.5;
   c.cy += 0.5;
   return c;
@@ -132,10 +139,7 @@ std::vector<std::uint8_t> mosca_read_epi(const std::string& root, const std::str
 
 // A mask PNG (any channel count) as first channel > 0: MoSca's test_covisible rule.
 std::vector<std::uint8_t> mosca_read_positive(const std::string& root, const std::string& rel, int W, int H) {
-  const files::Pixels8 png = layout_io::read_png(root, rel);
-  if (png.width != W || png.height != H)
-    fail_at(rel, "image is " + std::to_string(png.width) + "x" + std::to_string(png.height) + ", expected " + std::to_string(W) +
-                     "x" + std::to_string(H));
+  const files::Pixels8 png = layout_io::read_png(root, rel, files::image_of_size(W, H));  // refused unless W x H
   std::vector<std::uint8_t> m(static_cast<std::size_t>(W) * static_cast<std::size_t>(H));
   for (std::size_t i = 0; i < m.size(); ++i) m[i] = png.pixels[i * static_cast<std::size_t>(png.channels)] > 0 ? 1 : 0;
   return m;
@@ -223,10 +227,7 @@ void mosca_read_instances(const std::string& root, DycheckScene& s) {
   for (std::size_t t = 0; t < T; ++t) {
     const std::string rel = dir + s.train[t].name + ".png";
     if (!layout_io::has_file(root, rel)) continue;
-    const files::Pixels8 png = layout_io::read_png(root, rel);
-    if (png.width != s.width || png.height != s.height)
-      fail_at(rel, "image is " + std::to_string(png.width) + "x" + std::to_string(png.height) + ", expected " +
-                       std::to_string(s.width) + "x" + std::to_string(s.height));
+    const files::Pixels8 png = layout_io::read_png(root, rel, files::image_of_size(s.width, s.height));
     if (png.channels < 3) fail_at(rel, "expected RGB instance colours, found " + std::to_string(png.channels) + " channel(s)");
     const std::size_t n = static_cast<std::size_t>(png.width) * static_cast<std::size_t>(png.height), c = static_cast<std::size_t>(png.channels);
     ids[t].resize(n);
@@ -309,8 +310,17 @@ DycheckScene read_mosca(const std::string& dir) {
   s.has_mask.assign(T, 1);
   s.dynamic_mask.assign(T * HW, 1);
   if (layout_io::has_folder(dir, "epi/error")) {
+    // As load_epi_error: sorted(glob("epi/error/*.npy")), one per image in the images' order.
+    const std::vector<std::string> maps = mosca_list(dir, "epi/error", ".npy");
+    if (maps.size() != T)
+      fail_at("epi/error", std::to_string(maps.size()) + " epipolar error maps (*.npy) for " + std::to_string(T) +
+                               " images in images/ (MoSca writes one per image, named <image file name>.npy)");
     for (std::size_t t = 0; t < T; ++t) {
-      const std::vector<std::uint8_t> m = mosca_read_epi(dir, "epi/error/" + stems[t] + ".npy", s.width, s.height);
+      const std::string rel = "epi/error/" + maps[t];
+      if (maps[t] != files[t] + ".npy" && maps[t] != stems[t] + ".npy")
+        fail_at(rel, "sorted as the map of images/" + files[t] + ", expected " + files[t] + ".npy (MoSca's name) or " + stems[t] +
+                         ".npy");
+      const std::vector<std::uint8_t> m = mosca_read_epi(dir, rel, s.width, s.height);
       std::copy(m.begin(), m.end(), s.dynamic_mask.begin() + static_cast<std::ptrdiff_t>(t * HW));
     }
   } else {
@@ -341,7 +351,8 @@ void write_mosca(const std::string& dir, const DycheckScene& s) {
                           files::npz_bytes({{"dep", npy::to_bytes(s.depth.data() + t * HW, {s.height, s.width})}}));
     std::vector<float> err(HW);  // the mask as an epipolar error on either side of epi_th
     for (std::size_t i = 0; i < HW; ++i) err[i] = s.dynamic_mask[t * HW + i] ? 1.0f : 0.0f;
-    layout_io::write_file(dir, "epi/error/" + n + ".npy", npy::to_bytes(err.data(), {s.height, s.width}));
+    // MoSca's name: the image file's name + ".npy" (epi_analysis.py, `thread`).
+    layout_io::write_file(dir, "epi/error/" + n + ".png.npy", npy::to_bytes(err.data(), {s.height, s.width}));
   }
   for (std::size_t v = 0; v < s.val.size(); ++v) {
     const std::string& n = s.val[v].name;

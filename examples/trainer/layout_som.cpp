@@ -84,10 +84,7 @@ std::vector<float> som_read_depth(const std::string& root, const std::string& re
 
 // track_anything/1x/<frame>.png: one channel (grey or grey + alpha), value / 255 > 0.5 = dynamic.
 std::vector<std::uint8_t> som_read_mask(const std::string& root, const std::string& rel, int W, int H) {
-  const files::Pixels8 png = layout_io::read_png(root, rel);
-  if (png.width != W || png.height != H)
-    fail_at(rel, "image is " + std::to_string(png.width) + "x" + std::to_string(png.height) + ", expected " +
-                     std::to_string(W) + "x" + std::to_string(H));
+  const files::Pixels8 png = layout_io::read_png(root, rel, files::image_of_size(W, H));  // refused unless W x H
   if (png.channels > 2) fail_at(rel, "expected a one-channel mask, found " + std::to_string(png.channels) + " channels");
   std::vector<std::uint8_t> m(static_cast<std::size_t>(W) * static_cast<std::size_t>(H));
   for (std::size_t i = 0; i < m.size(); ++i) m[i] = png.pixels[i * static_cast<std::size_t>(png.channels)] > 127 ? 1 : 0;

@@ -248,7 +248,7 @@ TEST_CASE("smg_trainer --export-layout mosca, --data on it; the MoSca layout's r
   const fs::path scene = fs::temp_directory_path() / "smg_test_layout_cli_mosca";
   const fs::path out = fs::temp_directory_path() / "smg_test_layout_cli_mosca_out";
   layout_cli_round_trip(scene, out, "mosca",
-                        {"images/0_00007.png", "cameras/0_00000.json", "sensor_depth/0_00003.npz", "epi/error/0_00002.npy",
+                        {"images/0_00007.png", "cameras/0_00000.json", "sensor_depth/0_00003.npz", "epi/error/0_00002.png.npy",
                          "test_images/1_00000.png", "test_cameras/1_00000.json", "test_covisible/1_00000.png",
                          "uniform_dep=sensor_bootstapir_tap.npz"},
                         "MoSca");

@@ -627,3 +627,14 @@ TEST_CASE("dycheck: the writer names the file or folder it cannot write, and ref
           "depth/2x: the scene to write is inconsistent: depth holds 143 values, expected 144 (frames x height x width)");
   }
 }
+
+// A deflate bomb as priors/tracks.npz (tests/fuzz/corpus/npz, written by tests/fuzz/make_seeds.py):
+// once `smg_trainer: error: std::bad_alloc`, now one line naming the file and the member.
+TEST_CASE("dycheck: deflate bombs in priors/tracks.npz are refused naming the file and the member") {
+  const fs::path corpus = fs::path(SMG_TEST_DATA_DIR) / ".." / "fuzz" / "corpus" / "npz";
+  const fs::path d = fresh("bomb");
+  write_bytes(d / "priors/tracks.npz", slurp(corpus / "bomb-header.npz"));
+  CHECK(read_error(d) == "priors/tracks.npz: member 'uv.npy': its .npy header declares 4000000000128 bytes, the archive records 1048576");
+  write_bytes(d / "priors/tracks.npz", slurp(corpus / "bomb-ratio.npz"));
+  CHECK(starts_with(read_error(d), "priors/tracks.npz: member 'uv.npy' records 1073741824 bytes from "));
+}

@@ -1,4 +1,4 @@
-// PNG writing (read back with stb_image), composition helpers, colour maps, drawing.
+// PNG writing (stb_image_write, read back with libpng: trainer::files::decode_png), composition helpers, colour maps, drawing.
 #include <doctest/doctest.h>
 
 #include <cmath>
@@ -6,10 +6,7 @@
 #include <fstream>
 #include <stdexcept>
 
-#define STB_IMAGE_IMPLEMENTATION
-#define STB_IMAGE_STATIC
-#include <stb/stb_image.h>
-
+#include "trainer/file_formats.hpp"
 #include "trainer/image_io.hpp"
 
 using trainer::Image;
@@ -38,12 +35,13 @@ TEST_CASE("write_png round-trips 8-bit values for 1, 3 and 4 channels; values ar
     im.at(1, 0, 0) = -0.3f;  // clamped to 0
     const std::string path = (image_temp_dir() / ("g" + std::to_string(c) + ".png")).string();
     trainer::write_png(path, im);
-    int w = 0, h = 0, n = 0;
-    unsigned char* data = stbi_load(path.c_str(), &w, &h, &n, 0);
-    REQUIRE(data != nullptr);
+    const trainer::files::Pixels8 read =
+        trainer::files::decode_png(trainer::files::read_bytes(path, path), path, trainer::files::image_of_size(37, 23));
+    const int w = read.width, h = read.height;
+    const unsigned char* data = read.pixels.data();
     CHECK(w == 37);
     CHECK(h == 23);
-    CHECK(n == c);
+    CHECK(read.channels == c);
     int bad = 0;
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x)
@@ -54,7 +52,6 @@ TEST_CASE("write_png round-trips 8-bit values for 1, 3 and 4 channels; values ar
     CHECK(bad == 0);
     CHECK(data[0] == 255);
     CHECK(data[c] == 0);
-    stbi_image_free(data);
   }
 }
 

@@ -191,15 +191,17 @@ TEST_CASE("numpy files: a broken member is an error naming the archive and the m
   CHECK(patched([&](auto& z) { numpy_put_le(z, e + 20, csize / 2, 4); }) == p + ": deflate data ends early (truncated member)");
   CHECK(patched([&](auto& z) { numpy_put_le(z, e + 16, numpy_le(z, e + 16, 4) ^ 1u, 4); }) ==
         "priors/tracks.npz: CRC-32 mismatch in member 'visible.npy' (corrupt archive)");
-  CHECK(patched([&](auto& z) { numpy_put_le(z, e + 24, usize - 1, 4); }) == p + ": decompresses to more than the recorded 3727 bytes");
-  CHECK(patched([&](auto& z) { numpy_put_le(z, e + 24, usize + 1, 4); }) == p + ": decompresses to 3728 bytes, the archive records 3729");
+  // A recorded size that differs from the one the member's .npy header declares: refused once the
+  // header is inflated, before the rest (file_formats.hpp, the bounded inflater).
+  CHECK(patched([&](auto& z) { numpy_put_le(z, e + 24, usize - 1, 4); }) == p + ": its .npy header declares 3728 bytes, the archive records 3727");
+  CHECK(patched([&](auto& z) { numpy_put_le(z, e + 24, usize + 1, 4); }) == p + ": its .npy header declares 3728 bytes, the archive records 3729");
   CHECK(patched([&](auto& z) { numpy_put_le(z, e + 10, 12, 2); }) ==
         "priors/tracks.npz: member 'visible.npy' uses compression method 12 (only stored and deflate are supported)");
   // A final block of the reserved type 3 (the first three bits of the stream: 1, 11).
   CHECK(patched([&](auto& z) { z[data] = 0x07; }) == p + ": corrupt deflate data (zlib: invalid block type)");
   CHECK(patched([&](auto& z) { numpy_put_le(z, e + 24, usize * 2000, 4); }) ==
-        "priors/tracks.npz: corrupt archive (member 'visible.npy' records 7456000 bytes from " + std::to_string(csize) +
-            " compressed)");
+        "priors/tracks.npz: member 'visible.npy' records 7456000 bytes from " + std::to_string(csize) +
+            " compressed (more than DEFLATE's 1032:1; a corrupt or hostile archive)");
 }
 
 TEST_CASE("numpy files: archives numpy writes at test time (random, several sizes) are read element for element") {

@@ -7,7 +7,7 @@ bootstapir_wrapper.py writes its tracks with np.savez_compressed):
   images/<frame>.png                     RGBA, half of the cameras' image_size (as the iPhone release)
   cameras/<frame>.json                   Nerfies JSON at full size (image_size [2W, 2H])
   sensor_depth/<frame>.npz               np.savez_compressed(dep=float32 [H, W]), 0 = no depth
-  epi/error/<frame>.npy                  float32 [H, W] epipolar error (> 0.001 = dynamic)
+  epi/error/<frame>.png.npy              float32 [H, W] epipolar error (> 0.001 = dynamic)
   test_images/, test_cameras/, test_covisible/  camera 1 at time 1 (covisible: pixel > 0)
   uniform_dep=sensor_bootstapir_tap.npz  tracks [T, N, 2] float32, visibility [T, N] bool, queries [N, 3]
   dynamic_dep=sensor_bootstapir_tap.npz  a second file, concatenated along N (no queries)
@@ -69,7 +69,8 @@ def main():
         dep[0, 1] = 5000.0    # beyond MoSca's 1000 m clip: invalid
         np.savez_compressed(os.path.join(HERE, "sensor_depth", name + ".npz"), dep=dep)
         err = np.where(square(t), 0.01, 0.0005).astype(np.float32)  # either side of epi_th 0.001
-        np.save(os.path.join(HERE, "epi/error", name + ".npy"), err)
+        # MoSca names each map after its image file (epi_analysis.py, `thread`): 0_00000.png.npy.
+        np.save(os.path.join(HERE, "epi/error", name + ".png.npy"), err)
         inst = np.zeros((H, W, 4), np.uint8)
         inst[..., 3] = 255
         inst[square(t), :3] = [1, 1, 0]     # id 257

@@ -1,0 +1,136 @@
+// The readers of files users bring, on hostile inputs (docs/data.md, "Files from users"): the
+// regression inputs of tests/fuzz/corpus (a JPEG that wrote out of bounds in stb_image, a 307-byte
+// PNG that made it allocate 1 GB, deflate bombs written by tests/fuzz/make_seeds.py) and image
+// sizes refused from the header, before anything is decoded.
+#include <doctest/doctest.h>
+
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "npy.hpp"
+#include "support/files.hpp"
+#include "trainer/file_formats.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using trainer::files::ImageLimits;
+using trainer::files::Pixels8;
+
+std::vector<unsigned char> untrusted_corpus_file(const std::string& rel) {
+  const fs::path p = fs::path(SMG_TEST_DATA_DIR) / ".." / "fuzz" / "corpus" / rel;
+  return trainer::files::read_bytes(p.string(), rel);
+}
+
+template <class F>
+std::string untrusted_error(F&& f) {
+  try {
+    f();
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+bool untrusted_starts_with(const std::string& s, const std::string& prefix) { return s.compare(0, prefix.size(), prefix) == 0; }
+
+}  // namespace
+
+TEST_CASE("PNG (libpng): the 1 GB allocation input is refused from its header; sizes are checked before decoding") {
+  // As found: its IHDR's CRC is stale (stb_image never checks it); libpng refuses that first.
+  const std::vector<unsigned char> found = untrusted_corpus_file("png/regression-png_1gb_alloc.png");
+  CHECK(found.size() == 307);
+  CHECK(untrusted_error([&] { trainer::files::decode_png(found, "a.png"); }) == "a.png: corrupt PNG (libpng: IHDR: CRC error)");
+  // With the CRC made right (tests/fuzz/make_seeds.py): the pixel bound refuses it from the header.
+  const std::vector<unsigned char> bomb = untrusted_corpus_file("png/regression-png_1gb_alloc-crc.png");
+  CHECK(untrusted_error([&] { trainer::files::decode_png(bomb, "a.png"); }) ==
+        "a.png: image is 16x16712460: more than the 67108864 pixels an image may have");
+  // What every scene reader passes: the camera's size.
+  CHECK(untrusted_error([&] { trainer::files::decode_png(bomb, "a.png", trainer::files::image_of_size(16, 12)); }) ==
+        "a.png: image is 16x16712460, expected 16x12");
+  CHECK(untrusted_error([&] {
+          trainer::files::decode_png(bomb, "a.png", trainer::files::image_of_size(16, 12, "camera/a.json gives 16x12 at 2x"));
+        }) == "a.png: image is 16x16712460, camera/a.json gives 16x12 at 2x");
+  // A good PNG of the wrong size: refused with the size, not decoded.
+  const std::vector<unsigned char> rgba = untrusted_corpus_file("png/rgba.png");
+  ImageLimits two;
+  two.sizes = {{32, 24}, {8, 6}};
+  CHECK(untrusted_error([&] { trainer::files::decode_png(rgba, "b.png", two); }) == "b.png: image is 16x12, expected 32x24 or 8x6");
+  two.sizes.emplace_back(16, 12);
+  const Pixels8 p = trainer::files::decode_png(rgba, "b.png", two);
+  CHECK(p.width == 16);
+  CHECK(p.height == 12);
+  CHECK(p.channels == 4);
+  ImageLimits tight;
+  tight.max_pixels = 16 * 12 - 1;
+  CHECK(untrusted_error([&] { trainer::files::decode_png(rgba, "b.png", tight); }) ==
+        "b.png: image is 16x12: more than the 191 pixels an image may have");
+}
+
+TEST_CASE("PNG (libpng): palette + tRNS as RGBA, 2-bit grey expanded, 16-bit and truncated files refused") {
+  const Pixels8 pal = trainer::files::decode_png(untrusted_corpus_file("png/palette-trns.png"), "p.png");
+  REQUIRE(pal.channels == 4);
+  REQUIRE(pal.pixels.size() == 4 * 3 * 4);
+  // Row 0: indices 0, 1, 2, 1 -> red (alpha 0x80), green (0xff), blue (no tRNS entry: 255), green.
+  CHECK(std::vector<int>(pal.pixels.begin(), pal.pixels.begin() + 8) == std::vector<int>{255, 0, 0, 128, 0, 255, 0, 255});
+  CHECK(int(pal.pixels[8 + 2]) == 255);
+  CHECK(int(pal.pixels[8 + 3]) == 255);
+  const Pixels8 grey = trainer::files::decode_png(untrusted_corpus_file("png/grey2.png"), "g.png");
+  REQUIRE(grey.channels == 1);
+  // 2-bit levels 0, 1, 2, 3, 3 scaled to 8 bits (x 85).
+  CHECK(std::vector<int>(grey.pixels.begin(), grey.pixels.begin() + 5) == std::vector<int>{0, 85, 170, 255, 255});
+  CHECK(untrusted_error([&] { trainer::files::decode_png(untrusted_corpus_file("png/rgb16.png"), "w.png"); }) ==
+        "w.png: 16-bit PNG (8-bit expected)");
+  std::vector<unsigned char> cut = untrusted_corpus_file("png/rgba.png");
+  cut.resize(cut.size() - 20);
+  CHECK(untrusted_starts_with(untrusted_error([&] { trainer::files::decode_png(cut, "c.png"); }), "c.png: corrupt PNG (libpng: "));
+}
+
+TEST_CASE("JPEG (libjpeg-turbo): the stb_image out-of-bounds input is refused as corrupt; truncation is an error") {
+  const std::vector<unsigned char> oob = untrusted_corpus_file("jpeg/regression-jpeg_huffman_oob.jpg");
+  CHECK(oob.size() == 840);
+  const std::string e = untrusted_error([&] { trainer::files::decode_jpeg(oob, "images/0_00000.jpg"); });
+  MESSAGE(e);
+  CHECK(untrusted_starts_with(e, "images/0_00000.jpg: corrupt JPEG (libjpeg: "));
+  const std::vector<unsigned char> good = untrusted_corpus_file("jpeg/baseline.jpg");
+  const Pixels8 p = trainer::files::decode_jpeg(good, "g.jpg", trainer::files::image_of_size(16, 12));
+  CHECK(p.channels == 3);
+  CHECK(p.pixels.size() == 16 * 12 * 3);
+  CHECK(untrusted_error([&] { trainer::files::decode_jpeg(good, "g.jpg", trainer::files::image_of_size(32, 24)); }) ==
+        "g.jpg: image is 16x12, expected 32x24");
+  // libjpeg would pad a truncated file with grey and warn; the warning is an error here.
+  const std::vector<unsigned char> cut(good.begin(), good.end() - 100);
+  CHECK(untrusted_starts_with(untrusted_error([&] { trainer::files::decode_jpeg(cut, "t.jpg"); }), "t.jpg: corrupt JPEG (libjpeg: "));
+}
+
+TEST_CASE("npz: deflate bombs are refused before they are inflated; a consistent one is read within its bound") {
+  // 1 GiB recorded from a few dozen bytes of deflate data: more than DEFLATE's 1032:1.
+  const std::string ratio = untrusted_error([] { trainer::files::parse_npz(untrusted_corpus_file("npz/bomb-ratio.npz"), "priors/tracks.npz"); });
+  CHECK(untrusted_starts_with(ratio, "priors/tracks.npz: member 'uv.npy' records 1073741824 bytes from "));
+  CHECK(ratio.find("more than DEFLATE's 1032:1") != std::string::npos);
+  // 1 MiB recorded (within the ratio), a header declaring 4 TB: refused once the header is out.
+  CHECK(untrusted_error([] { trainer::files::parse_npz(untrusted_corpus_file("npz/bomb-header.npz"), "priors/tracks.npz"); }) ==
+        "priors/tracks.npz: member 'uv.npy': its .npy header declares 4000000000128 bytes, the archive records 1048576");
+  // A real bomb whose sizes agree (1 MiB of zeros in about 1 KiB) is data, read as such.
+  const std::vector<unsigned char> zeros = untrusted_corpus_file("npz/bomb-zeros.npz");
+  CHECK(zeros.size() < 2048);
+  const auto arrays = trainer::files::parse_npz(zeros, "z.npz");
+  REQUIRE(arrays.count("uv") == 1);
+  CHECK(arrays.at("uv").shape == std::vector<std::int64_t>{262144});
+  // The member bound: a ZIP64-sized record is refused from the sizes alone.
+  CHECK(trainer::files::kMaxNpzMemberBytes == (std::uint64_t{1} << 32));
+}
+
+TEST_CASE("npy::declared_size: the whole image's size from its header, 0 until the header is complete") {
+  const std::vector<float> v(6, 1.0f);
+  const std::string b = npy::to_bytes(v.data(), {2, 3});
+  const auto* p = reinterpret_cast<const unsigned char*>(b.data());
+  CHECK(npy::declared_size(p, b.size(), "x") == b.size());
+  CHECK(npy::declared_size(p, 11, "x") == 0);
+  CHECK(npy::declared_size(p, b.size() - 24, "x") == b.size());  // the header alone suffices
+  const std::string bad = "\x93NUMPX";
+  CHECK_THROWS_WITH_AS(npy::declared_size(reinterpret_cast<const unsigned char*>(bad.data()), bad.size(), "x"),
+                       "x: not an .npy file (bad magic)", npy::Error);
+}
