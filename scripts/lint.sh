@@ -16,14 +16,14 @@ echo "== cppcheck"
 # to 12 preprocessor configurations per file, most of which no build uses (298 CPU-s, against
 # 30 for one); it checks instead the three configurations the builds compile: portable (no
 # compiler macros: the scalar fallbacks of core/lanes), GCC/Clang with smg's assertions (the
-# sanitizer build), and GCC/Clang with AVX2+FMA (the vector-extension lanes). The two stb users
-# leave the two named configurations: cppcheck 2.10 takes their __has_include guards for false.
+# sanitizer build), and GCC/Clang with AVX2+FMA (the vector-extension lanes). The stb user
+# leaves the two named configurations: cppcheck 2.10 takes its __has_include guard for false.
 cppcheck_run() {
   cppcheck --quiet --error-exitcode=1 --std=c++17 --language=c++ --inline-suppr -j "$(nproc)" \
     --enable=warning,performance,portability --suppress=missingIncludeSystem \
     --suppress=unknownMacro -I include -I examples/common -i examples/torch "$@" examples
 }
-stb_users=(-i examples/trainer/file_formats.cpp -i examples/trainer/image_io.cpp)
+stb_users=(-i examples/trainer/image_io.cpp)
 cppcheck_run --max-configs=1
 cppcheck_run "${stb_users[@]}" -D__GNUC__ -DSMG_ENABLE_ASSERTS
 cppcheck_run "${stb_users[@]}" -D__GNUC__ -D__AVX__ -D__AVX2__ -D__FMA__

@@ -88,6 +88,7 @@ std::vector<std::pair<std::string, std::string>> mosca_images(const std::string&
       by_file.emplace(n, stem);
     }
   std::vector<std::pair<std::string, std::string>> out;
+  out.reserve(by_file.size());
   for (const auto& [file, stem] : by_file) out.emplace_back(stem, file);
   return out;
 }
