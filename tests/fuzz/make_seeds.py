@@ -3,7 +3,7 @@
 numpy; run from anywhere). The other seeds are copies of the test fixtures (tests/data), and
 files named regression-* are inputs that once crashed or exhausted a reader (kept as found).
 
-  npz/bomb-ratio.npz       a member recording 1 GiB from 1 KiB of deflate data (more than
+  npz/bomb-ratio.npz       a member recording 1 GiB from 115 bytes of deflate data (more than
                            DEFLATE's 1032:1): refused before anything is inflated
   npz/bomb-header.npz      a member recording 1 MiB (within the ratio) whose .npy header declares
                            [1000000000000] float32: refused once the header is inflated
@@ -69,7 +69,7 @@ def write(rel, data):
 
 
 def main():
-    # A 1 KiB deflate stream recorded as 1 GiB.
+    # A 115-byte deflate stream (16 KiB of zeros) recorded as 1 GiB.
     write("npz/bomb-ratio.npz", zip_member("uv.npy", npy_bytes(np.zeros(4096, np.float32)), recorded_size=1 << 30))
     # Recorded size within the ratio (1 MiB from ~1 KiB), header declaring 4 TB.
     body = npy_header_only("(1000000000000,)") + bytes(1 << 20)

@@ -4,6 +4,7 @@
 // sizes refused from the header, before anything is decoded.
 #include <doctest/doctest.h>
 
+#include <cstdint>
 #include <filesystem>
 #include <stdexcept>
 #include <string>
@@ -32,6 +33,27 @@ std::string untrusted_error(F&& f) {
     return e.what();
   }
   return "no error";
+}
+
+// A one-member ZIP whose deflated member `name` records `usize` bytes (ZIP64 fields) from
+// `csize` bytes of data (zeros: never inflated when the sizes are refused).
+std::vector<unsigned char> untrusted_zip64(const std::string& name, std::uint64_t csize, std::uint64_t usize) {
+  std::string z;
+  auto put = [&z](std::uint64_t v, int bytes) {
+    for (int k = 0; k < bytes; ++k) z += static_cast<char>((v >> (8 * k)) & 0xFFu);
+  };
+  put(0x04034b50, 4), put(45, 2), put(0, 2), put(8, 2), put(0, 4), put(0, 4);
+  put(0xFFFFFFFF, 4), put(0xFFFFFFFF, 4), put(name.size(), 2), put(0, 2);
+  z += name;
+  z += std::string(static_cast<std::size_t>(csize), '\0');
+  const std::uint64_t cd = z.size();
+  put(0x02014b50, 4), put(45, 2), put(45, 2), put(0, 2), put(8, 2), put(0, 4), put(0, 4);
+  put(0xFFFFFFFF, 4), put(0xFFFFFFFF, 4), put(name.size(), 2), put(20, 2), put(0, 2), put(0, 2), put(0, 2), put(0, 4), put(0, 4);
+  z += name;
+  put(0x0001, 2), put(16, 2), put(usize, 8), put(csize, 8);
+  const std::uint64_t cd_size = z.size() - cd;
+  put(0x06054b50, 4), put(0, 2), put(0, 2), put(1, 2), put(1, 2), put(cd_size, 4), put(cd, 4), put(0, 2);
+  return {z.begin(), z.end()};
 }
 
 bool untrusted_starts_with(const std::string& s, const std::string& prefix) { return s.compare(0, prefix.size(), prefix) == 0; }
@@ -106,10 +128,10 @@ TEST_CASE("JPEG (libjpeg-turbo): the stb_image out-of-bounds input is refused as
 }
 
 TEST_CASE("npz: deflate bombs are refused before they are inflated; a consistent one is read within its bound") {
-  // 1 GiB recorded from a few dozen bytes of deflate data: more than DEFLATE's 1032:1.
+  // 1 GiB recorded from 115 bytes of deflate data: more than DEFLATE's 1032:1.
   const std::string ratio = untrusted_error([] { trainer::files::parse_npz(untrusted_corpus_file("npz/bomb-ratio.npz"), "priors/tracks.npz"); });
-  CHECK(untrusted_starts_with(ratio, "priors/tracks.npz: member 'uv.npy' records 1073741824 bytes from "));
-  CHECK(ratio.find("more than DEFLATE's 1032:1") != std::string::npos);
+  CHECK(ratio == "priors/tracks.npz: member 'uv.npy' records 1073741824 bytes from 115 compressed (more than DEFLATE's "
+                 "1032:1; a corrupt or hostile archive)");
   // 1 MiB recorded (within the ratio), a header declaring 4 TB: refused once the header is out.
   CHECK(untrusted_error([] { trainer::files::parse_npz(untrusted_corpus_file("npz/bomb-header.npz"), "priors/tracks.npz"); }) ==
         "priors/tracks.npz: member 'uv.npy': its .npy header declares 4000000000128 bytes, the archive records 1048576");
@@ -119,8 +141,15 @@ TEST_CASE("npz: deflate bombs are refused before they are inflated; a consistent
   const auto arrays = trainer::files::parse_npz(zeros, "z.npz");
   REQUIRE(arrays.count("uv") == 1);
   CHECK(arrays.at("uv").shape == std::vector<std::int64_t>{262144});
-  // The member bound: a ZIP64-sized record is refused from the sizes alone.
+  // The member bound: 4 GiB + 1 recorded from 4.2 MB (within DEFLATE's ratio) is refused from the
+  // sizes alone, before anything is allocated or inflated.
   CHECK(trainer::files::kMaxNpzMemberBytes == (std::uint64_t{1} << 32));
+  const std::uint64_t big = (std::uint64_t{1} << 32) + 1, csize = big / 1000;
+  CHECK(untrusted_error([&] { trainer::files::parse_npz(untrusted_zip64("uv.npy", csize, big), "t.npz"); }) ==
+        "t.npz: member 'uv.npy' records 4294967297 bytes (more than the 4 GiB a member may have)");
+  // The same archive recording 1032 x + 1 KiB + 1: the ratio refuses it.
+  CHECK(untrusted_starts_with(untrusted_error([&] { trainer::files::parse_npz(untrusted_zip64("uv.npy", 1000, 1032 * 1000 + 1025), "t.npz"); }),
+                              "t.npz: member 'uv.npy' records 1033025 bytes from 1000 compressed"));
 }
 
 TEST_CASE("npy::declared_size: the whole image's size from its header, 0 until the header is complete") {
