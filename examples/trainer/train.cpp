@@ -157,7 +157,7 @@ int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, const
     trainer::write_dycheck(dir.string(), trainer::to_dycheck(d));
   trainer::TrackQueries q;
   std::vector<float> truth;
-  trainer::export_queries(d, 256, &q, &truth);
+  trainer::export_queries(d, trainer::kQueryCount, &q, &truth);
   trainer::write_track_queries((dir / "queries.json").string(), q);
   npy::write((dir / "queries_tracks3d.npy").string(), truth.data(), {q.count(), d.frames(), 3});
   progress.line("done", trainer::format("scene seed %llu (T=%d %dx%d, %d tracks, %d queries) in %s/ (%.1fs)",
@@ -179,8 +179,9 @@ bool parse(int argc, char** argv, Request& q) {
     return false;
   cfg = trainer::default_config(args.get_switch("quick"));
   trainer::apply_settings(args, &cfg);
-  q.pictures = !args.get_switch("no-pictures");
-  q.view = !args.get_switch("no-view");
+  cfg.image_eval = !args.get_switch("no-image-eval");
+  q.pictures = !args.get_switch("no-pictures") && cfg.image_eval;
+  q.view = !args.get_switch("no-view") && cfg.image_eval;
   q.quiet = args.get_switch("quiet");
   trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
   if (args.given("data")) {
@@ -269,6 +270,14 @@ trainer::TrainerResult train(Request& q, const trainer::Progress& progress) {
                                              : std::string())
               << "\n";
   cli::ensure_writable_dir(q.out);
+  // The query tracks are scored inside the pipeline, after stage 1 and after stage 2, by the
+  // code that scores a procedural run (score_queries).
+  if (q.queries) {
+    trainer::QuerySet set;
+    set.queries = *q.queries;
+    if (q.truth) set.truth = *q.truth;
+    stage0.queries = std::move(set);
+  }
   return trainer::run_trainer(std::move(stage0), progress);
 }
 
@@ -286,17 +295,11 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
   } else if (q.pictures) {
     written = trainer::write_pictures(q.out.string(), r);
   }
-  std::vector<float> tracks;
-  trainer::QueryTrackError te;
-  if (q.queries) {
-    tracks = trainer::carry_queries(*q.queries, r.data, r.nodes, r.model);
+  // The query tracks after stage 2, as the pipeline carried and scored them.
+  const std::vector<float>& tracks = r.query_stage2.tracks;
+  const trainer::QueryTrackError& te = r.query_stage2.all;
+  if (q.queries)
     npy::write((q.out / "tracks3d.npy").string(), tracks.data(), {q.queries->count(), r.data.frames(), 3});
-    if (q.truth) {
-      te = trainer::query_track_error(tracks, *q.truth);
-      progress.line("eval", trainer::format("%d query tracks: EPE %.4f m, within 5 cm %.3f, within 10 cm %.3f",
-                                            q.queries->count(), te.epe, te.within_5cm, te.within_10cm));
-    }
-  }
   trainer::RunRecord rec;
   rec.config = &q.cfg;
   rec.out = q.out.string();
