@@ -132,6 +132,10 @@ const std::vector<Setting>& settings() {
        &export_layout_names, nullptr, nullptr, "dycheck"},
       {"no-pictures", K::flag, "skip the PNG output"},
       {"no-view", K::flag, "skip OUT/view.html, the page of the run (docs/trainer.md)"},
+      {"ply", K::flag,
+       "write OUT/ply/frame_<t>.ply for every frame t: the trained Gaussians at t in the 3DGS PLY layout "
+       "(docs/trainer.md, \"Per-frame PLY\"); on by default with --quick"},
+      {"no-ply", K::flag, "with --quick: skip OUT/ply/"},
       {"quiet", K::flag, "no progress lines"},
       {"help", K::flag, "print this help"}};
   return table;
