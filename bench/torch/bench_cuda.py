@@ -137,8 +137,8 @@ def main():
     # the GPU tables of docs/performance.md unmeasured without anyone noticing (issue 36).
     if not smg.has_cuda:
         print("bench_cuda: error: smg_torch (%s) was built without its CUDA operators (has_cuda is False); "
-              "build it with the pip/setup.py route on a machine with nvcc and a CUDA torch (docs/torch.md, "
-              "\"Building it\"): the CMake route builds the CPU operators only" % os.path.dirname(smg.__file__),
+              "they are built by the pip route only, with nvcc and a CUDA build of torch (docs/torch.md, "
+              "\"Building it\"); the CMake route builds the CPU operators only" % os.path.dirname(smg.__file__),
               file=sys.stderr)
         return 1
     if not torch.cuda.is_available():

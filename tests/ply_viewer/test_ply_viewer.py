@@ -192,6 +192,7 @@ def main():
             failures.append(what)
 
     profile = tempfile.mkdtemp(prefix="smg_ply_profile_")
+    t_start = time.time()
     dt = DevTools(chromium, profile)
     try:
         target = dt.call("Target.createTarget", {"url": "about:blank"}, session=False)["targetId"]
@@ -208,6 +209,7 @@ def main():
             if state.get("ready") or state.get("error"):
                 break
             time.sleep(0.2)
+        print("ply_viewer: page loaded, file read and %d frames drawn in %.1f s" % (state.get("frames", 0), time.time() - t0))
         expect(not state.get("error"), "the viewer loaded the file (%s)" % (state.get("error") or "no error")[:300])
         expect(state.get("count") == count,
                "the viewer's PLY loader read %s splats; the header declares %d" % (state.get("count"), count))
@@ -227,6 +229,7 @@ def main():
         dt.close()
         server.shutdown()
         shutil.rmtree(profile, ignore_errors=True)
+    print("ply_viewer: browser part in %.1f s" % (time.time() - t_start))
     if failures:
         print("ply_viewer: %d check(s) failed" % len(failures))
         return 1
