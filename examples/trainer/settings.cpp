@@ -133,6 +133,10 @@ const std::vector<Setting>& settings() {
       {"no-pictures", K::flag, "skip the PNG output"},
       {"no-view", K::flag, "skip OUT/view.html, the page of the run (docs/trainer.md)"},
       {"no-image-eval", K::flag, "skip rendering after stage 2 (and so the pictures, view.html and renders): metrics.json keeps the 3D errors only (for studies)"},
+      {"ply", K::flag,
+       "write OUT/ply/frame_<t>.ply for every frame t: the trained Gaussians at t in the 3DGS PLY layout "
+       "(docs/trainer.md, \"Per-frame PLY\"); on by default with --quick"},
+      {"no-ply", K::flag, "with --quick: skip OUT/ply/"},
       {"quiet", K::flag, "no progress lines"},
       {"help", K::flag, "print this help"}};
   return table;
