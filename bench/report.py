@@ -14,9 +14,10 @@ numbers. bench/results/torch.json (bench/torch/bench_torch.py) also gives the en
 its PyTorch autograd baseline rows. Standard library only.
 
        bench/report.py --highlights RESULTS_DIR [RESULTS_MD]
+       bench/report.py --highlights-all RESULTS_DIR [RESULTS_MD]   (with the core, graph and skin tables)
        bench/report.py --readme README.md [RESULTS_DIR [RESULTS_MD]]
 
-The README's result highlights: a few short tables and lines generated from the same JSON
+The README's result highlights: two short lines and two tables generated from the same JSON
 (RESULTS_DIR, default bench/results, with gpu/torch_cuda_h100.json when present) and from the
 ablation-ladder tables of RESULTS_MD (default docs/results.md). --highlights prints the block;
 --readme rewrites the lines between "<!-- smg:highlights begin -->" and
@@ -764,7 +765,7 @@ def hl_ladder(results_md):
     return out
 
 
-def highlights(d, results_md=None):
+def highlights(d, results_md=None, full=False):
     """The README's result highlights (the lines between the markers, without them)."""
     results_md = results_md or os.path.join(REPO, "docs", "results.md")
     found = [r for r in (load_result(d, m) for m in ("core", "graph", "energy", "skin", "splat")) if r]
@@ -779,11 +780,17 @@ def highlights(d, results_md=None):
                 + (f", other processes keeping {fmt(min(others))}–{fmt(max(others))} of them busy, so wall "
                    f"times are indicative and process CPU times are given beside them" if others else "")
                 + "); every row, its load and its noise protocol: [docs/performance.md](docs/performance.md).", ""]
+    # Kept short (the README's size budget, scripts/check_docs.py): the energy and splat lines, the
+    # torch table and the ladder; core, graph and skin have their tables in docs/performance.md
+    # (hl_core, hl_graph and hl_skin print them with --highlights-all).
     by = {m: load_result(d, m) for m in ("core", "graph", "energy", "skin", "splat")}
-    for m, fn in (("core", hl_core), ("graph", hl_graph), ("energy", hl_energy), ("skin", hl_skin),
-                  ("splat", hl_splat)):
+    short = (("energy", hl_energy), ("splat", hl_splat))
+    every = (("core", hl_core), ("graph", hl_graph), ("energy", hl_energy), ("skin", hl_skin), ("splat", hl_splat))
+    for m, fn in (every if full else short):
         if by[m]:
             out += fn(by[m])
+    if not full and any(by[m] for m in ("core", "graph", "skin")):
+        out += ["**core, graph, skin**: [docs/performance.md](docs/performance.md).", ""]
     out += hl_torch(d)
     out += hl_ladder(results_md)
     while out and out[-1] == "":
@@ -813,8 +820,8 @@ def main():
     if args and args[0] in ("-h", "--help"):
         print(__doc__)
         return 0
-    if args and args[0] == "--highlights" and 2 <= len(args) <= 3:
-        sys.stdout.write(highlights(args[1], args[2] if len(args) > 2 else None))
+    if args and args[0] in ("--highlights", "--highlights-all") and 2 <= len(args) <= 3:
+        sys.stdout.write(highlights(args[1], args[2] if len(args) > 2 else None, args[0] == "--highlights-all"))
         return 0
     if args and args[0] == "--readme" and 2 <= len(args) <= 4:
         return write_readme(args[1], args[2] if len(args) > 2 else None,

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Checks that the documentation's references resolve inside the repository.
+"""Checks that the documentation's references resolve inside the repository, and that what it says
+about commands, scripts and devices is what the code does.
 
 Usage: scripts/check_docs.py [REPO_ROOT]   (standard library only; exit 1 on any problem)
 
@@ -36,6 +37,25 @@ Usage: scripts/check_docs.py [REPO_ROOT]   (standard library only; exit 1 on any
     "<!-- smg:highlights end -->" equals `bench/report.py --highlights bench/results`, and
     docs/performance.md equals `bench/report.py bench/results` (fix: `bench/report.py --readme
     README.md`, `bench/report.py bench/results > docs/performance.md`).
+
+(h) flag values in those commands are ones the program accepts, read from its own `--help` in
+    build/release/examples (skipped, with one note on stderr, for a program not built there; CI
+    builds them in stage 1): smg_trainer's and scene_preview's choices ("a | b | c") and ranges
+    ("in [lo, hi]"), also for flags handed on by scripts/example.sh, ladder.sh and data_ladder.sh
+    (after `--`); for `smg_cli SUBCOMMAND`, every flag must be one of that subcommand's. Inline
+    `smg_trainer --...`, `scene_preview --...` and `smg_cli SUB ...` in prose count as commands.
+(i) every script a page names (README.md, docs/**, bench/README.md) that has a #! line, or that a
+    command runs directly, is executable in git (mode 100755), and one run directly has a #! line.
+(j) README.md is at most 12 000 bytes.
+(k) smg_torch's devices: the operators with CUDA code are read from examples/torch/smg_torch_*.cpp
+    (an m.def whose implementation calls cuda_ops()); each operator's docstring in
+    smg_torch/__init__.py has exactly the line "Devices: CPU and CUDA tensors." or "Devices: CPU
+    tensors only (a CUDA tensor raises NotImplementedError)." accordingly; every list of operators
+    said to take CUDA tensors ("CUDA tensors for a, b and c", "a, b and c also take CUDA tensors")
+    or to raise NotImplementedError on them, in the module, its comments, the extension's m.doc
+    and the pages, equals the sources' set; no CUDA operator is marked "(CPU)".
+(l) no command says `python` (bookworm has only python3), and `pip install` always carries
+    --no-build-isolation (smg_torch builds against the torch already installed).
 
 Prints one line per problem, "path:line: message", and exits 1 if there are any.
 """
@@ -502,6 +522,113 @@ def split_commands(line):
 OUT_FLAGS = ("--out", "-B", "--prefix", "--json", "-o", "--export-case", "--export-dycheck", "--doc")
 
 
+# (h) flag values against the program's own --help: the choices
+# ("a | b | c") and ranges ("in [lo, hi]") it prints, and for smg_cli each subcommand's flags.
+HELP_BUILD = os.path.join(ROOT, "build", "release", "examples")
+HELP_CACHE = {}
+HELP_MISSING = set()
+
+
+def strip_parentheticals(text):
+    """Removes (...) groups that are not a list of choices, innermost first."""
+    while True:
+        new = re.sub(r"\(([^()]*)\)", lambda m: m.group(0).replace("(", "\x00").replace(")", "\x01")
+                     if " | " in m.group(1) or "in [" in m.group(1) else "", text)
+        if new == text:
+            return new.replace("\x00", "(").replace("\x01", ")")
+        text = new
+
+
+def program_help(program):
+    """{flag: (takes a value, choices or None, (lo, hi) or None)} from `program --help`
+    ("smg_cli graph": the subcommand's), or None when the program is not built."""
+    if program in HELP_CACHE:
+        return HELP_CACHE[program]
+    words = program.split()
+    exe = os.path.join(HELP_BUILD, words[0])
+    flags = None
+    if os.access(exe, os.X_OK):
+        try:
+            out = subprocess.run([exe] + words[1:] + ["--help"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                 timeout=20).stdout.decode("utf-8", "replace")
+        except (OSError, subprocess.TimeoutExpired):
+            out = ""
+        flags = {}
+        lines = out.split("\n")
+        for i, line in enumerate(lines):
+            m = re.match(r"^  (--[\w-]+)(?: (\S+))?\s*$", line)
+            if not m:
+                continue
+            body = []
+            for l in lines[i + 1:]:
+                if not l.startswith("      "):
+                    break
+                body.append(l.strip())
+            help_text = " ".join(body)
+            help_text = strip_parentheticals(help_text)
+            choices = rng = None
+            c = re.search(r"((?:[\w.+-]+ \| )+[\w.+-]+)", help_text)
+            if c:
+                choices = set(c.group(1).split(" | "))
+            r = re.search(r"in \[([-\d.e+]+), ([-\d.e+]+)\]", help_text)
+            if r:
+                rng = (float(r.group(1)), float(r.group(2)))
+            flags[m.group(1)] = (m.group(2) is not None, choices, rng)
+        if not flags:
+            flags = None
+    else:
+        HELP_MISSING.add(words[0])
+    HELP_CACHE[program] = flags
+    return flags
+
+
+def is_placeholder(value):
+    return (not value or re.search(r"[$<>{}*…|]|\.\.\.", value) is not None
+            or re.fullmatch(r"[A-Z][A-Z0-9_./-]*", value) is not None)
+
+
+def check_flag_values(f, n, program, args):
+    """Each --flag among args is one `program --help` lists, with a value among its choices or in
+    its range (values that are placeholders, SCENE or $x, are skipped)."""
+    spec = program_help(program)
+    if spec is None:
+        return
+    i = 0
+    while i < len(args):
+        a = args[i]
+        i += 1
+        if not a.startswith("--") or a == "--":
+            continue
+        name, eq, value = a.partition("=")
+        if name not in spec:
+            if not program.startswith("smg_cli") or name in ("--help",):
+                continue  # the trainer's flags are checked against its sources above
+            problem(f, n, "%s: flag %s is not in `%s --help`" % (program, name, program))
+            continue
+        takes, choices, rng = spec[name]
+        if not takes:
+            continue
+        if not eq:
+            if i >= len(args) or args[i].startswith("-"):
+                continue
+            value = args[i]
+            i += 1
+        if is_placeholder(value):
+            continue
+        if choices and value not in choices:
+            problem(f, n, "%s %s %s: not one of %s (`%s --help`)" % (program, name, value,
+                                                                     " | ".join(sorted(choices)), program))
+        elif rng:
+            try:
+                v = float(value)
+            except ValueError:
+                problem(f, n, "%s %s %s: not a number (`%s --help`)" % (program, name, value, program))
+                continue
+            if not rng[0] <= v <= rng[1]:
+                problem(f, n, "%s %s %s: outside [%g, %g] (`%s --help`)" % (program, name, value, rng[0], rng[1],
+                                                                            program))
+
+
 def check_command(f, n, toks, state):
     """One command (a token list); state: cwd and the build folders made on this page."""
     toks = [t.strip("[]") for t in toks]
@@ -514,6 +641,8 @@ def check_command(f, n, toks, state):
     if not toks:
         return
     prog, args = toks[0], toks[1:]
+    if prog in ("smg_trainer", "scene_preview", "smg_cli"):
+        prog = "build/release/examples/" + prog  # the program as a page names it in prose
     for e in env:
         for v in e.split("=", 1)[1].split(":"):
             if looks_like_path(v):
@@ -596,6 +725,9 @@ def check_command(f, n, toks, state):
         elif not rel.startswith("build/") and rel.endswith(SCRIPT_EXT + ("run",)):
             text = TEXT.get(rel, "")
             dest = PASS_ON.get(rel)
+            if dest and dest[0] == TRAINER_SRC:
+                check_flag_values(f, n, "smg_trainer", args[args.index("--") + 1:] if dest[1] and "--" in args
+                                  else ([] if dest[1] else args))
             after = False
             for a in args:
                 if a == "--":
@@ -611,6 +743,10 @@ def check_command(f, n, toks, state):
         elif rel.startswith("build/"):
             name = os.path.basename(rel)
             src = PROGRAM_SRC.get(name)
+            if name in ("smg_trainer", "scene_preview"):
+                check_flag_values(f, n, name, args)
+            elif name == "smg_cli" and args and re.fullmatch(r"[a-z]+", args[0]):
+                check_flag_values(f, n, "smg_cli " + args[0], args[1:])
             kind = "trainer" if src == TRAINER_SRC else "program"
             if name.startswith("bench_"):
                 src, kind = ("bench/",), "bench"
@@ -642,7 +778,8 @@ def check_command(f, n, toks, state):
 
 
 CMD_START = re.compile(r"^(?:[A-Za-z_]\w*=\S*\s+)*(?:time\s+)?(?:scripts/|build/|\.ci/|bench/\S+\.py|"
-                       r"examples/\S+\.py|python3?\s|/usr/bin/python3\s|cmake\s|ctest\s|cd\s)")
+                       r"examples/\S+\.py|python3?\s|/usr/bin/python3\s|cmake\s|ctest\s|cd\s|"
+                       r"smg_trainer\s+-|scene_preview\s+-|smg_cli\s+[a-z]+\s)")
 
 
 def doc_commands(text):
@@ -695,6 +832,140 @@ for f in CMD_PAGES:
             check_command(f, n, cmd, state)
 
 # ---------------------------------------------------------------------------------------------
+# (i) scripts the docs name are executable
+DOC_PAGES = sorted(f for f in TEXT if f.endswith(".md") and (f in ("README.md", "bench/README.md")
+                                                             or f.startswith("docs/")))
+
+
+def git_modes():
+    try:
+        out = subprocess.run(["git", "-C", ROOT, "ls-files", "-s", "-z"], check=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL).stdout.decode("utf-8", "replace")
+        return {e.split("\t", 1)[1]: e.split()[0] for e in out.split("\0") if "\t" in e}
+    except (OSError, subprocess.CalledProcessError):
+        return {}
+
+
+MODES = git_modes()
+SCRIPT_NAME = re.compile(r"(?<![\w/.-])((?:scripts|bench|examples|tests|\.ci)/[\w./-]*\.(?:sh|py)|\.ci/run)\b")
+RUN_AS_COMMAND = set()
+for f in CMD_PAGES:
+    for n, line in doc_commands(TEXT[f]):
+        for cmd in split_commands(line):
+            cmd = [t for t in cmd if not re.match(r"^[A-Za-z_]\w*=", t)]
+            if cmd and SCRIPT_NAME.fullmatch(cmd[0]):
+                RUN_AS_COMMAND.add((cmd[0], f, n))
+named = {}
+for f in DOC_PAGES:
+    for m in SCRIPT_NAME.finditer(TEXT[f]):
+        named.setdefault(m.group(1), (f, TEXT[f].count("\n", 0, m.start()) + 1))
+for script, f, n in sorted(RUN_AS_COMMAND):
+    named.setdefault(script, (f, n))
+for script, (f, n) in sorted(named.items()):
+    text = TEXT.get(script)
+    if text is None:
+        continue  # a missing file is (f)'s problem
+    as_command = any(s == script for s, _, _ in RUN_AS_COMMAND)
+    shebang = text.startswith("#!")
+    mode = MODES.get(script) or ("100755" if os.access(os.path.join(ROOT, script), os.X_OK) else "100644")
+    if (shebang or as_command) and mode != "100755":
+        problem(f, n, "%s is named here but is not executable (mode %s; fix: git update-index --chmod=+x %s)"
+                % (script, mode, script))
+    if as_command and not shebang:
+        problem(f, n, "%s is run as a command here but has no #! line" % script)
+
+# ---------------------------------------------------------------------------------------------
+# (j) the README's size budget
+README_BUDGET = 12000
+if "README.md" in TEXT and len(TEXT["README.md"].encode("utf-8")) > README_BUDGET:
+    problem("README.md", 1, "%d bytes, over the budget of %d: move detail to docs/"
+            % (len(TEXT["README.md"].encode("utf-8")), README_BUDGET))
+
+# ---------------------------------------------------------------------------------------------
+# (k) the devices smg_torch's operators take, as its sources say, in its docstrings and the docs
+TORCH_CPP = {f: t for f, t in TEXT.items() if re.match(r"examples/torch/smg_torch_\w+\.cpp$", f)}
+TORCH_INIT = "examples/torch/smg_torch/__init__.py"
+
+
+def torch_cuda_operators():
+    """(every operator of smg_torch._C, the ones with CUDA code): an m.def("name", ...) whose body
+    or implementation function calls cuda_ops(); dqb_forward/dqb_backward are dqb, render_* render."""
+    every, cuda = set(), set()
+    for text in TORCH_CPP.values():
+        with_cuda = set()
+        for m in re.finditer(r"\n(?:[\w:<>,]+\s+)+(\w+)\((?:[^()]|\([^()]*\))*\)\s*\{", text):
+            end = text.find("\n}", m.end())
+            if "cuda_ops()" in text[m.end():end]:
+                with_cuda.add(m.group(1))
+        defs = list(re.finditer(r'm\.def\(\s*"(\w+)"', text))
+        for k, m in enumerate(defs):
+            name = m.group(1)
+            if name.startswith("_") or name in ("set_memory_limit", "memory_limit"):
+                continue
+            body = text[m.end():defs[k + 1].start() if k + 1 < len(defs) else len(text)]
+            op = re.sub(r"_(forward|backward)$", "", name)
+            every.add(op)
+            if any(re.search(r"\b%s\b" % re.escape(fn), body) for fn in with_cuda) or "cuda_ops()" in body:
+                cuda.add(op)
+    return every, cuda
+
+
+if TORCH_CPP and TORCH_INIT in TEXT:
+    OPS, CUDA_OPS = torch_cuda_operators()
+    init = TEXT[TORCH_INIT]
+    want = {True: "Devices: CPU and CUDA tensors.",
+            False: "Devices: CPU tensors only (a CUDA tensor raises NotImplementedError)."}
+    for op in sorted(OPS):
+        m = re.search(r'\ndef %s\((?:.|\n)*?\)(?:\s*->[^:\n]*)?:\n\s*"""((?:.|\n)*?)"""' % re.escape(op), init)
+        if not m:
+            problem(TORCH_INIT, 1, "no docstring for smg_torch.%s (the _C module defines it)" % op)
+            continue
+        line = init.count("\n", 0, m.start(1)) + 1
+        devices = re.findall(r"Devices: [^\n]*", m.group(1))
+        if devices != [want[op in CUDA_OPS]]:
+            problem(TORCH_INIT, line, "smg_torch.%s's docstring must say \"%s\" (its C++ %s CUDA code), not %s"
+                    % (op, want[op in CUDA_OPS], "has" if op in CUDA_OPS else "has no", devices or "nothing"))
+    # Lists of operators said to take CUDA tensors, or to raise NotImplementedError on them, in the
+    # module's docstrings and comments, the extension's m.doc and the docs: each equals the sources' set.
+    names = "|".join(sorted(OPS, key=len, reverse=True))
+    op_list = r"((?:`?(?:%s)`?(?:,\s+|\s+and\s+|\s+or\s+|,\s+and\s+))+`?(?:%s)`?)" % (names, names)
+    places = [TORCH_INIT, "examples/torch/smg_torch_ext.cpp"] + DOC_PAGES
+    for f in places:
+        text = TEXT.get(f, "")
+        flat = re.sub(r"\s+", " ", re.sub(r"\n\s*(?:#:?|//)\s*", " ", text))
+        for m in re.finditer(r"(?:CUDA tensors (?:for|to) |CUDA operators? (?:for )?)" + op_list, flat):
+            got = set(re.findall(r"\b(%s)\b" % names, m.group(1)))
+            if got != CUDA_OPS:
+                problem(f, 1, "lists %s as the operators on CUDA tensors; the sources say %s"
+                        % (", ".join(sorted(got)), ", ".join(sorted(CUDA_OPS))))
+        for m in re.finditer(op_list + r"(?: also)? (?:take|takes|run on|accept) CUDA tensors", flat):
+            got = set(re.findall(r"\b(%s)\b" % names, m.group(1)))
+            if got != CUDA_OPS:
+                problem(f, 1, "lists %s as the operators that take CUDA tensors; the sources say %s"
+                        % (", ".join(sorted(got)), ", ".join(sorted(CUDA_OPS))))
+        for m in re.finditer(r"(?:\(|: )" + op_list + r"\)?[^.]{0,40}?NotImplementedError|NotImplementedError[^.]{0,60}?\(" + op_list + r"\)", flat):
+            got = set(re.findall(r"\b(%s)\b" % names, m.group(1) or m.group(2)))
+            if got != OPS - CUDA_OPS:
+                problem(f, 1, "lists %s as the CPU-only operators; the sources say %s"
+                        % (", ".join(sorted(got)), ", ".join(sorted(OPS - CUDA_OPS))))
+        for m in re.finditer(r"`?(%s)`?[^.;\n]{0,60}?\((?:CPU|CPU only|CPU-only|CPU tensors)\)" % names, flat):
+            if m.group(1) in CUDA_OPS:
+                problem(f, 1, "marks %s as CPU-only; its C++ has CUDA code" % m.group(1))
+
+# ---------------------------------------------------------------------------------------------
+# (l) Python commands as a Debian user can run them: `python3` (bookworm has no `python`), and
+# pip only with --no-build-isolation (smg_torch builds against the torch already installed)
+for f in CMD_PAGES:
+    for n, line in doc_commands(TEXT[f]):
+        for cmd in split_commands(line):
+            toks = [t for t in cmd if not re.match(r"^[A-Za-z_]\w*=", t)]
+            if toks and toks[0] == "python":
+                problem(f, n, "`python` is not a command on Debian bookworm: say python3")
+            if toks and os.path.basename(toks[0]) in ("pip", "pip3") and "install" in toks and \
+                    "--no-build-isolation" not in toks:
+                problem(f, n, "pip install without --no-build-isolation (docs/torch.md, \"Building it\")")
+
+# ---------------------------------------------------------------------------------------------
 # (g) generated text is current
 import importlib.util  # noqa: E402
 
@@ -735,6 +1006,9 @@ if report is not None:
         problem("docs/performance.md", 1, "differs from what bench/report.py generates from bench/results "
                 "(run: python3 bench/report.py bench/results > docs/performance.md)")
 
+if HELP_MISSING:
+    print("check_docs: note: not built, so their flag values were not checked: %s (build/release/examples)"
+          % ", ".join(sorted(HELP_MISSING)), file=sys.stderr)
 for p in problems:
     print(p)
 sys.exit(1 if problems else 0)

@@ -4,7 +4,11 @@
 #      docs/quickstart.md's find_package command block run as written (examples/quickstart);
 #   2. add_subdirectory(smg) from that project;
 #   3. copying include/ next to Eigen: README's "Copy the headers" command block run as written
-#      on a quick-start program, and a plain compiler call on tests/consumer.
+#      on a quick-start program, and a plain compiler call on tests/consumer;
+#   4. the pip route to smg_torch (docs/torch.md's "pip" block: a venv that sees Debian's torch,
+#      pip install --no-build-isolation ./examples/torch, import), then tests/torch/test_energy.py
+#      against the installed package. Skipped with one line where /usr/bin/python3 has no torch
+#      or no venv module (scripts/deps.sh python3-torch python3-venv, as root).
 # The command blocks are the fenced blocks after "<!-- run: NAME -->" in those pages; they run
 # in a fresh copy of the repository's tracked files (git ls-files) with HOME in a scratch folder.
 set -euo pipefail
@@ -65,3 +69,32 @@ cp examples/quickstart/energies.cpp "$work/fresh/my_project/main.cpp"
   { echo "packaging: README.md copied-headers block failed" >&2; exit 1; }
 "$work/fresh/my_project/main" | tail -n 1 | grep -qx "quickstart energies: ok"
 echo "packaging: README.md copied-headers route, as written: ok"
+
+# 4. The pip route, as docs/torch.md shows it, in the fresh copy (the build's files stay there).
+# Cheaper than the documented default and the same route: CFLAGS=-g0 drops the -g that Debian's
+# Python adds, SMG_TORCH_OPT=-O1 replaces -O3 (setup.py), MAX_JOBS = the cores (ninja's jobs).
+# Measured on smg_torch_energy.cpp, CPU-seconds: 53 as documented, 36 with -g0, 24 with -g0 -O1.
+scripts/deps.sh python3-venv >/dev/null 2>&1 || true
+if /usr/bin/python3 -c "import torch" >/dev/null 2>&1 && /usr/bin/python3 -m venv "$work/venv-probe" >/dev/null 2>&1; then
+  block=$(run_block docs/torch.md pip)
+  [ -n "$block" ] || { echo "packaging: docs/torch.md has no pip block" >&2; exit 1; }
+  t0=$(date +%s)
+  (cd "$work/fresh/smg" && HOME="$work/home" CFLAGS=-g0 SMG_TORCH_OPT=-O1 MAX_JOBS="$(nproc)" PYTHONPATH= \
+     bash -euo pipefail -c "$block") >"$work/pip.log" 2>&1 ||
+    { cat "$work/pip.log"; echo "packaging: docs/torch.md pip block failed" >&2; exit 1; }
+  where=$(cd "$work/fresh/smg" && PYTHONPATH= V/bin/python3 -c "import smg_torch; print(smg_torch.__file__)")
+  case "$where" in
+    "$work/fresh/smg/V/"*) ;;
+    *) echo "packaging: the venv imported smg_torch from $where, not from its own site-packages" >&2; exit 1 ;;
+  esac
+  if /usr/bin/python3 -c "import pytest" >/dev/null 2>&1; then
+    (cd "$work/fresh/smg" && PYTHONPATH= V/bin/python3 -m pytest -q -p no:cacheprovider tests/torch/test_energy.py) \
+      >"$work/pip-test.log" 2>&1 || { cat "$work/pip-test.log"; echo "packaging: tests/torch/test_energy.py failed against the pip-installed smg_torch" >&2; exit 1; }
+    tested=", tests/torch/test_energy.py: $(tail -n 1 "$work/pip-test.log")"
+  else
+    tested=" (python3-pytest missing: tests/torch/test_energy.py not run)"
+  fi
+  echo "packaging: docs/torch.md pip route (venv, --no-build-isolation, import smg_torch from $where): ok in $(( $(date +%s) - t0 ))s$tested"
+else
+  echo "packaging: pip route skipped: /usr/bin/python3 lacks torch or venv (scripts/deps.sh python3-torch python3-venv)"
+fi

@@ -24,12 +24,25 @@ T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8
         18: 2.101, 19: 2.093, 20: 2.086, 25: 2.060, 30: 2.042}
 
 # (key, column title, decimals, +1 if higher is better, -1 if lower is better)
+# The query EPE (the surface query tracks users report, metrics.json epe_query after stage 2) comes
+# first among the 3D errors; node EPE ("epe") is the diagnostic (docs/results.md).
 METRICS = [("test_psnr_masked", "masked PSNR (dB)", 2, +1),
            ("test_ssim", "SSIM", 4, +1),
            ("test_ssim_masked", "masked SSIM", 4, +1),
-           ("epe", "3D EPE (m)", 4, -1),
-           ("epe_hidden", "EPE unobserved (m)", 4, -1),
-           ("delta_10", "δ10", 3, +1)]
+           ("query_epe", "query EPE (m)", 4, -1),
+           ("query_epe_hidden", "query EPE hidden (m)", 4, -1),
+           ("epe", "node EPE (m)", 4, -1),
+           ("epe_hidden", "node EPE unobserved (m)", 4, -1),
+           ("delta_10", "node δ10", 3, +1)]
+
+
+def flatten_queries(m):
+    """Adds query_epe / query_epe_hidden (after stage 2) to a run's metrics where it has epe_query."""
+    q = m.get("epe_query")
+    if q:
+        m["query_epe"] = q["stage2"]["all"]["epe"]
+        m["query_epe_hidden"] = q["stage2"].get("hidden", {}).get("epe")
+    return m
 # Comparisons of the paper's order (full >= no-lrm >= no-carap ~ smg-only > base; full > mosca),
 # each as (A, B, what A - B isolates).
 PAIRS = [("full", "no-lrm", "LRM on top of C-ARAP"),
@@ -62,10 +75,11 @@ def fmt(mu, half, nd):
     return f"{mu:.{nd}f}" if math.isnan(half) else f"{mu:.{nd}f} ± {half:.{nd}f}"
 
 
-def study_arguments(default_out):
+def study_arguments(default_out, extra=None):
     """The command line the stage-1 studies share (scripts/carap_study.py, scripts/failure_study.py):
     parses it and returns it, with --trainer resolved: without it the trainer is first built into
-    build/release (scripts/build_trainer.sh, as scripts/ladder.sh does) and that binary is used."""
+    build/release (scripts/build_trainer.sh, as scripts/ladder.sh does) and that binary is used.
+    `extra(parser)`, when given, adds a study's own arguments."""
     import subprocess
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", default="0 1 2 3 4")
@@ -74,6 +88,8 @@ def study_arguments(default_out):
     ap.add_argument("--doc", default="docs/results.md")
     ap.add_argument("--trainer", default=None,
                     help="the smg_trainer to run (default: build it into build/release first)")
+    if extra:
+        extra(ap)
     a = ap.parse_args()
     if a.trainer is None:
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -113,8 +129,8 @@ def main():
             path = os.path.join(a.out, f"{v}_s{s}", "metrics.json")
             if not os.path.exists(path):
                 sys.exit(f"ladder_report.py: {path}: missing (run scripts/ladder.sh without --report-only)")
-            runs[v].append(json.load(open(path)))
-    metrics = [m for m in METRICS if m[0] in runs[variants[0]][0]]
+            runs[v].append(flatten_queries(json.load(open(path))))
+    metrics = [m for m in METRICS if all(r.get(m[0]) is not None for v in variants for r in runs[v])]
     n = len(seeds)
 
     head = "| variant | " + " | ".join(m[1] for m in metrics) + " | time (s) |\n|---|" + "---:|" * (len(metrics) + 1)
@@ -173,7 +189,7 @@ Verdict per metric: **better** or *worse* when the interval of A − B excludes 
 {vhead}
 """ + "\n".join(verdicts) + """
 
-Per seed (masked PSNR dB / 3D EPE m / EPE on unobserved samples m):
+Per seed (masked PSNR dB / node EPE m / node EPE on unobserved samples m):
 
 """ + "\n".join(per_seed) + f"\n<!-- /ladder:{a.section} -->\n"
 

@@ -22,9 +22,12 @@ for arg in "$@"; do
   esac
 done
 scripts/deps.sh cmake make g++ libeigen3-dev doctest-dev libbenchmark-dev libstb-dev zlib1g-dev libpng-dev libjpeg62-turbo-dev
-# Headless Chromium for the view.html test (tests/pipeline/test_view_html.py); optional: without
-# it (not root, or no package) that test prints one "skipped" line.
-scripts/deps.sh chromium >/dev/null 2>&1 || echo "smg: chromium is not installed: the view.html browser test will be skipped"
+# Headless Chromium for the view.html and PLY viewer tests (tests/pipeline/test_view_html.py,
+# tests/ply_viewer/test_ply_viewer.py, which also needs npm and the npm registry); optional:
+# without it (not root, or no package) those tests print one "skipped" line.
+scripts/deps.sh chromium >/dev/null 2>&1 || echo "smg: chromium is not installed: the view.html and PLY viewer browser tests will be skipped"
+# numpy and meshio read the trainer's PLY files (tests/pipeline/test_ply_readers.py); optional too.
+scripts/deps.sh python3-numpy python3-meshio >/dev/null 2>&1 || echo "smg: python3-numpy/python3-meshio not installed: the PLY readers test skips or reads with numpy only"
 jobs=$(nproc)
 if [ "$mode" = asan ]; then
   build=${SMG_BUILD_DIR:-build/asan}

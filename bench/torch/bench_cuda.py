@@ -19,7 +19,9 @@ Scaling (--scaling): the energies at bench_torch.SCALING_SIZES (5k x 100 ... 200
 (torch.cuda.max_memory_allocated after a reset, minus what was allocated before: the inputs);
 a peer whose extrapolated peak exceeds 90 % of the device's memory is skipped, one that runs out
 of memory is reported so.
-Prints a markdown table with the device name; --json writes the rows.
+Prints a markdown table with the device name; --json writes the rows. Without a CUDA device,
+or with an smg_torch built without its CUDA operators (the CMake route), it prints one
+"bench_cuda: error: ..." line on stderr and exits 1.
 """
 import argparse
 import functools
@@ -35,7 +37,10 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, os.path.join(ROOT, "tests", "torch"))
 sys.path.insert(0, HERE)
 
-import smg_torch as smg  # noqa: E402
+try:
+    import smg_torch as smg  # noqa: E402
+except ImportError as e:
+    sys.exit("bench_cuda: error: cannot import smg_torch (%s): put the package on PYTHONPATH (docs/torch.md)" % e)
 import torch_reference as ref  # noqa: E402
 from bench_torch import (SCALING_QUICK, SCALING_SIZES, compiled_peer, energy_fused, energy_ref,  # noqa: E402
                          energy_scene, energy_smg, fwd_bwd, print_scaling, scaling_json, scaling_scene,
@@ -128,9 +133,17 @@ def main():
     ap.add_argument("--scaling", action="store_true",
                     help="only the scaling table (bench_torch.SCALING_SIZES; tiny sizes with --quick)")
     args = ap.parse_args()
-    if not (torch.cuda.is_available() and smg.has_cuda):
-        print("bench_cuda: skipped (no CUDA device, or smg_torch built without CUDA)")
-        return 0
+    # Nothing to measure is a failure, not a skip: a run that printed "skipped" and exited 0 left
+    # the GPU tables of docs/performance.md unmeasured without anyone noticing (issue 36).
+    if not smg.has_cuda:
+        print("bench_cuda: error: smg_torch (%s) was built without its CUDA operators (has_cuda is False); "
+              "they are built by the pip route only, with nvcc and a CUDA build of torch (docs/torch.md, "
+              "\"Building it\"); the CMake route builds the CPU operators only" % os.path.dirname(smg.__file__),
+              file=sys.stderr)
+        return 1
+    if not torch.cuda.is_available():
+        print("bench_cuda: error: no CUDA device (torch.cuda.is_available() is False)", file=sys.stderr)
+        return 1
     dev = torch.device("cuda")
     name = torch.cuda.get_device_name(dev)
     # A CUDA build of smg_torch registers every operator's CUDA launch (smg_torch_cuda.cu's

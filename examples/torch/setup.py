@@ -1,8 +1,13 @@
-"""The torch.utils.cpp_extension route (pip-installed torch, no CMake): builds smg_torch._C
-from examples/torch/*.cpp over smg's headers and Eigen, and installs the smg_torch package.
+"""The pip route (torch.utils.cpp_extension, no CMake; pyproject.toml declares the build):
+builds smg_torch._C from examples/torch/*.cpp over smg's headers and Eigen, against the torch
+already installed, and installs the smg_torch package (docs/torch.md, "Building it"):
 
-    cd examples/torch && pip install .            # or: python setup.py build_ext --inplace
-    EIGEN3_INCLUDE_DIR=/path/to/eigen3 pip install .   # when Eigen is not in /usr/include/eigen3
+    python3 -m venv --system-site-packages V && V/bin/pip install --no-build-isolation ./examples/torch
+    EIGEN3_INCLUDE_DIR=/path/to/eigen3 ...      # when Eigen is not in /usr/include/eigen3
+    SMG_TORCH_NO_CUDA=1 ...                     # the CPU operators only
+    SMG_TORCH_OPT=-O1 ...                       # optimisation level (default -O3; CI's packaging
+                                                # check builds at -O1: it proves the route, faster)
+    cd examples/torch && python3 setup.py build_ext --inplace   # without pip: PYTHONPATH=examples/torch
 
 The CMake route (README "From PyTorch") builds the same module into <build>/python/smg_torch/.
 """
@@ -32,18 +37,21 @@ with_cuda = (torch.version.cuda is not None and CUDA_HOME is not None
 # OpenMP it runs serially whatever torch.set_num_threads says (smg_torch_ext.cpp stops the build
 # then). The compiler's OpenMP runtime must be the one torch loads (Debian: g++'s libgomp).
 openmp = ["/openmp"] if sys.platform == "win32" else ["-fopenmp"]
+opt = os.environ.get("SMG_TORCH_OPT", "-O3")
+if opt not in ("-O0", "-O1", "-O2", "-O3", "-Os"):
+    sys.exit("setup.py: SMG_TORCH_OPT must be one of -O0 -O1 -O2 -O3 -Os, got %r" % opt)
 openmp_link = [] if sys.platform == "win32" else ["-fopenmp"]
 if with_cuda:
     ext = CUDAExtension(
         "smg_torch._C", sources + [os.path.join(HERE, "smg_torch_cuda.cu")],
         include_dirs=include_dirs, define_macros=macros + [("SMG_TORCH_CUDA", None)],
-        extra_compile_args={"cxx": ["-O3", "-std=c++17", "-DNDEBUG"] + openmp,
-                            "nvcc": ["-O3", "-std=c++17", "-DNDEBUG", "--expt-relaxed-constexpr",
+        extra_compile_args={"cxx": [opt, "-std=c++17", "-DNDEBUG"] + openmp,
+                            "nvcc": [opt, "-std=c++17", "-DNDEBUG", "--expt-relaxed-constexpr",
                                      "-diag-suppress=20012"]},
         extra_link_args=openmp_link)
 else:
     ext = CppExtension("smg_torch._C", sources, include_dirs=include_dirs, define_macros=macros,
-                       extra_compile_args=["-O3", "-std=c++17", "-DNDEBUG"] + openmp,
+                       extra_compile_args=[opt, "-std=c++17", "-DNDEBUG"] + openmp,
                        extra_link_args=openmp_link)
 
 setup(

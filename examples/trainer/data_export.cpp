@@ -61,7 +61,7 @@ DycheckScene to_dycheck(const Dataset& d, int val_gap, int cell) {
   return s;
 }
 
-void export_queries(const Dataset& d, int count, TrackQueries* q, std::vector<float>* truth) {
+QuerySet export_query_set(const Dataset& d, int count) {
   if (!d.truth) throw std::invalid_argument("export_queries: needs the procedural dataset (true tracks)");
   const Tracks& tr = d.priors.tracks;
   const int T = tr.frames, N = tr.count;
@@ -77,17 +77,29 @@ void export_queries(const Dataset& d, int count, TrackQueries* q, std::vector<fl
   std::vector<int> chosen;
   chosen.reserve(sz(M));
   for (int k = 0; k < M; ++k) chosen.push_back(picked[sz(k) * picked.size() / sz(M)]);
-  q->frame = dycheck_frame_name(0, 0);
-  q->xy.clear();
-  truth->assign(sz(M) * T * 3, 0.0f);
+  QuerySet s;
+  s.queries.frame = dycheck_frame_name(0, 0);
+  s.truth.assign(sz(M) * T * 3, 0.0f);
+  s.semantic_class.assign(sz(M), 0);
+  s.visible.assign(sz(M) * T, 0);
   for (int k = 0; k < M; ++k) {
     const int i = chosen[sz(k)];
-    q->xy.push_back(tr.uv_true[sz(i) * 2]);
-    q->xy.push_back(tr.uv_true[sz(i) * 2 + 1]);
-    for (int t = 0; t < T; ++t)
+    s.queries.xy.push_back(tr.uv_true[sz(i) * 2]);
+    s.queries.xy.push_back(tr.uv_true[sz(i) * 2 + 1]);
+    s.semantic_class[sz(k)] = d.truth->scene.bodies[sz(tr.body[sz(i)])].semantic_class;
+    for (int t = 0; t < T; ++t) {
+      s.visible[sz(k) * T + sz(t)] = tr.visible_true[sz(t) * N + i];
       for (int c = 0; c < 3; ++c)
-        (*truth)[(sz(k) * T + t) * 3 + c] = static_cast<float>(tr.positions_true[(sz(t) * N + i) * 3 + c]);
+        s.truth[(sz(k) * T + t) * 3 + c] = static_cast<float>(tr.positions_true[(sz(t) * N + i) * 3 + c]);
+    }
   }
+  return s;
+}
+
+void export_queries(const Dataset& d, int count, TrackQueries* q, std::vector<float>* truth) {
+  QuerySet s = export_query_set(d, count);
+  *q = std::move(s.queries);
+  *truth = std::move(s.truth);
 }
 
 }  // namespace trainer

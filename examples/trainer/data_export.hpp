@@ -21,5 +21,11 @@ DycheckScene to_dycheck(const Dataset& data, int val_gap = 4, int feature_cell =
 // `count` object tracks (arm, box, ball) truly visible at frame 0, spread over the tracks, and
 // their true world positions [M][T][3].
 void export_queries(const Dataset& data, int count, TrackQueries* queries, std::vector<float>* truth);
+// The same queries and truth as a QuerySet, with each query's semantic class and each sample's
+// true visibility in the training view: what a procedural run is scored by (kQueryCount queries,
+// the count --export-dycheck writes, so that a run and the --data run of its export score the
+// same points).
+QuerySet export_query_set(const Dataset& data, int count);
+constexpr int kQueryCount = 256;
 
 }  // namespace trainer

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 
 #include "json_read.hpp"
 #include "trainer/dycheck.hpp"  // DataError
@@ -64,7 +65,8 @@ void write_track_queries(const std::string& path, const TrackQueries& q) {
 }
 
 std::vector<float> carry_queries(const TrackQueries& q, const Dataset& d, const Nodes& nodes,
-                                 const GaussianModel<float>& model, smg::ParallelOptions parallel) {
+                                 const GaussianModel<float>& model, smg::ParallelOptions parallel,
+                                 std::vector<double>* node_weight) {
   const int T = d.frames(), W = d.width, H = d.height, M = q.count(), N = nodes.count;
   const int t = static_cast<int>(std::find(d.frame_names.begin(), d.frame_names.end(), q.frame) - d.frame_names.begin());
   if (t >= T) throw DataError("queries: frame '" + q.frame + "' is not a training frame");
@@ -113,6 +115,12 @@ std::vector<float> carry_queries(const TrackQueries& q, const Dataset& d, const 
   smg::TableView<float, Eigen::Dynamic> wv(weights.data(), M, D);
   check(smg::validate_skinning_weights<float>(x, dcv, tr, pv, sigma, wv), "skinning_weights");
   smg::skinning_weights<float>(x, dcv, tr, pv, sigma, wv, parallel);
+  if (node_weight) {
+    node_weight->assign(sz(N), 0.0);
+    for (int i = 0; i < M; ++i)
+      for (int k = 0; k < D; ++k)
+        if (drivers[sz(i) * D + sz(k)] >= 0) (*node_weight)[sz(drivers[sz(i) * D + sz(k)])] += weights[sz(i) * D + sz(k)];
+  }
 
   smg::SkinPoints<float> pts;
   pts.drivers = dcv;
@@ -138,22 +146,60 @@ std::vector<float> carry_queries(const TrackQueries& q, const Dataset& d, const 
   return result;
 }
 
-QueryTrackError query_track_error(const std::vector<float>& est, const std::vector<float>& truth) {
+QueryTrackError query_track_error(const std::vector<float>& est, const std::vector<float>& truth,
+                                  const std::vector<std::uint8_t>* mask) {
   QueryTrackError e;
   const std::size_t n = std::min(est.size(), truth.size()) / 3;
-  if (n == 0) return e;
+  if (mask && mask->size() != n) throw std::invalid_argument("query_track_error: mask must be [M][T] like the tracks");
   for (std::size_t s = 0; s < n; ++s) {
+    if (mask && !(*mask)[s]) continue;
     const double dx = est[s * 3] - truth[s * 3], dy = est[s * 3 + 1] - truth[s * 3 + 1],
                  dz = est[s * 3 + 2] - truth[s * 3 + 2];
     const double r = std::sqrt(dx * dx + dy * dy + dz * dz);
     e.epe += r;
     e.within_5cm += r < 0.05 ? 1 : 0;
     e.within_10cm += r < 0.10 ? 1 : 0;
+    ++e.samples;
   }
-  e.epe /= static_cast<double>(n);
-  e.within_5cm /= static_cast<double>(n);
-  e.within_10cm /= static_cast<double>(n);
+  if (e.samples == 0) {
+    e.epe = e.within_5cm = e.within_10cm = std::numeric_limits<double>::quiet_NaN();
+    return e;
+  }
+  const double c = static_cast<double>(e.samples);
+  e.epe /= c;
+  e.within_5cm /= c;
+  e.within_10cm /= c;
   return e;
+}
+
+QueryScore score_queries(const QuerySet& set, const Dataset& d, const Nodes& nodes, const GaussianModel<float>& model,
+                         smg::ParallelOptions parallel) {
+  QueryScore s;
+  s.tracks = carry_queries(set.queries, d, nodes, model, parallel, &s.node_weight);
+  if (set.truth.empty()) return s;
+  const std::size_t M = sz(set.queries.count()), T = sz(d.frames());
+  if (set.truth.size() != M * T * 3) throw std::invalid_argument("score_queries: truth must be [M][T][3]");
+  s.scored = true;
+  s.all = query_track_error(s.tracks, set.truth);
+  if (set.visible.size() == M * T) {
+    std::vector<std::uint8_t> hidden(set.visible.size());
+    for (std::size_t k = 0; k < hidden.size(); ++k) hidden[k] = set.visible[k] ? 0 : 1;
+    s.visible = query_track_error(s.tracks, set.truth, &set.visible);
+    s.hidden = query_track_error(s.tracks, set.truth, &hidden);
+  }
+  if (set.semantic_class.size() == M) {
+    std::vector<int> classes(set.semantic_class);
+    std::sort(classes.begin(), classes.end());
+    classes.erase(std::unique(classes.begin(), classes.end()), classes.end());
+    for (int c : classes) {
+      std::vector<std::uint8_t> mask(M * T, 0);
+      for (std::size_t i = 0; i < M; ++i)
+        if (set.semantic_class[i] == c) std::fill(mask.begin() + static_cast<std::ptrdiff_t>(i * T),
+                                                   mask.begin() + static_cast<std::ptrdiff_t>((i + 1) * T), 1);
+      s.by_class.emplace_back(c, query_track_error(s.tracks, set.truth, &mask));
+    }
+  }
+  return s;
 }
 
 }  // namespace trainer

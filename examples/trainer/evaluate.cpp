@@ -5,6 +5,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <stdexcept>
 
 #include "trainer/data_evaluate.hpp"
 #include "trainer/progress.hpp"
@@ -55,6 +57,39 @@ TrackMetrics track_metrics(const Scene& scene, const Nodes& n) {
   m.hidden = masked([&](int t, int i) { return hidden(t, i); });
   m.box_hidden = masked([&](int t, int i) { return body(i) == box && hidden(t, i); });
   return m;
+}
+
+NodeErrorSplit node_error_split(const Scene& scene, const Nodes& n, const std::vector<double>& confidence,
+                                const std::vector<double>& node_weight) {
+  const int T = n.frames, N = n.count;
+  if (confidence.size() != sz(T) * N) throw std::invalid_argument("node_error_split: confidence must be [T][N]");
+  if (node_weight.size() != sz(N)) throw std::invalid_argument("node_error_split: node_weight must be [N]");
+  if (n.failed_report.size() != sz(T) * N) throw std::invalid_argument("node_error_split: needs Nodes::failed_report");
+  auto masked = [&](auto pick) {
+    std::vector<std::uint8_t> mask(sz(T) * N, 0);
+    for (int t = 0; t < T; ++t)
+      for (int i = 0; i < N; ++i) mask[sz(t) * N + i] = pick(sz(t) * N + i, i) ? 1 : 0;
+    return tracking_error(n.positions_view(), n.truth_view(), scene.extent,
+                          smg::VisibilityView<const std::uint8_t>(mask.data(), T, N));
+  };
+  NodeErrorSplit s;
+  s.failed = masked([&](std::size_t k, int) { return n.failed_report[k] != 0; });
+  s.clean = masked([&](std::size_t k, int) { return n.failed_report[k] == 0; });
+  s.conf_low = masked([&](std::size_t k, int) { return confidence[k] < 0.3; });
+  s.conf_mid = masked([&](std::size_t k, int) { return confidence[k] >= 0.3 && confidence[k] < 0.7; });
+  s.conf_high = masked([&](std::size_t k, int) { return confidence[k] >= 0.7; });
+  s.driving = masked([&](std::size_t, int i) { return node_weight[sz(i)] > 0; });
+  s.idle = masked([&](std::size_t, int i) { return !(node_weight[sz(i)] > 0); });
+  double num = 0, den = 0;
+  const auto est = n.positions_view();
+  const auto tru = n.truth_view();
+  for (int t = 0; t < T; ++t)
+    for (int i = 0; i < N; ++i) {
+      num += node_weight[sz(i)] * (est(t, i) - tru(t, i)).norm();
+      den += node_weight[sz(i)];
+    }
+  s.weighted_epe = den > 0 ? num / den : std::numeric_limits<double>::quiet_NaN();
+  return s;
 }
 
 namespace {

@@ -63,6 +63,23 @@ struct Evaluation {
 // 3D tracking error of the nodes.
 TrackMetrics track_metrics(const Scene& scene, const Nodes& nodes);
 
+// Node EPE (track_metrics' `all`) split by what explains it (docs/results.md, "Why node EPE and
+// query EPE disagree"), procedural scenes only:
+//   failed / clean: samples whose lifted track was a failed tracker report (Nodes::failed_report)
+//     and the others;
+//   conf_low / conf_mid / conf_high: samples by `confidence` [T][N] below 0.3, 0.3 to 0.7, from
+//     0.7 (the caller passes the confidences of the lifted trajectories: stage 0 is shared by
+//     every variant, so the bands hold the same samples in each);
+//   driving / idle: nodes with skinning weight > 0 on the query points (`node_weight` [N],
+//     score_queries) and nodes that drive none;
+//   weighted_epe: the mean node error weighted by `node_weight` (what the query points see of it).
+struct NodeErrorSplit {
+  TrackingError failed, clean, conf_low, conf_mid, conf_high, driving, idle;
+  double weighted_epe = 0;
+};
+NodeErrorSplit node_error_split(const Scene& scene, const Nodes& nodes, const std::vector<double>& confidence,
+                                const std::vector<double>& node_weight);
+
 // Renders what the dataset has to evaluate against and scores it: with truth, both test views and
 // the training view at every frame, and the nodes' tracking error; the validation frames, each
 // at its training frame (EvalFrame::frame) through its own camera. With `keep_renders` the

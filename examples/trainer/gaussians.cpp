@@ -210,28 +210,33 @@ smg::SkinPoints<S> skin_points(const GaussianModel<S>& m) {
 }
 
 template <class S>
+void pose_model(const GaussianModel<S>& m, const NodeState<S>& n, int t, std::vector<S>* means, std::vector<S>* quats,
+                smg::ParallelOptions parallel) {
+  const int G = m.count(), F = m.fixed, P = m.dynamic();
+  means->resize(sz(G) * 3);
+  quats->resize(sz(G) * 4);
+  std::copy(m.table.means.begin(), m.table.means.begin() + static_cast<long>(sz(F) * 3), means->begin());
+  std::copy(m.table.quats.begin(), m.table.quats.begin() + static_cast<long>(sz(F) * 4), quats->begin());
+  if (P == 0) return;
+  const smg::SkinPoints<S> pts = skin_points(m);
+  const std::int32_t tq[1] = {t};
+  const smg::SkinIndexView t_query(tq, 1);
+  smg::SkinBlendOutputs<S> out;
+  out.positions = smg::SequenceView<S, 3>(means->data() + sz(F) * 3, 1, P);
+  out.quaternions = smg::SequenceView<S, 4>(quats->data() + sz(F) * 4, 1, P);
+  check(smg::validate_skin_blend(n.skin_nodes(), pts, t_query, out), "skin_blend");
+  smg::SkinOptions so;
+  so.parallel = parallel;
+  smg::skin_blend(n.skin_nodes(), pts, t_query, out, so);
+}
+
+template <class S>
 void ModelRenderer<S>::render(const GaussianModel<S>& m, const NodeState<S>& n, int t,
                               const smg::splat::Camera<S>& cam, S* image, S* alpha, S* depth,
                               smg::ParallelOptions parallel) {
   const auto t0 = Clock::now();
-  const int G = m.count(), F = m.fixed, P = m.dynamic();
   t_ = t;
-  means_.resize(sz(G) * 3);
-  quats_.resize(sz(G) * 4);
-  std::copy(m.table.means.begin(), m.table.means.begin() + static_cast<long>(sz(F) * 3), means_.begin());
-  std::copy(m.table.quats.begin(), m.table.quats.begin() + static_cast<long>(sz(F) * 4), quats_.begin());
-  if (P > 0) {
-    const smg::SkinPoints<S> pts = skin_points(m);
-    const std::int32_t tq[1] = {t};
-    const smg::SkinIndexView t_query(tq, 1);
-    smg::SkinBlendOutputs<S> out;
-    out.positions = smg::SequenceView<S, 3>(means_.data() + sz(F) * 3, 1, P);
-    out.quaternions = smg::SequenceView<S, 4>(quats_.data() + sz(F) * 4, 1, P);
-    check(smg::validate_skin_blend(n.skin_nodes(), pts, t_query, out), "skin_blend");
-    smg::SkinOptions so;
-    so.parallel = parallel;
-    smg::skin_blend(n.skin_nodes(), pts, t_query, out, so);
-  }
+  pose_model(m, n, t, &means_, &quats_, parallel);
   const auto t1 = Clock::now();
   times_.skin_forward += std::chrono::duration<double>(t1 - t0).count();
   const smg::splat::GaussianParams<S> p = params(m);
@@ -333,6 +338,8 @@ int prune(GaussianModel<S>& m, double min_opacity, double max_scale, std::vector
   template GaussianModel<S> init_model<S>(const Dataset&, const Nodes&, const InitOptions&, smg::ParallelOptions); \
   template void update_skinning_weights<S>(GaussianModel<S>&, const NodeState<S>&, smg::ParallelOptions);       \
   template smg::SkinPoints<S> skin_points<S>(const GaussianModel<S>&);                                          \
+  template void pose_model<S>(const GaussianModel<S>&, const NodeState<S>&, int, std::vector<S>*, std::vector<S>*, \
+                              smg::ParallelOptions);                                                            \
   template int prune<S>(GaussianModel<S>&, double, double, std::vector<std::uint8_t>*);
 TRAINER_INSTANTIATE(float)
 TRAINER_INSTANTIATE(double)

@@ -125,6 +125,13 @@ void update_skinning_weights(GaussianModel<S>& model, const NodeState<S>& nodes,
 template <class S>
 smg::SkinPoints<S> skin_points(const GaussianModel<S>& model);
 
+// The model posed at frame t: every row's position (means [G][3]) and rotation (quats [G][4],
+// (w, x, y, z)); static rows copied, dynamic rows blended by smg::skin_blend (DQB) from their
+// reference pose. What ModelRenderer::render draws, and what OUT/ply/frame_<t>.ply holds (ply.hpp).
+template <class S>
+void pose_model(const GaussianModel<S>& model, const NodeState<S>& nodes, int t, std::vector<S>* means,
+                std::vector<S>* quats, smg::ParallelOptions parallel = {});
+
 // Renders a model at frame t and back-propagates image gradients into model and node gradients.
 template <class S>
 class ModelRenderer {

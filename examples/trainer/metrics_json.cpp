@@ -9,6 +9,7 @@
 
 #include "json_line.hpp"
 #include "smg/core/parallel.hpp"
+#include "trainer/util.hpp"
 
 namespace trainer {
 
@@ -68,6 +69,49 @@ void add_tracks(cli::JsonLine& j, const std::string& suffix, const TrackMetrics&
       .add("epe_box_hidden" + suffix, m.box_hidden.epe);
 }
 
+std::string query_error_json(const QueryTrackError& e) {
+  cli::JsonLine j;
+  j.add("epe", e.epe).add("delta_5cm", e.within_5cm).add("delta_10cm", e.within_10cm).add("samples", e.samples);
+  return j.str();
+}
+
+// epe_query.stage1 / .stage2 (docs/trainer.md, "Query tracks"): all samples, and where the
+// query set knows them, by the semantic class under each query and split into truly visible and
+// hidden samples.
+std::string query_score_json(const QueryScore& s, const std::vector<std::string>& class_names) {
+  cli::JsonLine j;
+  j.add_raw("all", query_error_json(s.all));
+  if (s.visible.samples + s.hidden.samples > 0)
+    j.add_raw("visible", query_error_json(s.visible)).add_raw("hidden", query_error_json(s.hidden));
+  if (!s.by_class.empty()) {
+    cli::JsonLine c;
+    for (const auto& [cls, e] : s.by_class)
+      c.add_raw(cls >= 0 && sz(cls) < class_names.size() ? class_names[sz(cls)] : "class_" + std::to_string(cls),
+                query_error_json(e));
+    j.add_raw("by_class", c.str());
+  }
+  return j.str();
+}
+
+std::string tracking_error_json(const TrackingError& e) {
+  cli::JsonLine j;
+  j.add("epe", e.epe).add("samples", e.samples);
+  return j.str();
+}
+
+std::string node_split_json(const NodeErrorSplit& s) {
+  cli::JsonLine j;
+  j.add_raw("failed", tracking_error_json(s.failed))
+      .add_raw("clean", tracking_error_json(s.clean))
+      .add_raw("conf_low", tracking_error_json(s.conf_low))
+      .add_raw("conf_mid", tracking_error_json(s.conf_mid))
+      .add_raw("conf_high", tracking_error_json(s.conf_high))
+      .add_raw("driving", tracking_error_json(s.driving))
+      .add_raw("idle", tracking_error_json(s.idle))
+      .add("weighted_epe", s.weighted_epe);
+  return j.str();
+}
+
 double peak_memory_mib() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
@@ -92,7 +136,8 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
       .add("width", r.data.width)
       .add("height", r.data.height)
       .add("threads", cfg.threads > 0 ? cfg.threads : smg::num_threads());
-  if (truth) {
+  if (!cfg.image_eval) j.add("image_eval", false);  // --no-image-eval: no image metrics below
+  if (truth && cfg.image_eval) {
     const Evaluation& e = r.evaluation;
     j.add("test_psnr", e.mean.psnr)
         .add("test_ssim", e.mean.ssim)
@@ -104,7 +149,9 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
     std::string views = "{";
     for (const auto& v : e.views) views += (views.size() > 1 ? "," : "") + cli::JsonLine::quote(v.name) + ":" + view_json(v);
     j.add_raw("views", views + "}");
-    add_tracks(j, "", e.tracks);
+  }
+  if (truth) {
+    add_tracks(j, "", r.evaluation.tracks);
     add_tracks(j, "_stage1", r.tracks_stage1);
     add_tracks(j, "_lifted", r.tracks_lifted);
   }
@@ -114,8 +161,8 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
     add_confidence(j, "_lifted", r.confidence_lifted);
   } else {
     const Evaluation& e = r.evaluation;
-    j.add("semantic_graph", r.config.variant.semantic_graph)
-        .add("val_frames", static_cast<long long>(e.frames.size()))
+    j.add("semantic_graph", r.config.variant.semantic_graph);
+    if (cfg.image_eval) j.add("val_frames", static_cast<long long>(e.frames.size()))
         .add("mpsnr", e.frames_mean.mpsnr)
         .add("mssim", e.frames_mean.mssim)
         .add("mssim_covisible", e.frames_mean.mssim_covisible)
@@ -134,6 +181,25 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
       j.add("epe", run.query_error->epe)
           .add("delta_5cm", run.query_error->within_5cm)
           .add("delta_10cm", run.query_error->within_10cm);
+  }
+  if (r.query_stage1.scored) {
+    const std::vector<std::string> none;
+    const std::vector<std::string>& names = truth ? r.data.truth->scene.class_names : none;
+    cli::JsonLine q;
+    q.add("queries", r.queries->queries.count())
+        .add_raw("stage1", query_score_json(r.query_stage1, names))
+        .add_raw("stage2", query_score_json(r.query_stage2, names));
+    j.add_raw("epe_query", q.str());
+    if (truth) j.add_raw("node_epe_split_stage1", node_split_json(r.node_split_stage1));
+  }
+  {
+    cli::JsonLine sj;
+    sj.add("low_confidence", r.signals.low_confidence)
+        .add("visibility_flips", r.signals.visibility_flips)
+        .add("observed", r.signals.observed);
+    j.add_raw("signals", sj.str());
+    if (r.rule_applied)
+      j.add("alpha_auto", true).add("rigidity", r.config.variant.rigidity == Rigidity::carap ? "carap" : "arap");
   }
   j.add("extent", r.data.extent);
   if (!truth) j.add("length_factor", r.length_factor).add("unit", r.nodes.unit).add("lifted_tracks", r.lifted.count);

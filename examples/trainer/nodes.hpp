@@ -122,6 +122,9 @@ struct NodeLossOptions {
   double lrm_weight = 0.1;
   double lrm_huber = 0.01;         // metres per frame (smg::LrmOptions::huber_delta)
   double alpha = 0.6;              // confidence floor of C-ARAP and LRM (E7)
+  // --alpha auto: the trainer picks C-ARAP (with `alpha`) or plain ARAP for the rigidity term of
+  // a variant with C-ARAP from what it sees before stage 1 (pipeline.hpp, choose_carap).
+  bool alpha_auto = false;
   CarapReading carap_reading = CarapReading::symmetric;
   ConfidenceSource confidence_source = ConfidenceSource::estimate;
   // E6's visibility factor v_{t,i}: off computes the confidences as if every sample were

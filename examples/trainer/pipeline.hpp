@@ -6,9 +6,11 @@
 // program (train.cpp) maps flags onto it; tests run tiny configurations in-process.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "trainer/data_queries.hpp"
 #include "trainer/data_scene.hpp"
 #include "trainer/dataset.hpp"
 #include "trainer/evaluate.hpp"
@@ -31,6 +33,9 @@ struct TrainerConfig {
   InitOptions init;  // frame lists filled by resolve_frames() when empty
   Stage2Options stage2;
   int threads = 0;   // 0 = all hardware threads
+  // false (--no-image-eval): no rendering after stage 2; the evaluation keeps the 3D errors only
+  // (node EPE, query EPE), for studies that read nothing else.
+  bool image_eval = true;
 };
 
 // The defaults (quick = the CI-sized run: fewer frames, a smaller image, fewer iterations).
@@ -47,6 +52,22 @@ void resolve_frames(TrainerConfig& config, int frames, const std::vector<std::ui
 // kReferenceExtent for a scene from disk (data_scene.hpp).
 void scale_lengths(TrainerConfig& config, double factor);
 
+// What a run can see of its scene before stage 1, without any truth (docs/results.md, "A rule
+// from what the trainer sees"): over the nodes' lifted trajectories,
+//   low_confidence: the share of observed samples whose confidence c (E6, of the lifted
+//     trajectories) is below 0.3;
+//   visibility_flips: the share of consecutive frame pairs (t-1, t) of a node whose observed
+//     flag differs (occlusions and tracker dropouts switch it);
+//   observed: the share of samples observed.
+struct SceneSignals {
+  double low_confidence = 0, visibility_flips = 0, observed = 0;
+};
+SceneSignals scene_signals(const Nodes& nodes, const std::vector<double>& confidence);
+
+// The rule of --alpha auto (docs/results.md, "A rule from what the trainer sees"): true when the
+// rigidity term should be C-ARAP, false for plain ARAP, from the signals alone.
+bool choose_carap(const SceneSignals& signals);
+
 struct TrainerResult {
   Dataset data;
   LiftedTracks lifted;
@@ -60,6 +81,20 @@ struct TrainerResult {
   // starts from, and of its result (nodes.hpp, confidence_diagnostics).
   ConfidenceDiagnostics confidence_lifted, confidence_stage1;
   Evaluation evaluation;       // after stage 2, with the renders: test views or validation frames
+  // The surface query tracks the run is scored by (docs/trainer.md, "Query tracks"): on the
+  // procedural scene the kQueryCount points --export-dycheck writes (export_query_set, set by
+  // run_stage0); on a scene from disk whatever the caller sets (smg_trainer: --track-queries and
+  // --track-truth), or none. Scored after stage 1 (the stage-1 nodes with the initial model, as a
+  // run with --stage2-iters 0 ends) and after stage 2, by the same score_queries.
+  std::optional<QuerySet> queries;
+  QueryScore query_stage1, query_stage2;
+  // Node EPE after stage 1 split by failed reports, confidence band and query influence
+  // (procedural scenes with queries; evaluate.hpp, node_error_split).
+  NodeErrorSplit node_split_stage1;
+  SceneSignals signals;  // of the lifted trajectories (every run)
+  // With --alpha auto (NodeLossOptions::alpha_auto) on a variant with C-ARAP: what choose_carap
+  // picked (config.variant.rigidity is set to it before stage 1).
+  bool rule_applied = false;
   double seconds_dataset = 0, seconds_stage0 = 0, seconds_total = 0;
 
   // The configuration the stages ran with (frame lists resolved; lengths scaled for a scene from

@@ -98,7 +98,7 @@ const std::vector<Setting>& settings() {
        [](const C& c) { return c.node_loss.rigidity_weight; }, [](C& c, double v) { c.node_loss.rigidity_weight = v; }},
       {"w-lrm", K::number, "weight of the LRM term", 0.0, 1e6, nullptr,
        [](const C& c) { return c.node_loss.lrm_weight; }, [](C& c, double v) { c.node_loss.lrm_weight = v; }},
-      {"alpha", K::number, "confidence floor alpha of C-ARAP and LRM, E7; 1 makes C-ARAP plain ARAP", 0.0, 1.0,
+      {"alpha", K::number, "confidence floor alpha of C-ARAP and LRM, E7; 1 makes C-ARAP plain ARAP; auto: C-ARAP or plain ARAP chosen by the trainer from the scene (docs/results.md)", 0.0, 1.0,
        nullptr, [](const C& c) { return c.node_loss.alpha; }, [](C& c, double v) { c.node_loss.alpha = v; }},
       {"carap-reading", K::choice,
        "how C-ARAP moves the nodes: symmetric is the gradient of E9, directed lets term i-j move node i only "
@@ -132,6 +132,11 @@ const std::vector<Setting>& settings() {
        &export_layout_names, nullptr, nullptr, "dycheck"},
       {"no-pictures", K::flag, "skip the PNG output"},
       {"no-view", K::flag, "skip OUT/view.html, the page of the run (docs/trainer.md)"},
+      {"no-image-eval", K::flag, "skip rendering after stage 2 (and so the pictures, view.html and renders): metrics.json keeps the 3D errors only (for studies)"},
+      {"ply", K::flag,
+       "write OUT/ply/frame_<t>.ply for every frame t: the trained Gaussians at t in the 3DGS PLY layout "
+       "(docs/trainer.md, \"Per-frame PLY\"); on by default with --quick"},
+      {"no-ply", K::flag, "with --quick: skip OUT/ply/"},
       {"quiet", K::flag, "no progress lines"},
       {"help", K::flag, "print this help"}};
   return table;
@@ -167,6 +172,12 @@ std::vector<cli::FlagSpec> setting_flags() {
 void apply_settings(const cli::Args& args, TrainerConfig* config) {
   for (const Setting& s : settings()) {
     if (!s.set || !args.given(s.name)) continue;
+    // --alpha auto: the rule of docs/results.md ("A rule from what the trainer sees") picks C-ARAP
+    // (with the default alpha) or plain ARAP at run time.
+    if (std::string(s.name) == "alpha" && args.get(s.name) == "auto") {
+      config->node_loss.alpha_auto = true;
+      continue;
+    }
     double v = 0;
     switch (s.kind) {
       case K::integer: v = static_cast<double>(flags::int_in(args, s.name, static_cast<long long>(s.lo),

@@ -5,7 +5,8 @@
 //
 // Progress lines go to stderr; the last line on stdout is one JSON object with the metrics,
 // also written to OUT/metrics.json, next to the pictures (pictures.hpp) and OUT/view.html, one
-// self-contained page of the run (view_html.hpp; --no-view skips it). Bad flags or an
+// self-contained page of the run (view_html.hpp; --no-view skips it), and with --ply (default
+// with --quick) OUT/ply/frame_<t>.ply, the Gaussians of every frame (ply.hpp). Bad flags or an
 // output folder that cannot be written: one line on stderr and exit code 2, before any work.
 // A failure during training: one line on stderr and exit code 1.
 //
@@ -49,6 +50,7 @@
 #include "trainer/flags.hpp"
 #include "trainer/image_io.hpp"
 #include "trainer/pictures.hpp"
+#include "trainer/ply.hpp"
 #include "trainer/pipeline.hpp"
 #include "trainer/settings.hpp"
 #include "trainer/view_html.hpp"
@@ -132,7 +134,7 @@ struct Request {
   enum class Job { train, export_scene, export_case } job = Job::train;
   fs::path out;                 // train: OUT; export_scene / export_case: the folder to write
   std::string export_layout;    // export_scene: dycheck, som or mosca
-  bool pictures = true, quiet = false, view = true;
+  bool pictures = true, quiet = false, view = true, ply = false;
   // --data: the scene (moved into the run once it starts) and its layout's description;
   // --track-queries / --track-truth.
   bool from_disk = false;
@@ -157,7 +159,7 @@ int export_dycheck(const trainer::TrainerConfig& cfg, const fs::path& dir, const
     trainer::write_dycheck(dir.string(), trainer::to_dycheck(d));
   trainer::TrackQueries q;
   std::vector<float> truth;
-  trainer::export_queries(d, 256, &q, &truth);
+  trainer::export_queries(d, trainer::kQueryCount, &q, &truth);
   trainer::write_track_queries((dir / "queries.json").string(), q);
   npy::write((dir / "queries_tracks3d.npy").string(), truth.data(), {q.count(), d.frames(), 3});
   progress.line("done", trainer::format("scene seed %llu (T=%d %dx%d, %d tracks, %d queries) in %s/ (%.1fs)",
@@ -179,8 +181,11 @@ bool parse(int argc, char** argv, Request& q) {
     return false;
   cfg = trainer::default_config(args.get_switch("quick"));
   trainer::apply_settings(args, &cfg);
-  q.pictures = !args.get_switch("no-pictures");
-  q.view = !args.get_switch("no-view");
+  cfg.image_eval = !args.get_switch("no-image-eval");
+  q.pictures = !args.get_switch("no-pictures") && cfg.image_eval;
+  q.view = !args.get_switch("no-view") && cfg.image_eval;
+  if (args.get_switch("ply") && args.get_switch("no-ply")) throw cli::UsageError("--ply and --no-ply contradict each other");
+  q.ply = args.get_switch("ply") || (args.get_switch("quick") && !args.get_switch("no-ply"));
   q.quiet = args.get_switch("quiet");
   trainer::flags::validate(cfg.dataset.scene, cfg.dataset.priors);
   if (args.given("data")) {
@@ -269,6 +274,14 @@ trainer::TrainerResult train(Request& q, const trainer::Progress& progress) {
                                              : std::string())
               << "\n";
   cli::ensure_writable_dir(q.out);
+  // The query tracks are scored inside the pipeline, after stage 1 and after stage 2, by the
+  // code that scores a procedural run (score_queries).
+  if (q.queries) {
+    trainer::QuerySet set;
+    set.queries = *q.queries;
+    if (q.truth) set.truth = *q.truth;
+    stage0.queries = std::move(set);
+  }
   return trainer::run_trainer(std::move(stage0), progress);
 }
 
@@ -286,17 +299,11 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
   } else if (q.pictures) {
     written = trainer::write_pictures(q.out.string(), r);
   }
-  std::vector<float> tracks;
-  trainer::QueryTrackError te;
-  if (q.queries) {
-    tracks = trainer::carry_queries(*q.queries, r.data, r.nodes, r.model);
+  // The query tracks after stage 2, as the pipeline carried and scored them.
+  const std::vector<float>& tracks = r.query_stage2.tracks;
+  const trainer::QueryTrackError& te = r.query_stage2.all;
+  if (q.queries)
     npy::write((q.out / "tracks3d.npy").string(), tracks.data(), {q.queries->count(), r.data.frames(), 3});
-    if (q.truth) {
-      te = trainer::query_track_error(tracks, *q.truth);
-      progress.line("eval", trainer::format("%d query tracks: EPE %.4f m, within 5 cm %.3f, within 10 cm %.3f",
-                                            q.queries->count(), te.epe, te.within_5cm, te.within_10cm));
-    }
-  }
   trainer::RunRecord rec;
   rec.config = &q.cfg;
   rec.out = q.out.string();
@@ -315,6 +322,12 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
       vi.queries = q.queries->count();
     }
     written.push_back(trainer::write_view_html(q.out.string(), r, vi));
+  }
+  if (q.ply) {
+    const std::vector<std::string> ply = trainer::write_ply_frames(q.out.string(), r.model, r.nodes);
+    if (!ply.empty())
+      written.push_back((q.out / "ply").string() + "/frame_<t>.ply, t = 0.." + std::to_string(ply.size() - 1) + " (" +
+                        std::to_string(r.model.count()) + " Gaussians each)");
   }
   const std::string what = r.data.truth ? std::string("pictures")
                                         : std::to_string(e.frame_renders.size()) + " renders";

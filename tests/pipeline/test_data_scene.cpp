@@ -179,11 +179,16 @@ TEST_CASE("round trip: a quick run on the exported scene agrees with the in-memo
   // Query tracks carried by the disk run's nodes against the truth.
   trainer::TrackQueries q;
   std::vector<float> truth;
-  trainer::export_queries(e.memory, 64, &q, &truth);
+  trainer::export_queries(e.memory, trainer::kQueryCount, &q, &truth);
   REQUIRE(q.count() > 10);
   const std::vector<float> est = trainer::carry_queries(q, disk.data, disk.nodes, disk.model);
   REQUIRE(est.size() == truth.size());
   const trainer::QueryTrackError err = trainer::query_track_error(est, truth);
+  // The in-memory run scored the same queries itself (after stage 2): the two runs differ by what
+  // the files change (8-bit images, float32 tracks, feature cells), not by how they are scored.
+  REQUIRE(mem.query_stage2.scored);
+  MESSAGE("query EPE after stage 2: in memory " << mem.query_stage2.all.epe << " m, from disk " << err.epe << " m");
+  CHECK(std::abs(err.epe - mem.query_stage2.all.epe) < 0.25 * mem.query_stage2.all.epe);
   // Against the queries held still at their lifted position: carrying them must help.
   const int T = disk.data.frames(), M = q.count();
   std::vector<float> still(est.size());
@@ -205,6 +210,130 @@ TEST_CASE("round trip: a quick run on the exported scene agrees with the in-memo
   std::nth_element(at_query.begin(), at_query.begin() + M / 2, at_query.end());
   MESSAGE("median error at the query frame " << at_query[sz(M / 2)] << " m");
   CHECK(at_query[sz(M / 2)] < 0.05);
+}
+
+TEST_CASE("query metric: a procedural run scores the exported queries as the --data path reads them") {
+  // One code path (issue 33): the procedural run scores export_query_set's points after stage 1
+  // and after stage 2; the files --export-dycheck writes (queries.json, queries_tracks3d.npy),
+  // read back by the --data path's readers and scored by the same score_queries on the same
+  // reconstruction, give the same figures within round-off (pixels pass through "%.9g").
+  const Exported& e = exported();
+  const trainer::TrainerResult r = trainer::run_trainer(e.config, trainer::Dataset(e.memory), silent());
+  REQUIRE(r.queries.has_value());
+  const trainer::QuerySet& set = *r.queries;
+  const int M = set.queries.count(), T = r.data.frames();
+  REQUIRE(M > 10);
+  REQUIRE(r.query_stage1.scored);
+  REQUIRE(r.query_stage2.scored);
+  CHECK(r.query_stage1.all.samples == static_cast<long long>(M) * T);
+  CHECK(std::isfinite(r.query_stage1.all.epe));
+  CHECK(std::isfinite(r.query_stage2.all.epe));
+  // The parts partition the samples and their means recombine to the whole.
+  for (const trainer::QueryScore* s : {&r.query_stage1, &r.query_stage2}) {
+    CHECK(s->visible.samples + s->hidden.samples == s->all.samples);
+    CHECK(s->visible.samples > 0);
+    const double vh = (s->visible.epe * double(s->visible.samples) +
+                       (s->hidden.samples ? s->hidden.epe * double(s->hidden.samples) : 0.0)) / double(s->all.samples);
+    CHECK(vh == doctest::Approx(s->all.epe).epsilon(1e-9));
+    long long n = 0;
+    double sum = 0;
+    for (const auto& [cls, qe] : s->by_class) {
+      CHECK(qe.samples > 0);
+      n += qe.samples;
+      sum += qe.epe * double(qe.samples);
+    }
+    CHECK(s->by_class.size() >= 2);
+    CHECK(n == s->all.samples);
+    CHECK(sum / double(n) == doctest::Approx(s->all.epe).epsilon(1e-9));
+  }
+  // Through the files.
+  const fs::path dir = fs::temp_directory_path() / "smg_test_pipeline_query_metric";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  trainer::TrackQueries q;
+  std::vector<float> truth;
+  trainer::export_queries(e.memory, trainer::kQueryCount, &q, &truth);
+  trainer::write_track_queries((dir / "queries.json").string(), q);
+  npy::write((dir / "queries_tracks3d.npy").string(), truth.data(), {q.count(), T, 3});
+  trainer::QuerySet from_files;
+  from_files.queries = trainer::read_track_queries((dir / "queries.json").string(), r.data);
+  from_files.truth = npy::read((dir / "queries_tracks3d.npy").string()).as<float>("queries_tracks3d.npy");
+  REQUIRE(from_files.queries.count() == M);
+  CHECK(from_files.truth == set.truth);
+  const trainer::QueryScore again = trainer::score_queries(from_files, r.data, r.nodes, r.model);
+  REQUIRE(again.scored);
+  CHECK(again.all.samples == r.query_stage2.all.samples);
+  CHECK(again.all.epe == doctest::Approx(r.query_stage2.all.epe).epsilon(1e-6));
+  CHECK(again.all.within_5cm == doctest::Approx(r.query_stage2.all.within_5cm).epsilon(1e-6));
+  CHECK(again.all.within_10cm == doctest::Approx(r.query_stage2.all.within_10cm).epsilon(1e-6));
+  // Without truth nothing is scored, but the tracks are carried.
+  trainer::QuerySet no_truth;
+  no_truth.queries = q;
+  const trainer::QueryScore carried = trainer::score_queries(no_truth, r.data, r.nodes, r.model);
+  CHECK_FALSE(carried.scored);
+  CHECK(carried.tracks.size() == sz(M) * sz(T) * 3);
+  // The node-EPE split: each pair of groups partitions the samples and recombines to node EPE.
+  const trainer::NodeErrorSplit& sp = r.node_split_stage1;
+  const trainer::TrackingError& all = r.tracks_stage1.all;
+  auto recombine = [&](std::initializer_list<const trainer::TrackingError*> parts) {
+    long long n = 0;
+    double sum = 0;
+    for (const trainer::TrackingError* p : parts) {
+      n += p->samples;
+      if (p->samples) sum += p->epe * double(p->samples);
+    }
+    CHECK(n == all.samples);
+    CHECK(sum / double(n) == doctest::Approx(all.epe).epsilon(1e-9));
+  };
+  recombine({&sp.failed, &sp.clean});
+  recombine({&sp.conf_low, &sp.conf_mid, &sp.conf_high});
+  recombine({&sp.driving, &sp.idle});
+  CHECK(sp.driving.samples > 0);
+  CHECK(std::isfinite(sp.weighted_epe));
+  // The run-time signals are shares.
+  for (double v : {r.signals.low_confidence, r.signals.visibility_flips, r.signals.observed}) {
+    CHECK(v >= 0);
+    CHECK(v <= 1);
+  }
+  CHECK(r.signals.observed > 0);
+  fs::remove_all(dir);
+}
+
+TEST_CASE("query_track_error: a mask selects samples; nothing selected gives NaN; a bad mask throws") {
+  const std::vector<float> truth{0, 0, 0, 1, 1, 1, 0, 0, 0};
+  const std::vector<float> est{0.03f, 0, 0, 1, 1, 1.08f, 0, 0.2f, 0};
+  const std::vector<std::uint8_t> mask{0, 1, 1};
+  const trainer::QueryTrackError e = trainer::query_track_error(est, truth, &mask);
+  CHECK(e.samples == 2);
+  CHECK(e.epe == doctest::Approx((0.08 + 0.2) / 2).epsilon(1e-6));
+  CHECK(e.within_10cm == doctest::Approx(0.5));
+  const std::vector<std::uint8_t> none{0, 0, 0};
+  CHECK(std::isnan(trainer::query_track_error(est, truth, &none).epe));
+  const std::vector<std::uint8_t> bad{1, 1};
+  CHECK_THROWS_AS(trainer::query_track_error(est, truth, &bad), std::invalid_argument);
+}
+
+TEST_CASE("scene_signals: shares on a hand example") {
+  trainer::Nodes n;
+  n.frames = 3;
+  n.count = 2;
+  // [T][N]: node 0 observed at t = 0, 1, 2; node 1 at t = 0 and 2 only (two flips).
+  n.visible = {1, 1, 1, 0, 1, 1};
+  const std::vector<double> c{0.9, 0.1, 0.2, 0.5, 0.8, 0.05};
+  const trainer::SceneSignals s = trainer::scene_signals(n, c);
+  CHECK(s.observed == doctest::Approx(5.0 / 6));
+  CHECK(s.low_confidence == doctest::Approx(3.0 / 5));  // observed below 0.3: 0.1, 0.2 and 0.05 (0.5 is unobserved)
+  CHECK(s.visibility_flips == doctest::Approx(2.0 / 4));
+  CHECK_THROWS_AS(trainer::scene_signals(n, std::vector<double>(5, 0.5)), std::invalid_argument);
+  // --alpha auto's rule: C-ARAP unless the confidence distrusts a large share of the observations;
+  // with nothing observed (NaN) the default, C-ARAP.
+  trainer::SceneSignals sig;
+  sig.low_confidence = 0.10;
+  CHECK(trainer::choose_carap(sig));
+  sig.low_confidence = 0.25;
+  CHECK_FALSE(trainer::choose_carap(sig));
+  sig.low_confidence = std::nan("");
+  CHECK(trainer::choose_carap(sig));
 }
 
 TEST_CASE("query_track_error: EPE and thresholds on a hand example") {

@@ -176,7 +176,7 @@ def main():
         run = os.path.join(work, "run")
         t0 = time.time()
         # --stage2-iters 60 (quick: 300): the page is the same kind, the test 7 s faster.
-        subprocess.run([a.trainer, "--quick", "--stage2-iters", "60", "--quiet", "--no-pictures", "--out", run],
+        subprocess.run([a.trainer, "--quick", "--stage2-iters", "60", "--quiet", "--no-pictures", "--no-ply", "--out", run],
                        check=True, stdout=subprocess.DEVNULL)
         print("view_html: smg_trainer --quick --stage2-iters 60 in %.1f s" % (time.time() - t0))
     page = os.path.abspath(os.path.join(run, "view.html"))

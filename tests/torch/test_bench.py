@@ -76,3 +76,17 @@ def test_bench_cuda_options(tmp_path):
     r = _run([os.path.join(BENCH, "bench_cuda.py"), "--help"], tmp_path)
     assert r.returncode == 0, r.stderr
     assert "--scaling" in r.stdout
+
+
+def test_bench_cuda_fails_without_cuda_operators(tmp_path):
+    # Nothing to measure must fail loudly (issue 36): exit 1 with one "bench_cuda: error:" line.
+    import smg_torch
+    if smg_torch.has_cuda and torch.cuda.is_available():
+        import pytest
+        pytest.skip("this smg_torch has its CUDA operators and a device: bench_cuda.py would run")
+    r = _run([os.path.join(BENCH, "bench_cuda.py"), "--quick", "--repeat", "1"], tmp_path)
+    assert r.returncode == 1, (r.returncode, r.stdout, r.stderr)
+    lines = [l for l in r.stderr.splitlines() if l.startswith("bench_cuda: error:")]
+    assert len(lines) == 1, r.stderr
+    assert ("built without its CUDA operators" in lines[0]) == (not smg_torch.has_cuda), lines[0]
+    assert "skipped" not in r.stdout

@@ -1,12 +1,12 @@
 """smg_torch — smg's Semantic Motion Graph regularisers as PyTorch operators (CPU tensors; with a CUDA
-build, also CUDA tensors for node_confidences, carap, arap, lrm and dqb: docs/cuda.md).
+build, also CUDA tensors for node_confidences, carap, arap, lrm, regularizers and dqb: docs/cuda.md).
 
     import smg_torch as smg
     c = smg.node_confidences(positions, g)                        # [T, N], no grad
     e = smg.carap(positions, quats, g, c) + smg.lrm(positions, g, c)
     e.backward()                                                  # analytic gradients
     r = smg.regularizers(positions, quats, g, visibility)         # the same in one fused pass
-    r.total.backward()                                            # (CPU tensors)
+    r.total.backward()                                            # (CPU or CUDA tensors)
 
 Shapes and meanings: docs/interop.md. Every energy returns a 0-dim tensor and is differentiable
 w.r.t. positions [T, N, 3] and the raw, unnormalised quaternions [T, N, 4] (w, x, y, z);
@@ -46,7 +46,7 @@ __all__ = ["Graph", "has_cuda", "build_graph", "node_confidences", "carap", "ara
 version = _C.version
 
 #: True when the extension was built with its CUDA operators (smg_torch_cuda.cu): then
-#: node_confidences, carap, arap, lrm and dqb also take CUDA tensors (all on one device) and run on the
+#: node_confidences, carap, arap, lrm, regularizers and dqb also take CUDA tensors (all on one device) and run on the
 #: device's current stream with the same equations and gradients.
 has_cuda = bool(getattr(_C, "has_cuda", False))
 
@@ -110,7 +110,8 @@ def build_graph(positions: torch.Tensor, visibility: Optional[torch.Tensor] = No
     [T, N, 3] (visibility [T, N] or None = all visible), gated by cos(f_i, f_j) >= tau when
     features [N, C] (or feature_samples [T, N, C], reduced to descriptors with rho) are given
     and gate is True. Returns Graph(indices int64 [N, k] -1 padded, weights [N, k],
-    features [N, C] or None, distances [N, k]). No gradient."""
+    features [N, C] or None, distances [N, k]). No gradient.
+    Devices: CPU tensors only (a CUDA tensor raises NotImplementedError)."""
     _check(positions=positions, visibility=visibility, feature_samples=feature_samples,
            features=features)
     with torch.no_grad():
@@ -126,7 +127,8 @@ def node_confidences(positions: torch.Tensor, g: GraphLike, visibility: Optional
                      *, kappa_m: float = 2.5, kappa_r: float = 2.5, lambda_m: float = 1.0,
                      lambda_r: float = 1.0, eps: float = 1e-4, validate: bool = False) -> torch.Tensor:
     """c_{t,i} (docs/math/energy.md E2-E6), [T, N], no gradient (a constant for the energies).
-    validate: as for carap (CUDA tensors only; CPU tensors are always validated)."""
+    validate: as for carap (CUDA tensors only; CPU tensors are always validated).
+    Devices: CPU and CUDA tensors."""
     idx, w = _graph(g)
     _check(positions=positions, indices=idx, weights=w, visibility=visibility)
     with torch.no_grad():
@@ -166,7 +168,8 @@ def carap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike,
           validate: bool = False) -> torch.Tensor:
     """Confidence-aware ARAP energy (E7-E10), 0-dim; differentiable w.r.t. positions and quats.
     CPU tensors are always validated; CUDA tensors' contents only with validate=True (the CPU
-    validators on a host copy, one synchronising copy per call)."""
+    validators on a host copy, one synchronising copy per call).
+    Devices: CPU and CUDA tensors."""
     idx, w = _graph(g)
     _check(positions=positions, quats=quats, indices=idx, weights=w, confidence=confidence)
     gaps, gw = _gap_args(gaps, gap_weights)
@@ -179,7 +182,8 @@ def arap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike, *, lambda_c
          lambda_l: float = 1.0, gaps: Sequence[int] = (1, 2, 4),
          gap_weights: Optional[Sequence[float]] = None, normalize: bool = False,
          validate: bool = False) -> torch.Tensor:
-    """Plain ARAP energy (E9 with c = 1, alpha = 1), 0-dim; differentiable like carap."""
+    """Plain ARAP energy (E9 with c = 1, alpha = 1), 0-dim; differentiable like carap.
+    Devices: CPU and CUDA tensors."""
     idx, w = _graph(g)
     _check(positions=positions, quats=quats, indices=idx, weights=w)
     gaps, gw = _gap_args(gaps, gap_weights)
@@ -208,7 +212,8 @@ def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor
         alpha: float = 0.6, huber_delta: float = 0.01, detach_omega: bool = False,
         normalize: bool = False, validate: bool = False) -> torch.Tensor:
     """Local rigid-motion energy (E11-E16), 0-dim; differentiable w.r.t. positions.
-    validate: as for carap (CUDA tensors only; CPU tensors are always validated)."""
+    validate: as for carap (CUDA tensors only; CPU tensors are always validated).
+    Devices: CPU and CUDA tensors."""
     idx, w = _graph(g)
     _check(positions=positions, indices=idx, weights=w, confidence=confidence)
     return _LrmFunction.apply(positions, idx, w, confidence, float(alpha), float(huber_delta),
@@ -298,8 +303,9 @@ def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: Grap
     arap, lrm, confidence): `total` is differentiable w.r.t. positions and the raw quats (the
     confidences are constants, as with the separate operators); the per-term energies are detached.
     The same values as node_confidences + carap + arap + lrm to rounding (1e-12 relative in
-    float64, tests/torch/test_energy.py). CPU and CUDA tensors (smg::cuda::regularizers on the
-    current stream; tests/torch/test_cuda.py)."""
+    float64, tests/torch/test_energy.py). On CUDA tensors smg::cuda::regularizers runs on the
+    current stream (tests/torch/test_cuda.py; not yet run on a GPU).
+    Devices: CPU and CUDA tensors."""
     idx, w = _graph(g)
     _check(positions=positions, quats=quats, indices=idx, weights=w, visibility=visibility)
     terms, opts = {}, {}
@@ -367,7 +373,8 @@ def dqb(node_positions: torch.Tensor, node_quats: torch.Tensor, g: GraphLike, po
     (index ranges, sigma > 0, finite incoming gradients) are checked only with validate=True
     (one synchronising copy in forward and one in backward); without it they are the caller's
     precondition, except that a t_query entry out of range gives NaN outputs and no gradient
-    instead of an out-of-bounds read. CPU tensors are always validated."""
+    instead of an out-of-bounds read. CPU tensors are always validated.
+    Devices: CPU and CUDA tensors."""
     idx, w = _graph(g)
     tensors = dict(node_positions=node_positions, node_quats=node_quats, points=points,
                    point_quats=point_quats, indices=idx, weights=w, anchor=anchor, t_ref=t_ref,
@@ -409,7 +416,8 @@ def render(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
     [G, 4], log_scales [G, 3], opacity_logits [G], colors [G, C] or SH coefficients [G, K, C],
     viewmat [4, 4] (world -> camera, OpenCV axes), K [3, 3]. Returns image [H, W, C], alpha
     [H, W] and expected depth [H, W]; differentiable w.r.t. every Gaussian parameter (viewmat, K
-    and background are constants)."""
+    and background are constants).
+    Devices: CPU tensors only (a CUDA tensor raises NotImplementedError)."""
     _check(means=means, quats=quats, log_scales=log_scales, opacity_logits=opacity_logits,
            colors=colors, viewmat=viewmat, K=K)
     if background is not None and not isinstance(background, torch.Tensor):
