@@ -737,10 +737,15 @@ def hl_ladder(results_md):
         seeds[scene] = len(shead)
     if not scenes:
         return []
-    cols = ("3D EPE (m)", "masked PSNR (dB)")
+    # The query EPE (surface query tracks, what Dycheck and Shape-of-Motion report) where the ladder
+    # has it; ladders generated before issue 33 have node EPE only, titled "3D EPE (m)".
+    first = next(iter(means[scenes[0]].values()))
+    epe = next((c for c in ("query EPE (m)", "node EPE (m)", "3D EPE (m)") if c in first), "3D EPE (m)")
+    title = "node EPE (m)" if epe == "3D EPE (m)" else epe
+    cols = (epe, "masked PSNR (dB)")
     variants = list(means[scenes[0]])
     head = ("| variant | graph | rigidity | LRM | "
-            + " | ".join(f"{s}: {cols[0]} | {cols[1]}" for s in scenes) + " |")
+            + " | ".join(f"{s}: {title} | {cols[1]}" for s in scenes) + " |")
     out = [f"**ablation ladder** (`docs/results.md`, written by `scripts/ladder.sh`; "
            f"{' and '.join(f'{seeds[s]} seeds on the {s} scene' for s in scenes)}, mean ± 95 % "
            f"interval; every seed is a different scene):", "", head,
@@ -757,8 +762,8 @@ def hl_ladder(results_md):
         if not row:
             continue
         what = next(iter(row.values())).get("isolates", "")
-        per = "; ".join(f"{s}: {r[cols[0]]}" for s, r in row.items())
-        lines.append(f"- {what} (`{key}`), 3D EPE in m: {per}")
+        per = "; ".join(f"{s}: {r.get(cols[0], '—')}" for s, r in row.items())
+        lines.append(f"- {what} (`{key}`), {title[:-4]} in m: {per}")
     if lines:
         out += ["Paired differences A − B over the same seeds (mean ± 95 % interval; in brackets, on how "
                 "many seeds A is better):", ""] + lines + [""]
