@@ -739,9 +739,15 @@ def hl_ladder(results_md):
         return []
     # The query EPE (surface query tracks, what Dycheck and Shape-of-Motion report) where the ladder
     # has it; ladders generated before issue 33 have node EPE only, titled "3D EPE (m)".
-    first = next(iter(means[scenes[0]].values()))
-    epe = next((c for c in ("query EPE (m)", "node EPE (m)", "3D EPE (m)") if c in first), "3D EPE (m)")
-    title = "node EPE (m)" if epe == "3D EPE (m)" else epe
+    # The same column for every scene: the query EPE only where every scene's ladder has it.
+    # Ladders written before issue 33 title node EPE "3D EPE (m)": the same column under its new name.
+    for s in scenes:
+        for row in list(means[s].values()) + list(paired[s].values()):
+            if "3D EPE (m)" in row:
+                row.setdefault("node EPE (m)", row["3D EPE (m)"])
+    firsts = [next(iter(means[s].values())) for s in scenes]
+    epe = "query EPE (m)" if all("query EPE (m)" in f for f in firsts) else "node EPE (m)"
+    title = epe
     cols = (epe, "masked PSNR (dB)")
     variants = list(means[scenes[0]])
     head = ("| variant | graph | rigidity | LRM | "
