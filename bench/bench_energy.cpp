@@ -90,8 +90,8 @@ smg::LrmOptions lrm_options(bool detach = false) {
 
 // Double-precision results, the references of the error columns.
 struct Reference {
-  double carap = 0, lrm = 0, lrm_detached = 0, arap = 0, conf_sum = 0;
-  std::vector<double> carap_x, carap_r, lrm_x, lrm_detached_x, arap_x, arap_r, conf;
+  double carap = 0, lrm = 0, lrm_detached = 0, arap = 0, accel = 0, conf_sum = 0;
+  std::vector<double> carap_x, carap_r, lrm_x, lrm_detached_x, arap_x, arap_r, accel_x, conf;
 };
 Reference compute_reference(const Scene<double>& s) {
   {
@@ -103,6 +103,7 @@ Reference compute_reference(const Scene<double>& s) {
     f.lrm_detached_x.assign(n, 0.0);
     f.arap_x.assign(n, 0.0);
     f.arap_r.assign(n, 0.0);
+    f.accel_x.assign(n, 0.0);
     f.conf.assign(s.v.size(), 0.0);
     smg::node_confidences<double>(s.positions(), s.visibility(), s.graph(), {},
                                   {f.conf.data(), s.T, s.N});
@@ -115,6 +116,7 @@ Reference compute_reference(const Scene<double>& s) {
                                       lrm_options(true), {f.lrm_detached_x.data(), s.T, s.N});
     f.arap = smg::arap<double>(s.positions(), s.rotations(), s.graph(), arap_options(),
                                {f.arap_x.data(), s.T, s.N}, {f.arap_r.data(), s.T, s.N});
+    f.accel = smg::accel<double>(s.positions(), {}, smg::AccelOptions{}, {f.accel_x.data(), s.T, s.N});
     return f;
   }
 }
@@ -289,6 +291,23 @@ void BM_lrm(benchmark::State& state) {
       });
   if (kMode == 2)
     state.counters["err_detach_vs_exact"] = relative_error(original_reference().lrm_detached_x, original_reference().lrm_x);
+}
+
+// ---- Trajectory smoothness (E21), acceleration form, unweighted: energy + position gradient;
+// ns_per_term over the (T − 2)·N second differences ----
+template <class S>
+void BM_accel(benchmark::State& state) {
+  const Scene<S>& s = scene_as<S>();
+  std::vector<S> gx(s.x.size());
+  smg::EnergyWorkspace<S> ws;
+  const double terms = static_cast<double>(std::max<Index>(0, cfg.T - 2)) * static_cast<double>(cfg.N);
+  time_energy(state, terms, [&] {
+    return double(smg::accel<S>(s.positions(), {}, smg::AccelOptions{}, grad_view(gx, s, true), &ws,
+                                threads(state)));
+  });
+  set_errors<S>(
+      state, [&](const Reference& r) { return relative_error(gx, r.accel_x); },
+      [](const Reference& r, const Reference& o) { return relative_error(r.accel_x, o.accel_x); });
 }
 
 // ---- The target: C-ARAP + LRM, energy + exact gradient, into one gradient buffer ----
@@ -723,6 +742,8 @@ int main(int argc, char** argv) {
   if (fl) add("BM_arap<float, false>", BM_arap<float, false>);
   if (fl) add("BM_arap<float, true>", BM_arap<float, true>);
   if (db) add("BM_arap<double, true>", BM_arap<double, true>);
+  if (fl) add("BM_accel<float>", BM_accel<float>);
+  if (db) add("BM_accel<double>", BM_accel<double>);
   if (fl) add("BM_carap_plus_lrm<float>", BM_carap_plus_lrm<float>);
   if (db) add("BM_carap_plus_lrm<double>", BM_carap_plus_lrm<double>);
   if (fl) add("BM_regularizers<float, false>", BM_regularizers<float, false>);

@@ -966,6 +966,46 @@ for f in CMD_PAGES:
                 problem(f, n, "pip install without --no-build-isolation (docs/torch.md, \"Building it\")")
 
 # ---------------------------------------------------------------------------------------------
+# (m) every regulariser term has its pieces (docs/contributing.md section 3): a header in
+# include/smg/energy/terms/ is included by the umbrella, its term struct is a member of the
+# fused step's RegularizerTermSet, its header is named in docs/contributing.md and
+# docs/math/energy.md, and (for an energy, not the confidences) its one-term operator has an
+# entry in the operator list of the cross-cutting tests.
+TERMS_DIR = "include/smg/energy/terms"
+umbrella = read_text("include/smg/energy.hpp") or ""
+regs = read_text("include/smg/energy/regularizers.hpp") or ""
+term_set = regs[regs.find("struct RegularizerTermSet"):]
+term_set = term_set[:term_set.find("\n};")]
+operators = read_text("tests/support/operators.hpp") or ""
+op_list = re.search(r"using Operators = std::tuple<([^>]*)>", operators)
+op_names = set(re.findall(r'static constexpr const char\* name = "(\w+)"', operators))
+contributing = TEXT.get("docs/contributing.md", "")
+energy_md = TEXT.get("docs/math/energy.md", "")
+for rel in sorted(f for f in tracked_files() if f.startswith(TERMS_DIR + "/") and f.endswith(".hpp")):
+    name = os.path.basename(rel)[:-4]
+    text = read_text(rel) or ""
+    if '#include "smg/energy/terms/%s.hpp"' % name not in umbrella:
+        problem("include/smg/energy.hpp", 1, "does not include %s" % rel)
+    structs = re.findall(r"struct (\w+Term) : TermDefaults", text)
+    if not structs:
+        problem(rel, 1, "no term struct (struct FooTerm : TermDefaults, energy/block.hpp's concept)")
+    for st in structs:
+        if not re.search(r"\b%s<S, I> \w+;" % st, term_set):
+            problem("include/smg/energy/regularizers.hpp", 1,
+                    "%s (%s) is not a member of RegularizerTermSet" % (st, rel))
+    if "terms/%s.hpp" % name not in contributing:
+        problem("docs/contributing.md", 1, "does not name %s" % rel)
+    if "terms/%s.hpp" % name not in energy_md:
+        problem("docs/math/energy.md", 1, "does not name %s" % rel)
+    # The operator list names one-term operators: carap/arap for the rigid term, lrm, accel.
+    wanted = {"rigid": ["carap", "arap"], "confidence": ["confidences"]}.get(name, [name])
+    for op in wanted:
+        if op not in op_names:
+            problem("tests/support/operators.hpp", 1, "no operator '%s' for %s in the list" % (op, rel))
+if op_list is None:
+    problem("tests/support/operators.hpp", 1, "no `using Operators = std::tuple<...>` list")
+
+# ---------------------------------------------------------------------------------------------
 # (g) generated text is current
 import importlib.util  # noqa: E402
 

@@ -175,8 +175,8 @@ void dqb_backward_cuda(const SkinInputs& in, const smg::SkinOptions& opt, const 
   });
 }
 
-// regularizers: smg::cuda::regularizers (the fused step) into energies [3] (float64: the
-// RegularizerResult<S> of either dtype is three doubles), c, gx and gq when defined.
+// regularizers: smg::cuda::regularizers (the fused step) into energies [4] (float64: the
+// RegularizerResult<S> of either dtype is four doubles), c, gx and gq when defined.
 void regularizers_cuda(const EnergyInputs& in, const smg::RegularizerOptions& o, bool validate,
                        const at::Tensor& energies, const at::Tensor& c, const at::Tensor& gx,
                        const at::Tensor& gq) {
@@ -186,8 +186,8 @@ void regularizers_cuda(const EnergyInputs& in, const smg::RegularizerOptions& o,
   dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
     using S = decltype(s);
     using I = decltype(i);
-    static_assert(sizeof(smg::RegularizerResult<S>) == 3 * sizeof(double),
-                  "RegularizerResult<S> must be the three doubles of the energies tensor");
+    static_assert(sizeof(smg::RegularizerResult<S>) == 4 * sizeof(double),
+                  "RegularizerResult<S> must be the four doubles of the energies tensor");
     const auto gv = graph_view<S, I>(in.g);
     const smg::PositionsView<const S> xv(cptr<S>(in.x), in.T, in.N);
     const smg::QuaternionsView<const S> qv =

@@ -340,9 +340,16 @@ NodeLossTerms NodeObjective::evaluate(const Nodes& n, double scale, double* gp, 
     }
     out.data = w * e;
   }
-  if (variant_.rigidity == Rigidity::none && !variant_.lrm) return out;
   // Energies add their gradient into the buffers; the scale goes through options.weight.
   smg::PositionsView<double> gpv(gp, gp ? T : 0, gp ? N : 0);
+  if (options_.accel_weight > 0) {
+    smg::AccelOptions ao;
+    ao.weight = options_.accel_weight * per_node_frame * scale;
+    check(smg::validate_accel<double>(n.positions_view(), {}, ao, gpv), "accel");
+    const double e = smg::accel<double>(n.positions_view(), {}, ao, gpv, &ws_, parallel_);
+    out.accel = scale != 0 ? e / scale : 0.0;
+  }
+  if (variant_.rigidity == Rigidity::none && !variant_.lrm) return out;
   smg::TangentsView<double> grv(gr, gr ? T : 0, gr ? N : 0);
   const bool conf = uses_confidence();
   if (conf && confidence_.size() != sz(T) * N) update_confidences(n);
@@ -397,8 +404,9 @@ Stage1Result fit_nodes(Nodes& n, NodeObjective& obj, const Stage1Options& o, con
     adam_x.step(n.positions.data(), gx.data());
     if (rotations_matter) adam_q.step_rotations(n.rotations.data(), gq.data());
     if (o.log_every > 0 && (it % o.log_every == 0 || it + 1 == o.iterations))
-      progress.line("stage1", format("it %4d/%d  loss %.4e  (data %.3e  rigidity %.3e  lrm %.3e)", it + 1,
-                                     o.iterations, last.total(), last.data, last.rigidity, last.lrm));
+      progress.line("stage1", format("it %4d/%d  loss %.4e  (data %.3e  rigidity %.3e  lrm %.3e  accel %.3e)",
+                                     it + 1, o.iterations, last.total(), last.data, last.rigidity, last.lrm,
+                                     last.accel));
   }
   obj.update_confidences(n);
   r.final = obj.evaluate(n);

@@ -18,6 +18,7 @@
 //   E = w_data * (1/(T N)) Σ_{t,i observed} ρ_H(|x_i^t − y_i^t|)                (data)
 //     + w_rig  * rigidity / (N Σ_δ (T − δ))      plain ARAP or C-ARAP (E9)         (per variant)
 //     + w_lrm  * LRM / (T N)                     (E14)                             (per variant)
+//     + w_accel * smoothness / (T N)             (E21, squared accelerations; off by default)
 // Each term is normalised to "per node and frame" so that the weights do not depend on N, T or
 // the graph's degree. Confidences (E6) are recomputed from the current positions every few
 // iterations and held constant in between (stop-gradient, as the library defines them).
@@ -121,6 +122,9 @@ struct NodeLossOptions {
   double rigidity_weight = 0.1;    // plain ARAP or C-ARAP, per node and frame
   double lrm_weight = 0.1;
   double lrm_huber = 0.01;         // metres per frame (smg::LrmOptions::huber_delta)
+  // Trajectory smoothness (E21, unweighted accelerations, as MoSca and Shape-of-Motion): every
+  // variant, 0 = off (the paper has no such term).
+  double accel_weight = 0.0;
   double alpha = 0.6;              // confidence floor of C-ARAP and LRM (E7)
   // --alpha auto: the trainer picks C-ARAP (with `alpha`) or plain ARAP for the rigidity term of
   // a variant with C-ARAP from what it sees before stage 1 (pipeline.hpp, choose_carap).
@@ -135,8 +139,8 @@ struct NodeLossOptions {
 };
 
 struct NodeLossTerms {
-  double data = 0, rigidity = 0, lrm = 0;
-  double total() const { return data + rigidity + lrm; }
+  double data = 0, rigidity = 0, lrm = 0, accel = 0;
+  double total() const { return data + rigidity + lrm + accel; }
 };
 
 // Data term + the variant's regularisers over the node trajectories, with exact gradients

@@ -102,7 +102,6 @@ bool choose_carap(const SceneSignals& s) {
   // high: when the confidence already distrusts many observed samples, C-ARAP's weight
   // w (alpha + (1 − alpha) c) mostly lowers the rigidity of sound edges. The threshold is the one
   // that minimised the summed query EPE on those seeds; seeds 5-9 report it (docs/results.md).
-  constexpr double kLowConfidenceShare = 0.19;
   return !(s.low_confidence >= kLowConfidenceShare);  // NaN (nothing observed): the default, C-ARAP
 }
 

@@ -67,6 +67,9 @@ SceneSignals scene_signals(const Nodes& nodes, const std::vector<double>& confid
 // The rule of --alpha auto (docs/results.md, "A rule from what the trainer sees"): true when the
 // rigidity term should be C-ARAP, false for plain ARAP, from the signals alone.
 bool choose_carap(const SceneSignals& signals);
+// The low-confidence share at and above which choose_carap picks plain ARAP; metrics.json writes
+// it as signals.rule_threshold so that scripts/failure_study.py follows the same rule.
+inline constexpr double kLowConfidenceShare = 0.19;
 
 struct TrainerResult {
   Dataset data;

@@ -98,6 +98,8 @@ const std::vector<Setting>& settings() {
        [](const C& c) { return c.node_loss.rigidity_weight; }, [](C& c, double v) { c.node_loss.rigidity_weight = v; }},
       {"w-lrm", K::number, "weight of the LRM term", 0.0, 1e6, nullptr,
        [](const C& c) { return c.node_loss.lrm_weight; }, [](C& c, double v) { c.node_loss.lrm_weight = v; }},
+      {"w-accel", K::number, "weight of trajectory smoothness (squared node accelerations, E21, as MoSca and Shape-of-Motion); 0 = off", 0.0, 1e6, nullptr,
+       [](const C& c) { return c.node_loss.accel_weight; }, [](C& c, double v) { c.node_loss.accel_weight = v; }},
       {"alpha", K::number, "confidence floor alpha of C-ARAP and LRM, E7; 1 makes C-ARAP plain ARAP; auto: C-ARAP or plain ARAP chosen by the trainer from the scene (docs/results.md)", 0.0, 1.0,
        nullptr, [](const C& c) { return c.node_loss.alpha; }, [](C& c, double v) { c.node_loss.alpha = v; }},
       {"carap-reading", K::choice,

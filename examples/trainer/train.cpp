@@ -99,6 +99,7 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
       .add("data_huber", l.data_huber)
       .add("w_rigidity", l.rigidity_weight)
       .add("w_lrm", l.lrm_weight)
+      .add("w_accel", l.accel_weight)
       .add("lrm_huber", l.lrm_huber)
       .add("alpha", l.alpha)
       .add_raw("gaps", gaps + "]")

@@ -7,6 +7,8 @@
 #include "smg/core/parallel.hpp"
 #include "smg/core/quaternion.hpp"
 #include "smg/core/quaternion_manifold.hpp"
+#include "smg/core/rotation_gradient.hpp"
+#include "smg/core/rotation_gradient_batch.hpp"
 #include "smg/core/scalar.hpp"
 #include "smg/core/so3.hpp"
 #include "smg/core/status.hpp"

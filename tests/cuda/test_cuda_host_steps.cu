@@ -37,6 +37,17 @@ bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
 }
 
+// max |a − b| / max |b| over two arrays (the error relative to the array's scale).
+template <class T>
+double max_rel_diff(const std::vector<T>& a, const std::vector<T>& b) {
+  double scale = 0, err = 0;
+  for (std::size_t k = 0; k < a.size() && k < b.size(); ++k) {
+    scale = std::max(scale, std::abs(double(b[k])));
+    err = std::max(err, std::abs(double(a[k]) - double(b[k])));
+  }
+  return a.size() == b.size() ? err / std::max(scale, 1e-300) : 1e300;
+}
+
 // The device builder (detail::build_in_edges) run by its per-element steps in host loops: the
 // count and fill steps over the slots in `order` (a permutation of [0, rows·width): the order in
 // which the device's atomics happen to land), the one-block scan as its kThreads threads (chunk
@@ -203,7 +214,10 @@ void lrm_steps_case(Index T, Index N, Index K, bool conf, const smg::LrmOptions&
   for (const auto v : terms) e_gpu += double(v);
   e_gpu *= scale;
   CHECK(e_gpu == doctest::Approx(e_cpu).epsilon(1e-12));
-  CHECK(same_bits(g_gpu, g_cpu));
+  // ω is one element function's output per (frame, node): bitwise. The gradient sums the same
+  // contributions in another order (the CPU's driver adds them per neighbour into its block's
+  // rows, the CUDA steps gather per edge), so it agrees to rounding: 1e-12 relative in double.
+  CHECK(max_rel_diff(g_gpu, g_cpu) <= (sizeof(S) == 8 ? 1e-12 : 2e-6));
   CHECK(same_bits(om_gpu, om_cpu));
 }
 
@@ -361,7 +375,7 @@ void dqb_steps_case(Index T, Index N, Index P, Index D, Index Q, smg::SkinMethod
 }  // namespace
 
 TEST_SUITE("cuda-host") {
-  TEST_CASE("cuda lrm steps on the host reproduce the CPU lrm bit for bit") {
+  TEST_CASE("cuda lrm steps on the host reproduce the CPU lrm (ω bit for bit, gradient to 1e-12)") {
     smg::LrmOptions o;
     o.huber_delta = 0.3;
     lrm_steps_case<double, std::int32_t>(5, 40, 8, true, o, 1);

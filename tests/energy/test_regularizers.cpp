@@ -4,12 +4,10 @@
 // hard cases, the memory bound and the argument checks.
 //
 // Bitwise or 1e-12? The confidences are always bit-identical (same element functions, same
-// order). C-ARAP alone and ARAP alone (tangent gradients) use carap()'s block partition and
-// per-node arithmetic unchanged, so energy and gradients are bit-identical too. Everywhere else
-// the same terms are summed in another association (C-ARAP and ARAP d-gradients summed before
-// one back-propagation; LRM's contributions added per neighbour instead of through lrm()'s
-// [T][N][3] arrays; raw-quaternion gradients converted per contribution), so the comparison is
-// ≤ 1e-12 relative to the largest value, in double.
+// order). One energy alone (C-ARAP, ARAP or LRM) is bit-identical too: carap(), arap() and lrm()
+// are the same driver (energy/driver.hpp) with the same term. With several energies the block
+// partition follows the largest reach, and C-ARAP's and ARAP's d-gradients are summed before
+// one back-propagation, so the comparison is ≤ 1e-12 relative to the largest value, in double.
 #include <doctest/doctest.h>
 
 #include <algorithm>
@@ -27,16 +25,6 @@ using smg::test::fused_options;
 using smg::test::Scene;
 
 namespace {
-
-// Bitwise comparisons with carap(): its energy sums (Eigen packet sums over its scratch) are
-// associated by the scratch's address modulo the packet size; with SSE's 16-byte packets every
-// allocation is aligned, with AVX's 32 bytes carap()'s depends on malloc. The fused step aligns
-// its arrays to 64 bytes, so its own results (thread counts) are bitwise under either.
-#if defined(__AVX__)
-constexpr bool kFusedBitwiseWithCarap = false;
-#else
-constexpr bool kFusedBitwiseWithCarap = true;
-#endif
 
 template <class S>
 struct FusedOut {
@@ -103,6 +91,7 @@ FusedOut<S> fused_separate(const Scene<S>& s, const smg::RegularizerOptions& o, 
   if (o.terms.arap)
     r.e.arap = smg::arap<S>(s.positions(), s.rotations(), s.graph(), o.arap, gx, gr, nullptr, par);
   if (o.terms.lrm) r.e.lrm = smg::lrm<S>(s.positions(), c, s.graph(), o.lrm, gx, nullptr, par);
+  if (o.terms.accel) r.e.accel = smg::accel<S>(s.positions(), c, o.accel, gx, nullptr, par);
   return r;
 }
 
@@ -135,7 +124,7 @@ bool fused_all_finite(const FusedOut<S>& r) {
 // Fused against separate on one scene, every subset of the four terms, tangent and raw.
 void fused_check_equal(const Scene<double>& s, const std::string& what) {
   CAPTURE(what);
-  for (unsigned mask = 0; mask < 16; ++mask)
+  for (unsigned mask = 0; mask < 32; ++mask)
     for (bool raw : {false, true}) {
       CAPTURE(mask);
       CAPTURE(raw);
@@ -144,18 +133,21 @@ void fused_check_equal(const Scene<double>& s, const std::string& what) {
       const FusedOut<double> r = fused_separate(s, o, 2, raw);
       CHECK(fused_all_finite(f));
       if (o.terms.confidence) CHECK(f.conf == r.conf);  // bitwise: same functions, same order
-      // C-ARAP or ARAP alone (tangent): carap()'s arithmetic unchanged, bitwise.
-      const bool bitwise = kFusedBitwiseWithCarap && !raw && (mask & 8u) == 0 &&
-                           ((mask & 6u) == 2u || (mask & 6u) == 4u);
+      // One energy alone: the separate operator is the same driver with the same term, bitwise.
+      const unsigned energies = mask & 30u;
+      const bool bitwise = energies == 2u || energies == 4u || energies == 8u || energies == 16u;
       if (bitwise) {
         CHECK(f.e.carap == r.e.carap);
         CHECK(f.e.arap == r.e.arap);
+        CHECK(f.e.lrm == r.e.lrm);
+        CHECK(f.e.accel == r.e.accel);
         CHECK(f.gx == r.gx);
         CHECK(f.gr == r.gr);
       }
       CHECK(fused_rel(f.e.carap, r.e.carap) <= 1e-12);
       CHECK(fused_rel(f.e.arap, r.e.arap) <= 1e-12);
       CHECK(fused_rel(f.e.lrm, r.e.lrm) <= 1e-12);
+      CHECK(fused_rel(f.e.accel, r.e.accel) <= 1e-12);
       CHECK(fused_rel_diff(f.gx, r.gx) <= 1e-12);
       CHECK(fused_rel_diff(f.gr, r.gr) <= 1e-12);
       // Energies only (no gradient buffers: no spill, a different frame overlap).
@@ -163,6 +155,7 @@ void fused_check_equal(const Scene<double>& s, const std::string& what) {
       CHECK(fused_rel(fe.e.carap, r.e.carap) <= 1e-12);
       CHECK(fused_rel(fe.e.arap, r.e.arap) <= 1e-12);
       CHECK(fused_rel(fe.e.lrm, r.e.lrm) <= 1e-12);
+      CHECK(fused_rel(fe.e.accel, r.e.accel) <= 1e-12);
       CHECK(fused_max_abs(fe.gx) == 0.0);
       // Terms that are off are exactly 0; those that are on vanish only where the separate
       // operator's does (LRM with one neighbour, one frame).
@@ -172,9 +165,14 @@ void fused_check_equal(const Scene<double>& s, const std::string& what) {
       if ((mask & 2u) == 0) CHECK(f.e.carap == 0.0);
       if ((mask & 4u) == 0) CHECK(f.e.arap == 0.0);
       if ((mask & 8u) == 0) CHECK(f.e.lrm == 0.0);
+      if ((mask & 16u) == 0) CHECK(f.e.accel == 0.0);
       if (s.T > 4 && s.K > 1) {
         CHECK(((mask & 2u) == 0) == (f.e.carap == 0.0));
         CHECK(((mask & 8u) == 0) == (f.e.lrm == 0.0));
+        // Confidence-weighted smoothness vanishes exactly where every confidence is 0.
+        const bool some_c = (mask & 1u) == 0 ||
+                            std::any_of(f.conf.begin(), f.conf.end(), [](double c) { return c > 0; });
+        if (some_c) CHECK(((mask & 16u) == 0) == (f.e.accel == 0.0));
       }
     }
 }
@@ -192,7 +190,7 @@ TEST_CASE("fused regularizers are bit-identical for 1, 2 and 3 threads") {
   SMG_TEST_RNG(rng, 2402);
   const Scene<double> sd = smg::test::random_scene(41, 36, 7, rng);
   const Scene<float> sf = sd.cast<float>();
-  const smg::RegularizerOptions o = fused_options(15);
+  const smg::RegularizerOptions o = fused_options(31);
   for (bool raw : {false, true}) {
     CAPTURE(raw);
     const FusedOut<double> d1 = fused_run(sd, o, 1, raw);
@@ -204,11 +202,13 @@ TEST_CASE("fused regularizers are bit-identical for 1, 2 and 3 threads") {
       CHECK(d.e.carap == d1.e.carap);
       CHECK(d.e.arap == d1.e.arap);
       CHECK(d.e.lrm == d1.e.lrm);
+      CHECK(d.e.accel == d1.e.accel);
       CHECK(d.gx == d1.gx);
       CHECK(d.gr == d1.gr);
       CHECK(d.conf == d1.conf);
       CHECK(f.e.carap == f1.e.carap);
       CHECK(f.e.lrm == f1.e.lrm);
+      CHECK(f.e.accel == f1.e.accel);
       CHECK(f.gx == f1.gx);
       CHECK(f.gr == f1.gr);
       CHECK(f.conf == f1.conf);
@@ -219,7 +219,7 @@ TEST_CASE("fused regularizers are bit-identical for 1, 2 and 3 threads") {
 TEST_CASE("fused regularizers in float agree with double") {
   const Scene<double> sd = smg::test::rigid_bodies_scene(20, 50, 6);
   const Scene<float> sf = sd.cast<float>();
-  const smg::RegularizerOptions o = fused_options(15);
+  const smg::RegularizerOptions o = fused_options(31);
   const FusedOut<double> d = fused_run(sd, o, 2);
   const FusedOut<float> f = fused_run(sf, o, 2);
   CHECK(fused_all_finite(f));
@@ -241,7 +241,7 @@ TEST_CASE("fused regularizers' gradient matches central finite differences") {
   Scene<double> s = smg::test::random_scene(7, 9, 4, rng);
   // The confidences are constants for the gradient (stop-gradient), so the function that is
   // differentiated has them held: c ≡ 1 (terms.confidence off) and α < 1 still weights C-ARAP.
-  smg::RegularizerOptions o = fused_options(2 | 4 | 8);
+  smg::RegularizerOptions o = fused_options(2 | 4 | 8 | 16);
   o.lrm.huber_delta = 0.05;
   const FusedOut<double> f = fused_run(s, o, 2);
   auto energy = [&] {
@@ -320,7 +320,7 @@ TEST_CASE("fused regularizers keep their extra memory under the inputs' size") {
   // what regularizers_extra_bytes says, and at most the bytes of positions, rotations,
   // visibility and graph; the separate operators' workspace holds several T·N·3 arrays.
   const Scene<double> s = smg::test::rigid_bodies_scene(96, 120, 8);
-  const smg::RegularizerOptions o = fused_options(15);
+  const smg::RegularizerOptions o = fused_options(31);
   for (int threads : {1, 2, 3}) {
     CAPTURE(threads);
     smg::EnergyWorkspace<double> ws;
@@ -336,16 +336,19 @@ TEST_CASE("fused regularizers keep their extra memory under the inputs' size") {
     CHECK(ws.bytes() == predicted);
     CHECK(ws.bytes() <= inputs);
   }
-  // The separate calls' workspace, for the record of what the fused pass saves.
-  smg::EnergyWorkspace<double> sep;
-  std::vector<double> conf(static_cast<std::size_t>(s.T * s.N)), gx(s.x.size()), gr(s.x.size());
-  smg::node_confidences<double>(s.positions(), s.visibility(), s.graph(), o.confidence,
-                                smg::FrameScalarsView<double>(conf.data(), s.T, s.N), {}, {}, &sep);
-  (void)smg::lrm<double>(s.positions(), smg::FrameScalarsView<const double>(conf.data(), s.T, s.N),
-                         s.graph(), o.lrm, smg::PositionsView<double>(gx.data(), s.T, s.N), &sep);
-  smg::EnergyWorkspace<double> fused_ws;
-  (void)fused_run(s, o, 2, false, true, true, &fused_ws);
-  CHECK(fused_ws.bytes() < sep.bytes());
+  // The separate operators are the same driver with one term (carap(), lrm()): their workspace
+  // keeps the same bound, on their own inputs (no visibility; lrm() reads no rotations).
+  std::vector<double> gx(s.x.size()), gr(s.x.size());
+  const std::size_t graph_bytes = sizeof(double) * s.w.size() + sizeof(std::int32_t) * s.idx.size();
+  smg::EnergyWorkspace<double> ws_lrm, ws_carap;
+  (void)smg::lrm<double>(s.positions(), s.confidence(), s.graph(), o.lrm,
+                         smg::PositionsView<double>(gx.data(), s.T, s.N), &ws_lrm);
+  (void)smg::carap<double>(s.positions(), s.rotations(), s.confidence(), s.graph(), o.carap,
+                           smg::PositionsView<double>(gx.data(), s.T, s.N),
+                           smg::TangentsView<double>(gr.data(), s.T, s.N), &ws_carap);
+  CHECK(ws_lrm.bytes() > 0);
+  CHECK(ws_lrm.bytes() <= sizeof(double) * s.x.size() + graph_bytes);
+  CHECK(ws_carap.bytes() <= sizeof(double) * (s.x.size() + s.q.size()) + graph_bytes);
 }
 
 TEST_CASE("validate_regularizers names the bad argument in one line") {

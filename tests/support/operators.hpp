@@ -37,24 +37,28 @@ struct OperatorOutputs {
   FrameScalarsView<S> confidence;
 };
 
-// Each operator: `name` (also the smg_assert_probe mode that misuses it) and
-// run(in, out, workspace, parallel), with default options; returns the energy (0 for the
-// confidences, which have none). Preconditions: the operator's validate_* with the same views.
+// Each operator: `name` (also the smg_assert_probe mode that misuses it), `exact_gradient` (its
+// outputs are the exact gradient of its energy in the given inputs: tests/energy/test_terms.cpp
+// checks them against central differences and AutoDiffScalar) and run(in, out, workspace,
+// parallel), with default options; returns the energy in Accumulator<S> (0 for the confidences, which have none).
+// Preconditions: the operator's validate_* with the same views.
 struct Confidences {
   static constexpr const char* name = "confidences";
+  static constexpr bool exact_gradient = false;  // no energy
   template <class S, class I>
-  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
     node_confidences<S>(in.positions, in.visibility, in.graph, ConfidenceOptions{}, out.confidence, {}, {}, workspace,
                         parallel);
-    return 0;
+    return Accumulator<S>(0);
   }
 };
 
 struct Carap {
   static constexpr const char* name = "carap";
+  static constexpr bool exact_gradient = true;
   template <class S, class I>
-  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
     return carap<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions, out.rotations,
                     workspace, parallel);
@@ -63,8 +67,9 @@ struct Carap {
 
 struct Arap {
   static constexpr const char* name = "arap";
+  static constexpr bool exact_gradient = true;
   template <class S, class I>
-  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
     return arap<S>(in.positions, in.rotations, in.graph, ArapOptions{}, out.positions, out.rotations, workspace, parallel);
   }
@@ -73,8 +78,9 @@ struct Arap {
 // The directed reading of C-ARAP (its updates go to the gradient views); it takes no workspace.
 struct CarapDirected {
   static constexpr const char* name = "carap_directed";
+  static constexpr bool exact_gradient = false;  // updates, not a gradient (E20)
   template <class S, class I>
-  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* = nullptr,
+  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* = nullptr,
                     ParallelOptions parallel = {}) {
     return carap_directed<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
                              out.rotations, parallel);
@@ -83,30 +89,49 @@ struct CarapDirected {
 
 struct Lrm {
   static constexpr const char* name = "lrm";
+  static constexpr bool exact_gradient = true;
   template <class S, class I>
-  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
     return lrm<S>(in.positions, in.confidence, in.graph, LrmOptions{}, out.positions, workspace, parallel);
   }
 };
 
-// The fused step (regularizers.hpp) with all four terms: the confidences it computes (from the
-// visibility; the confidence input is not read), C-ARAP, ARAP and LRM; returns their sum.
+// Trajectory smoothness (E21), acceleration form, weighted by the given confidences.
+struct Accel {
+  static constexpr const char* name = "accel";
+  static constexpr bool exact_gradient = true;
+  template <class S, class I>
+  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+                    ParallelOptions parallel = {}) {
+    AccelOptions o;
+    o.confidence_weighted = true;
+    return accel<S>(in.positions, in.confidence, o, out.positions, workspace, parallel);
+  }
+};
+
+// The fused step (regularizers.hpp) with every term: the confidences it computes (from the
+// visibility; the confidence input is not read), C-ARAP, ARAP, LRM and smoothness; returns their
+// sum.
 struct Regularizers {
   static constexpr const char* name = "regularizers";
+  // Its gradient holds the confidences it computes constant (stop-gradient): central
+  // differences would move them (test_regularizers.cpp checks it with the confidences off).
+  static constexpr bool exact_gradient = false;
   template <class S, class I>
-  static double run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
     RegularizerOptions o;
     o.terms.arap = true;
-    return double(regularizers<S>(in.positions, in.rotations, in.visibility, in.graph, o, out.confidence,
-                                  out.positions, out.rotations, workspace, parallel)
-                      .total());
+    o.terms.accel = true;
+    return regularizers<S>(in.positions, in.rotations, in.visibility, in.graph, o, out.confidence,
+                           out.positions, out.rotations, workspace, parallel)
+        .total();
   }
 };
 
 // The list. A new regulariser gets a struct like the ones above and an entry here.
-using Operators = std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Regularizers>;
+using Operators = std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Accel, Regularizers>;
 
 // Calls f(Op{}) for each operator of the list, in its order.
 template <class F>

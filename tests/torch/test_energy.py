@@ -322,7 +322,7 @@ def test_regularizers_gradcheck():
     # The confidences are constants for the gradient (stop-gradient): gradcheck differentiates
     # numerically, so it runs with them off (c = 1; alpha < 1 still weights C-ARAP).
     f = lambda a, b: smg.regularizers(a, b, (idx, w), confidence=False, arap=True,
-                                      lrm=dict(huber_delta=0.05)).total
+                                      lrm=dict(huber_delta=0.05), accel=True).total
     assert gradcheck(f, (x.requires_grad_(), q.requires_grad_()))
 
 
@@ -342,3 +342,38 @@ def test_regularizers_threads_bitwise():
     for o in out[1:]:
         for a, b in zip(o, out[0]):
             assert torch.equal(a, b)
+
+
+# ---- trajectory smoothness (accel, E21) against torch's own arithmetic and autograd ------------
+
+def accel_reference(x, c, form, weighted, weight):
+    """(E21) written in torch: squared second (or first) differences of every node trajectory,
+    weighted by c at the earliest frame of each term when weighted."""
+    d = x[2:] - 2 * x[1:-1] + x[:-2] if form == "acceleration" else x[1:] - x[:-1]
+    per = (d * d).sum(-1)
+    if weighted:
+        per = per * c[: per.shape[0]]
+    return weight * per.sum()
+
+
+@pytest.mark.parametrize("form", ["acceleration", "velocity"])
+@pytest.mark.parametrize("weighted", [False, True])
+def test_regularizers_accel_equals_torch_autograd(form, weighted):
+    x, q, idx, w, _ = random_scene(T=9)
+    vis = torch.rand(x.shape[0], x.shape[1]) > 0.2
+    opts = dict(form=form, confidence_weighted=weighted, weight=0.7)
+    xs = x.clone().requires_grad_()
+    r = smg.regularizers(xs, q, (idx, w), vis, carap=False, lrm=False, accel=opts)
+    xr = x.clone().requires_grad_()
+    e = accel_reference(xr, r.confidence, form, weighted, 0.7)
+    assert float(e) > 0
+    assert rel(r.accel, e) < 1e-12 and rel(r.total, e) < 1e-12
+    assert float(r.carap) == float(r.lrm) == 0.0
+    r.total.backward()
+    e.backward()
+    assert rel(xs.grad, xr.grad) < 1e-12
+    # With the other terms: accel adds its energy and gradient to theirs.
+    both = smg.regularizers(x, q, (idx, w), vis, accel=opts)
+    alone = smg.regularizers(x, q, (idx, w), vis)
+    assert rel(both.total, alone.total + r.accel) < 1e-12
+    assert float(alone.accel) == 0.0

@@ -80,6 +80,8 @@ def test_regularizers_option_errors():
     cases = {"carap.alpha:": lambda: smg.regularizers(x, q, g, carap=dict(alpha=1.5)),
              "arap.gaps[0]:": lambda: smg.regularizers(x, q, g, arap=dict(gaps=(0,))),
              "lrm.huber_delta:": lambda: smg.regularizers(x, q, g, lrm=dict(huber_delta=0)),
+             "accel.weight:": lambda: smg.regularizers(x, q, g, accel=dict(weight=-1)),
+             "accel.form:": lambda: smg.regularizers(x, q, g, accel=dict(form="jerk")),
              "confidence.kappa_m:": lambda: smg.regularizers(x, q, g, confidence=dict(kappa_m=0)),
              "carap: unknown option": lambda: smg.regularizers(x, q, g, carap=dict(beta=1)),
              "lrm: expected True, False or a dict": lambda: smg.regularizers(x, q, g, lrm=3),
@@ -105,6 +107,8 @@ def test_cuda_not_implemented():
         # The fused step runs on CUDA (tests/torch/test_cuda.py); mixed devices are refused.
         with pytest.raises(ValueError, match="graph.weights"):
             smg.regularizers(x.cuda(), q.cuda(), (idx.cuda(), w))
+        with pytest.raises(ValueError, match="accel: not yet on CUDA"):
+            smg.regularizers(x.cuda(), q.cuda(), (idx.cuda(), w.cuda()), accel=True)
     else:
         with pytest.raises(NotImplementedError, match="built with CUDA"):
             smg.carap(x.cuda(), q.cuda(), (idx.cuda(), w.cuda()), c.cuda())

@@ -221,15 +221,17 @@ def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor
 
 
 class Regularizers(NamedTuple):
-    """What smg_torch.regularizers returns: total = carap + arap + lrm (0-dim, differentiable
-    w.r.t. positions and quats), the three energies (0-dim, detached: for logging; a term that is
-    off is 0) and the confidences [T, N] (no gradient; None when off)."""
+    """What smg_torch.regularizers returns: total = carap + arap + lrm + accel (0-dim,
+    differentiable w.r.t. positions and quats), the energies (0-dim, detached: for logging; a term
+    that is off is 0) and the confidences [T, N] (no gradient; None when off). `accel` comes last
+    so that code unpacking the first five fields keeps working."""
 
     total: torch.Tensor
     carap: torch.Tensor
     arap: torch.Tensor
     lrm: torch.Tensor
     confidence: Optional[torch.Tensor]
+    accel: Optional[torch.Tensor] = None
 
 
 #: The options of each term of regularizers, with their defaults (those of node_confidences,
@@ -241,6 +243,9 @@ REGULARIZER_DEFAULTS = {
     "arap": dict(lambda_c=1.0, lambda_l=1.0, gaps=(1, 2, 4), gap_weights=None, normalize=False,
                  weight=1.0),
     "lrm": dict(alpha=0.6, huber_delta=0.01, detach_omega=False, normalize=False, weight=1.0),
+    # trajectory smoothness (E21): form "acceleration" or "velocity"; confidence_weighted uses
+    # c at the earliest frame of each term (1 otherwise)
+    "accel": dict(form="acceleration", confidence_weighted=False, normalize=False, weight=1.0),
 }
 
 
@@ -263,7 +268,9 @@ def _term_options(name, value):
                 "huber_delta", "weight"):
         if key in out:
             out[key] = float(out[key])
-    for key in ("normalize", "detach_omega"):
+    if "form" in out:
+        out["form"] = str(out["form"])
+    for key in ("normalize", "detach_omega", "confidence_weighted"):
         if key in out:
             out[key] = bool(out[key])
     return True, out
@@ -276,7 +283,7 @@ class _RegularizersFunction(torch.autograd.Function):
         e, c, gx, gq = _C.regularizers(
             positions.detach(), None if quats is None else quats.detach(), idx, w.detach(),
             visibility, terms, opts["confidence"], opts["carap"], opts["arap"], opts["lrm"],
-            need_x, need_q and quats is not None, validate)
+            opts["accel"], need_x, need_q and quats is not None, validate)
         ctx.grads = (gx, gq)
         total = e.sum()
         if c is None:
@@ -293,14 +300,16 @@ class _RegularizersFunction(torch.autograd.Function):
 
 def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: GraphLike,
                  visibility: Optional[torch.Tensor] = None, *, confidence=True, carap=True,
-                 arap=False, lrm=True, validate: bool = False) -> Regularizers:
+                 arap=False, lrm=True, accel=False, validate: bool = False) -> Regularizers:
     """The regulariser step fused (smg::regularizers, docs/math/energy.md "The fused regulariser
     pass"): the confidences (E2-E6; visibility [T, N] or None = all visible), C-ARAP (E7-E10),
-    plain ARAP and LRM (E11-E16) in one pass over the graph. Each term is False (off), True (the
+    plain ARAP, LRM (E11-E16) and trajectory smoothness (accel, E21: squared accelerations or
+    velocities of the node trajectories, as MoSca and Shape-of-Motion regularise; CPU tensors
+    only so far) in one pass over the graph. Each term is False (off), True (the
     defaults of node_confidences / carap / arap / lrm) or a dict of its options
     (REGULARIZER_DEFAULTS; `weight` scales the term). With confidence off, C-ARAP and LRM use
     c = 1. quats [T, N, 4] may be None without carap and arap. Returns Regularizers(total, carap,
-    arap, lrm, confidence): `total` is differentiable w.r.t. positions and the raw quats (the
+    arap, lrm, confidence, accel): `total` is differentiable w.r.t. positions and the raw quats (the
     confidences are constants, as with the separate operators); the per-term energies are detached.
     The same values as node_confidences + carap + arap + lrm to rounding (1e-12 relative in
     float64, tests/torch/test_energy.py). On CUDA tensors smg::cuda::regularizers runs on the
@@ -309,11 +318,12 @@ def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: Grap
     idx, w = _graph(g)
     _check(positions=positions, quats=quats, indices=idx, weights=w, visibility=visibility)
     terms, opts = {}, {}
-    for name, value in (("confidence", confidence), ("carap", carap), ("arap", arap), ("lrm", lrm)):
+    for name, value in (("confidence", confidence), ("carap", carap), ("arap", arap), ("lrm", lrm),
+                        ("accel", accel)):
         terms[name], opts[name] = _term_options(name, value)
     total, e, c = _RegularizersFunction.apply(positions, quats, idx, w, visibility, terms, opts,
                                               bool(validate))
-    return Regularizers(total, e[0], e[1], e[2], c if terms["confidence"] else None)
+    return Regularizers(total, e[0], e[1], e[2], c if terms["confidence"] else None, e[3])
 
 
 def _library_seconds(op: str, positions: torch.Tensor, quats: Optional[torch.Tensor], g: GraphLike,

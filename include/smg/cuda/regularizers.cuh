@@ -50,7 +50,7 @@
 #include "smg/energy/common.hpp"
 #include "smg/energy/confidence_term.hpp"
 #include "smg/energy/options.hpp"
-#include "smg/energy/regularizers.hpp"
+#include "smg/energy/block.hpp"
 #include "smg/energy/velocity.hpp"
 #include "smg/graph/neighbors.hpp"
 
@@ -402,7 +402,8 @@ std::size_t regularizers_extra_bytes(Index frames, Index nodes, Index k,
 // Checks the shapes and options of smg::cuda::regularizers on the host (the views are over
 // device memory: contents are not read; run validate_regularizers below on untrusted data
 // first). Same messages as the CPU validate_regularizers for what it checks; in addition
-// K <= kLrmMaxK with LRM on and a ReverseGraph built for this graph.
+// K <= kLrmMaxK with LRM on, no smoothness term (not on CUDA yet) and a ReverseGraph built
+// for this graph.
 template <class S, class I>
 Status validate_regularizers_shapes(smg::detail::NonDeducedT<PositionsView<const S>> positions,
                                     smg::detail::NonDeducedT<QuaternionsView<const S>> rotations,
@@ -442,6 +443,9 @@ Status validate_regularizers_shapes(smg::detail::NonDeducedT<PositionsView<const
     return Status::error(s.str());
   }
   if (Status s = validate_options(options); !s) return s;
+  // The CUDA fused step has no smoothness term yet (the CPU driver's terms/accel.hpp).
+  if (on.accel)
+    return Status::error("options.terms.accel: the smoothness term is not on CUDA yet");
   if (confidence.data() != nullptr) {
     if (!on.confidence)
       return Status::error("confidence: an output was given but options.terms.confidence is off");

@@ -29,6 +29,7 @@
 #include "smg/core/views.hpp"
 #include "smg/energy/confidence_term.hpp"
 #include "smg/energy/options.hpp"
+#include "smg/energy/velocities.hpp"
 #include "smg/energy/velocity.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"

@@ -115,6 +115,17 @@ struct LrmOptions {
   double weight = 1.0;         // overall factor on the energy and its gradient
 };
 
+// Smoothness of node trajectories (E21), as MoSca and Shape-of-Motion regularise their motion:
+// the squared second differences x^{t+2} − 2x^{t+1} + x^t (acceleration) or first differences
+// (velocity) of every node, weighted by c_{t,i} at the earliest frame or by 1.
+enum class AccelForm { acceleration, velocity };
+struct AccelOptions {
+  AccelForm form = AccelForm::acceleration;
+  bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
+  Normalization normalization = Normalization::sum;  // mean: over (T − 2) · N terms (or T − 1)
+  double weight = 1.0;                               // overall factor (units: 1 / length²)
+};
+
 // The fused step (regularizers.hpp): which terms it computes. Confidences off: C-ARAP and LRM
 // use c ≡ 1 (as carap() and lrm() do with an empty confidence view).
 struct RegularizerTerms {
@@ -122,6 +133,7 @@ struct RegularizerTerms {
   bool carap = true;       // (E9), weights (E7) with the confidences
   bool arap = false;       // (E9) with c ≡ 1, α = 1 (ablations)
   bool lrm = true;         // (E14), weights (E7) with the confidences
+  bool accel = false;      // (E21), trajectory smoothness
 };
 
 // The options of the fused step: the terms, and each term's own options (plain values).
@@ -131,6 +143,7 @@ struct RegularizerOptions {
   CarapOptions carap;
   ArapOptions arap;
   LrmOptions lrm;
+  AccelOptions accel;
 };
 
 namespace detail {
@@ -214,6 +227,12 @@ inline Status validate_options(const LrmOptions& o) {
                               detail::check_nonneg("LrmOptions", "weight", o.weight)});
 }
 
+inline Status validate_options(const AccelOptions& o) {
+  if (o.form != AccelForm::acceleration && o.form != AccelForm::velocity)
+    return Status::error("AccelOptions.form must be acceleration or velocity");
+  return detail::check_nonneg("AccelOptions", "weight", o.weight);
+}
+
 // Plain ARAP is C-ARAP with α = 1 and no confidences (the caller passes none).
 inline CarapOptions carap_options_for_arap(const ArapOptions& o) {
   CarapOptions c;
@@ -237,6 +256,8 @@ inline Status validate_options(const RegularizerOptions& o) {
     if (Status s = validate_options(o.arap); !s) return s;
   if (o.terms.lrm)
     if (Status s = validate_options(o.lrm); !s) return s;
+  if (o.terms.accel)
+    if (Status s = validate_options(o.accel); !s) return s;
   return Status::ok();
 }
 

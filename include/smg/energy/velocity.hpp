@@ -6,13 +6,12 @@
 //   u_i^0 = 0                      when T = 1
 //
 // The same rule gives the per-frame edge-length change of the confidence (E4). Velocities are in
-// world units per frame.
+// world units per frame. Per-element functions only (CUDA kernels include this header): the loop
+// over all nodes and frames, velocities(), is in velocities.hpp.
 #pragma once
 
 #include "smg/core/config.hpp"
 
-#include "smg/core/parallel.hpp"
-#include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
 
 namespace smg {
@@ -37,27 +36,6 @@ inline Vector3<S> velocity(PositionsView<const S> x, Index t, Index i) {
   const VelocityFrames f = velocity_frames(t, x.frames());
   if (!f.moving) return Vector3<S>::Zero();
   return x(f.plus, i) - x(f.minus, i);
-}
-
-// All velocities u [T][N][3] (same shape as x).  (E1)
-template <class S>
-void velocities(detail::NonDeducedT<PositionsView<const S>> x, PositionsView<S> u,
-                ParallelOptions parallel = {}) {
-  const Index T = x.frames(), N = x.nodes();
-  SMG_ASSERT(u.frames() == T && u.nodes() == N, "velocities: u shape");
-  parallel_for(
-      T * N,
-      [&](Index begin, Index end) {
-        for (Index k = begin; k < end; ++k) u(k / N, k % N) = velocity(x, k / N, k % N);
-      },
-      parallel);
-}
-
-// Checks velocities()' arguments: x [T][N][3] finite, u of the same shape (written).
-template <class S>
-Status validate_velocities(detail::NonDeducedT<PositionsView<const S>> x, PositionsView<S> u) {
-  if (Status s = validate_positions<S>(x, -1, -1, "positions"); !s) return s;
-  return validate_output(u, x.frames(), x.nodes(), "velocities");
 }
 
 }  // namespace smg

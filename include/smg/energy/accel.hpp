@@ -1,0 +1,68 @@
+// smg/energy/accel.hpp — trajectory smoothness (E21) as a separate operator: the squared
+// acceleration (or velocity) of every node trajectory, weighted by given confidences or 1, with
+// its gradient (docs/math/energy.md (E21)). The same term the fused step runs
+// (regularizers.hpp, options.terms.accel), through the same driver: a one-term call.
+#pragma once
+
+#include "smg/core/config.hpp"
+
+#include <cstdint>
+
+#include "smg/core/parallel.hpp"
+#include "smg/core/scalar.hpp"
+#include "smg/core/validate.hpp"
+#include "smg/core/views.hpp"
+#include "smg/energy/common.hpp"
+#include "smg/energy/driver.hpp"
+#include "smg/energy/options.hpp"
+#include "smg/energy/terms/accel.hpp"
+#include "smg/energy/terms/confidence.hpp"
+#include "smg/energy/workspace.hpp"
+
+namespace smg {
+
+// Checks the arguments of accel(): `confidence` [T][N] may be empty (all 1; read only with
+// options.confidence_weighted), the gradient may be empty (not computed).
+template <class S>
+Status validate_accel(detail::NonDeducedT<PositionsView<const S>> positions,
+                      detail::NonDeducedT<FrameScalarsView<const S>> confidence,
+                      const AccelOptions& options, PositionsView<S> grad_positions = {}) {
+  const Index T = positions.frames(), N = positions.nodes();
+  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
+  if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
+  if (Status s = validate_options(options); !s) return s;
+  return validate_optional_output(grad_positions, T, N, "grad_positions");
+}
+
+inline namespace SMG_ISA_NAMESPACE {
+
+// Trajectory smoothness (E21), returned in Accumulator<S> (double for float): with the
+// acceleration form Σ_i Σ_t w_i^t ‖x_i^{t+2} − 2 x_i^{t+1} + x_i^t‖² times options.weight (the
+// velocity form: first differences), w = confidence(t, i) at the earliest frame when
+// options.confidence_weighted, else 1. positions [T][N][3] in scene units; the gradient
+// w.r.t. positions is *added* to grad_positions [T][N][3]. Bit-identical for any thread count.
+// Precondition: validate_accel.
+template <class S>
+Accumulator<S> accel(detail::NonDeducedT<PositionsView<const S>> positions,
+                     detail::NonDeducedT<FrameScalarsView<const S>> confidence,
+                     const AccelOptions& options, PositionsView<S> grad_positions = {},
+                     EnergyWorkspace<S>* workspace = nullptr, ParallelOptions parallel = {}) {
+  const Index T = positions.frames(), N = positions.nodes();
+  SMG_ASSERT(detail::absent_or_shape(confidence, T, N), "accel: confidence shape");
+  SMG_ASSERT(detail::absent_or_shape(grad_positions, T, N), "accel: grad_positions shape");
+  if (T == 0 || N == 0) return Accumulator<S>(0);
+  using I = std::int32_t;
+  detail::ConfidenceTerm<S, I> conf;
+  conf.given = options.confidence_weighted ? confidence : FrameScalarsView<const S>();
+  detail::AccelTerm<S, I> term;
+  term.configure(options, T, N);
+  if (!term.on()) return Accumulator<S>(0);
+  // No graph: the term reads each node's own trajectory only.
+  return detail::drive_views<S, I>(positions, QuaternionsView<const S>(), false,
+                                   NeighborsView<S, I>(nullptr, nullptr, N, 0), grad_positions,
+                                   RotationGradientView<S>(), workspace, parallel, conf, term)
+      .accel;
+}
+
+}  // inline namespace SMG_ISA_NAMESPACE
+}  // namespace smg

@@ -1,0 +1,240 @@
+// The properties every regulariser must have, checked for every operator of the list
+// (tests/support/operators.hpp), as manif's common tester does for every group: an operator
+// added to the list is covered here without a line of its own.
+//   - the gradient (where it is the exact gradient of the energy) against central differences
+//     in double and against Eigen's AutoDiffScalar through the same code;
+//   - float against double;
+//   - bit-identical results for 1, 2 and 3 threads;
+//   - finite results on the hard cases (all confidences zero, zero-length edges, coincident
+//     frames, huge and tiny coordinates, one and two frames).
+// The int32/int64 graphs, the caller's executor and mutable views are tests/api's, over the
+// same list.
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "energy/scene.hpp"
+#include "smg/energy.hpp"
+#include "support/autodiff.hpp"
+#include "support/finite_diff.hpp"
+#include "support/operators.hpp"
+#include "support/prelude.hpp"
+
+using smg::test::AD;
+using smg::test::Scene;
+
+namespace {
+
+// One operator's outputs on a scene: energy, position and rotation (tangent) gradients,
+// confidences.
+template <class S>
+struct Outputs {
+  double energy = 0;
+  std::vector<S> gx, gr, c;
+};
+
+template <class Op, class S>
+Outputs<S> run_op(const Scene<S>& s, int threads, smg::EnergyWorkspace<S>* ws = nullptr) {
+  Outputs<S> o;
+  const std::size_t TN = static_cast<std::size_t>(s.T * s.N);
+  o.gx.assign(3 * TN, S(0));
+  o.gr.assign(3 * TN, S(0));
+  o.c.assign(TN, S(0));
+  smg::ParallelOptions par;
+  par.threads = threads;
+  o.energy = static_cast<double>(Op::run(smg::test::inputs_of(s, s.graph(), s.confidence()),
+                                         smg::test::OperatorOutputs<S>{{o.gx.data(), s.T, s.N},
+                                                                       {o.gr.data(), s.T, s.N},
+                                                                       {o.c.data(), s.T, s.N}},
+                                         ws, par));
+  return o;
+}
+
+// A random scene with confidences in [0, 1] and about a fifth of the nodes hidden per frame.
+Scene<double> term_scene(smg::Index T, smg::Index N, smg::Index K, unsigned seed) {
+  smg::test::Rng rng(seed);
+  Scene<double> s = smg::test::random_scene(T, N, K, rng);
+  for (std::size_t k = 0; k < s.c.size(); ++k) {
+    s.c[k] = rng.uniform(0.0, 1.0);
+    s.v[k] = rng.uniform(0.0, 1.0) < 0.2 ? 0 : 1;
+  }
+  return s;
+}
+
+// The energy of Op at the scene's current values (gradients not computed).
+template <class Op>
+double energy_of(const Scene<double>& s) {
+  smg::ParallelOptions par;
+  par.threads = 1;
+  return static_cast<double>(
+      Op::run(smg::test::inputs_of(s, s.graph(), s.confidence()),
+              smg::test::OperatorOutputs<double>{},
+              static_cast<smg::EnergyWorkspace<double>*>(nullptr), par));
+}
+
+// Every output bit for bit.
+template <class S>
+bool same_bits(const Outputs<S>& a, const Outputs<S>& b) {
+  return a.energy == b.energy && a.gx == b.gx && a.gr == b.gr && a.c == b.c;
+}
+
+template <class S>
+bool all_finite(const Outputs<S>& o) {
+  auto fin = [](const std::vector<S>& v) {
+    return std::all_of(v.begin(), v.end(), [](S x) { return std::isfinite(x); });
+  };
+  return std::isfinite(o.energy) && fin(o.gx) && fin(o.gr) && fin(o.c);
+}
+
+}  // namespace
+
+TEST_CASE("every operator with an exact gradient matches central differences") {
+  Scene<double> s = term_scene(9, 10, 4, 3501);
+  smg::test::for_each_operator([&](auto op) {
+    using Op = decltype(op);
+    if constexpr (Op::exact_gradient) {
+      CAPTURE(Op::name);
+      const Outputs<double> a = run_op<Op>(s, 1);
+      CHECK(a.energy > 0);
+      const std::vector<double> fx =
+          smg::test::central_gradient(s.x, [&] { return energy_of<Op>(s); });
+      CHECK(smg::test::relative_error(a.gx, fx) < 1e-7);
+      // Rotations along the right tangent (operators without rotations: exactly 0).
+      std::vector<double> fr(a.gr.size());
+      for (smg::Index t = 0; t < s.T; ++t)
+        for (smg::Index i = 0; i < s.N; ++i) {
+          const Eigen::Quaterniond q0 = s.rot(t, i);
+          for (int c = 0; c < 3; ++c)
+            fr[static_cast<std::size_t>((t * s.N + i) * 3 + c)] =
+                smg::test::central_difference_tangent(
+                    q0, c, [&](const Eigen::Quaterniond& q) { s.set_rot(t, i, q); },
+                    [&] { return energy_of<Op>(s); });
+        }
+      if (smg::test::relative_error(fr, std::vector<double>(fr.size(), 0.0)) == 0.0)
+        CHECK(std::all_of(a.gr.begin(), a.gr.end(), [](double v) { return v == 0.0; }));
+      else
+        CHECK(smg::test::relative_error(a.gr, fr) < 1e-7);
+    }
+  });
+}
+
+TEST_CASE("every operator with an exact gradient equals AutoDiffScalar through its own code") {
+  const Scene<double> s = term_scene(7, 6, 3, 3502);
+  // Positions are variables 0..3TN−1, rotations q ⊗ Exp(φ) with φ the variables 3TN..6TN−1.
+  const smg::Index TN = s.T * s.N, vars = 6 * TN;
+  std::vector<AD> x, q, c, w;
+  for (smg::Index k = 0; k < 3 * TN; ++k) x.push_back(AD(s.x[k], vars, k));
+  for (smg::Index k = 0; k < TN; ++k) {
+    Eigen::Matrix<AD, 3, 1> phi;
+    for (int d = 0; d < 3; ++d) phi(d) = AD(0.0, vars, 3 * TN + 3 * k + d);
+    const Eigen::Quaternion<AD> q0(AD(s.q[4 * k]), AD(s.q[4 * k + 1]), AD(s.q[4 * k + 2]),
+                                   AD(s.q[4 * k + 3]));
+    const Eigen::Quaternion<AD> r = q0 * smg::so3::exp(phi);
+    for (const AD& v : {r.w(), r.x(), r.y(), r.z()}) q.push_back(v);
+  }
+  for (double v : s.c) c.push_back(AD(v));
+  for (double v : s.w) w.push_back(AD(v));
+  const smg::test::OperatorInputs<AD> in{{x.data(), s.T, s.N}, {q.data(), s.T, s.N},
+                                         s.visibility(), {c.data(), s.T, s.N},
+                                         {s.idx.data(), w.data(), s.N, s.K}};
+  smg::ParallelOptions par;
+  par.threads = 1;
+  smg::test::for_each_operator([&](auto op) {
+    using Op = decltype(op);
+    if constexpr (Op::exact_gradient) {
+      CAPTURE(Op::name);
+      const AD e = Op::run(in, smg::test::OperatorOutputs<AD>{},
+                           static_cast<smg::EnergyWorkspace<AD>*>(nullptr), par);
+      const Outputs<double> a = run_op<Op>(s, 1);
+      CHECK(std::abs(e.value() - a.energy) <= 1e-12 * std::abs(a.energy));
+      REQUIRE(e.derivatives().size() == vars);
+      std::vector<double> dx(e.derivatives().data(), e.derivatives().data() + 3 * TN);
+      std::vector<double> dr(e.derivatives().data() + 3 * TN, e.derivatives().data() + vars);
+      CHECK(smg::test::relative_error(a.gx, dx) < 1e-10);
+      if (std::any_of(dr.begin(), dr.end(), [](double v) { return v != 0.0; }))
+        CHECK(smg::test::relative_error(a.gr, dr) < 1e-10);
+      else
+        CHECK(std::all_of(a.gr.begin(), a.gr.end(), [](double v) { return v == 0.0; }));
+    }
+  });
+}
+
+TEST_CASE("every operator in float agrees with double") {
+  const Scene<double> sd = term_scene(20, 30, 6, 3503);
+  const Scene<float> sf = sd.cast<float>();
+  smg::test::for_each_operator([&](auto op) {
+    using Op = decltype(op);
+    CAPTURE(Op::name);
+    const Outputs<double> d = run_op<Op>(sd, 2);
+    const Outputs<float> f = run_op<Op>(sf, 2);
+    CHECK(all_finite(f));
+    CHECK(std::abs(f.energy - d.energy) <= 1e-4 * std::abs(d.energy));
+    CHECK(smg::test::relative_error(f.gx, d.gx) <= 1e-3);
+    CHECK(smg::test::relative_error(f.gr, d.gr) <= 1e-3);
+    double dc = 0;  // confidences: exp of ratios of small sums; float keeps a few digits
+    for (std::size_t k = 0; k < d.c.size(); ++k)
+      dc = std::max(dc, std::abs(static_cast<double>(f.c[k]) - d.c[k]));
+    CHECK(dc <= 1e-2);
+  });
+}
+
+TEST_CASE("every operator is bit-identical for 1, 2 and 3 threads") {
+  // T = 41: several blocks of frames, the last one short.
+  const Scene<double> sd = term_scene(41, 36, 7, 3504);
+  const Scene<float> sf = sd.cast<float>();
+  smg::test::for_each_operator([&](auto op) {
+    using Op = decltype(op);
+    CAPTURE(Op::name);
+    const Outputs<double> d1 = run_op<Op>(sd, 1);
+    const Outputs<float> f1 = run_op<Op>(sf, 1);
+    for (int threads : {2, 3}) {
+      CAPTURE(threads);
+      CHECK(same_bits(run_op<Op>(sd, threads), d1));
+      CHECK(same_bits(run_op<Op>(sf, threads), f1));
+    }
+  });
+}
+
+TEST_CASE("every operator stays finite on the hard cases") {
+  struct Case {
+    std::string name;
+    Scene<double> s;
+  };
+  std::vector<Case> cases;
+  // A small scene changed by `edit`.
+  auto add = [&](const char* name, smg::Index T, unsigned seed, auto&& edit) {
+    Scene<double> s = term_scene(T, 8, 3, seed);
+    edit(s);
+    cases.push_back({name, s});
+  };
+  add("all confidences zero", 6, 3505, [](Scene<double>& s) {  // and every node hidden
+    std::fill(s.c.begin(), s.c.end(), 0.0);
+    std::fill(s.v.begin(), s.v.end(), std::uint8_t(0));
+  });
+  add("zero-length edges", 6, 3506, [](Scene<double>& s) {  // every node at one point
+    for (smg::Index k = 0; k < s.T * s.N; ++k) s.set_pos(k / s.N, k % s.N, smg::Vector3<double>(1, 2, 3));
+  });
+  add("coincident frames", 6, 3507, [](Scene<double>& s) {  // no motion at all
+    for (smg::Index k = s.N; k < s.T * s.N; ++k) s.set_pos(k / s.N, k % s.N, s.pos(0, k % s.N));
+  });
+  add("huge coordinates", 6, 3508, [](Scene<double>& s) { for (double& v : s.x) v *= 1e6; });
+  add("tiny coordinates", 6, 3508, [](Scene<double>& s) { for (double& v : s.x) v *= 1e-6; });
+  add("one frame", 1, 3509, [](Scene<double>&) {});
+  add("two frames", 2, 3509, [](Scene<double>&) {});
+  smg::test::for_each_operator([&](auto op) {
+    using Op = decltype(op);
+    CAPTURE(Op::name);
+    for (const Case& c : cases) {
+      CAPTURE(c.name);
+      const Outputs<double> d = run_op<Op>(c.s, 2);
+      CHECK(all_finite(d));
+      CHECK(all_finite(run_op<Op>(c.s.cast<float>(), 2)));
+      if (c.name == "coincident frames" && std::string(Op::name) == "accel")
+        CHECK(d.energy == 0.0);  // a still trajectory has no acceleration
+    }
+  });
+}
