@@ -87,6 +87,20 @@ const char* type_name() {
 int kK = 16;       // --k
 int kThreads = 0;  // --threads
 
+// The options of the timed KNN searches: --k neighbours on --threads threads, the rest default.
+smg::KnnOptions knn_options() {
+  smg::KnnOptions o;
+  o.k = kK;
+  o.parallel.threads = kThreads;
+  return o;
+}
+
+// The cost counters every KNN benchmark reports from its stats (the table at the top).
+void knn_cost_counters(benchmark::State& state, const smg::KnnStats& st, Index N) {
+  state.counters["pairs_per_node"] = static_cast<double>(st.pairs_evaluated) / static_cast<double>(N);
+  state.counters["scratch_mb"] = static_cast<double>(st.scratch_bytes) / (1024.0 * 1024.0);
+}
+
 // ---- peak memory of a fresh process ---------------------------------------------------------
 // The benchmark re-runs itself as `bench_graph --rss-probe N T float|double`: the child builds
 // the scene and the KNN once and prints its ru_maxrss, so each figure starts from an empty process.
@@ -131,9 +145,7 @@ void BM_knn(benchmark::State& state, Index N, Index T) {
   const auto x = cast<S>(sc.positions);
   const smg::PositionsView<const S> xv(x.data(), T, N);
   const smg::VisibilityView<const std::uint8_t> vv(sc.visibility.data(), T, N);
-  smg::KnnOptions o;
-  o.k = kK;
-  o.parallel.threads = kThreads;
+  const smg::KnnOptions o = knn_options();
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<S> dist(idx.size());
   smg::KnnStats st;
@@ -208,8 +220,7 @@ void BM_knn(benchmark::State& state, Index N, Index T) {
     state.counters["dist_rel_err_vs_f64"] = worst;
   }
   state.counters["segment_frames"] = st.segment_frames;
-  state.counters["pairs_per_node"] = static_cast<double>(st.pairs_evaluated) / static_cast<double>(N);
-  state.counters["scratch_mb"] = static_cast<double>(st.scratch_bytes) / (1024.0 * 1024.0);
+  knn_cost_counters(state, st, N);
   state.counters["input_mb"] = static_cast<double>(x.size() * sizeof(S) + sc.visibility.size()) / (1024.0 * 1024.0);
   state.counters["peak_rss_mb"] = peak_rss_mb(N, T, type_name<S>());
 }
@@ -218,9 +229,7 @@ template <class S>
 void BM_knn_brute_force(benchmark::State& state, Index N, Index T) {
   const auto& sc = scene({N, T, 0, 1.0});
   const auto x = cast<S>(sc.positions);
-  smg::KnnOptions o;
-  o.k = kK;
-  o.parallel.threads = kThreads;
+  const smg::KnnOptions o = knn_options();
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<S> dist(idx.size());
   smg::KnnStats st;
@@ -229,16 +238,13 @@ void BM_knn_brute_force(benchmark::State& state, Index N, Index T) {
                                             {dist.data(), N, kK});
     benchmark::DoNotOptimize(idx.data());
   }
-  state.counters["pairs_per_node"] = static_cast<double>(st.pairs_evaluated) / static_cast<double>(N);
-  state.counters["scratch_mb"] = static_cast<double>(st.scratch_bytes) / (1024.0 * 1024.0);
+  knn_cost_counters(state, st, N);
 }
 
 // Exact KNN with a fixed segment length (0 = automatic), on a fast and a slow scene.
 void BM_knn_segments(benchmark::State& state, Index N, Index T, double speed, int L) {
   const auto& sc = scene({N, T, 0, speed});
-  smg::KnnOptions o;
-  o.k = kK;
-  o.parallel.threads = kThreads;
+  smg::KnnOptions o = knn_options();
   o.segment_frames = L;
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<double> dist(idx.size());
@@ -249,8 +255,7 @@ void BM_knn_segments(benchmark::State& state, Index N, Index T, double speed, in
     benchmark::DoNotOptimize(idx.data());
   }
   state.counters["segment_frames"] = st.segment_frames;
-  state.counters["pairs_per_node"] = static_cast<double>(st.pairs_evaluated) / static_cast<double>(N);
-  state.counters["scratch_mb"] = static_cast<double>(st.scratch_bytes) / (1024.0 * 1024.0);
+  knn_cost_counters(state, st, N);
 }
 
 // ---- descriptors ----------------------------------------------------------------------------
@@ -293,8 +298,7 @@ void BM_graph(benchmark::State& state, Index N, Index T, Index C) {
   std::vector<std::int32_t> idx(static_cast<std::size_t>(N * kK));
   std::vector<S> w(idx.size()), d(idx.size());
   smg::GraphOptions o;
-  o.knn.k = kK;
-  o.knn.parallel.threads = kThreads;
+  o.knn = knn_options();
   smg::GraphStats st;
   for (auto _ : state) {
     smg::semantic_descriptors<S>({g.data(), T, N, C}, {sc.visibility.data(), T, N}, {}, {f.data(), N, C});

@@ -39,6 +39,7 @@ FAILURES = ["off", "typical", "double"]
 VARIANTS = ["no-carap", "full", "smg-only", "no-lrm"]
 # The node-EPE split (evaluate.hpp, node_error_split): groups whose contributions sum to the total.
 # The threshold of choose_carap (examples/trainer/pipeline.cpp): C-ARAP below this low-confidence share.
+# Only for a trainer whose metrics.json lacks signals.rule_threshold (rule_threshold below).
 RULE_THRESHOLD = 0.19
 SPLITS = [(("failed", "clean"), "failed reports \\| clean samples"),
           (("conf_low", "conf_mid", "conf_high"), "c < 0.3 \\| 0.3–0.7 \\| ≥ 0.7"),
@@ -68,6 +69,12 @@ def run(trainer, out, scene, failures, seed, variant, stage2=False):
         cmd += ["--stage2-iters", "0", "--no-image-eval"]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     return json.load(open(path))
+
+
+def rule_threshold(m):
+    """The --alpha auto threshold of the trainer that wrote metrics.json `m` (signals.rule_threshold),
+    so that the study follows the trainer's rule; RULE_THRESHOLD where an older trainer lacks it."""
+    return m["signals"].get("rule_threshold", RULE_THRESHOLD)
 
 
 def q1(m):
@@ -214,7 +221,7 @@ def main():
             # held-out seeds the --alpha auto runs are real, and must equal the picked variant's.
             for sd in seeds:
                 full = res[(scene, fl, sd, "full", False)]
-                pick = "full" if full["signals"]["low_confidence"] < RULE_THRESHOLD else "no-carap"
+                pick = "full" if full["signals"]["low_confidence"] < rule_threshold(full) else "no-carap"
                 res[(scene, fl, sd, "auto", False)] = res[(scene, fl, sd, pick, False)]
             for sd in hold:
                 auto = res[(scene, fl, sd, "auto", False)]

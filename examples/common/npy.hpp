@@ -20,6 +20,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -284,6 +285,37 @@ inline void check_bool_bytes(const Array& a, const std::string& path) {
     for (auto c : a.bytes)
       if (c > 1) throw Error(path + ": corrupt bool data (byte value " + std::to_string(c) + ")");
 }
+
+// The preamble of an .npy image: its own length (10 bytes for version 1.0, 12 for 2.0 and 3.0)
+// and the header length it declares.
+struct Preamble {
+  std::uint64_t length = 0;
+  std::uint64_t header_len = 0;
+};
+
+// Reads the preamble of the in-memory .npy image whose first `size` bytes are at `data`, for
+// declared_size and parse alike. std::nullopt says "need more bytes": the bytes end before the
+// preamble or the header it declares, which declared_size answers with 0 and parse with an error.
+// Throws Error("<what>: ...") on a bad magic (checked on as many of its 6 bytes as there are, so a
+// partial image fails early) or an unsupported version.
+inline std::optional<Preamble> read_preamble(const unsigned char* data, std::size_t size, const std::string& what) {
+  if (std::memcmp(data, "\x93NUMPY", std::min<std::size_t>(size, 6)) != 0) throw Error(what + ": not an .npy file (bad magic)");
+  if (size < 10) return std::nullopt;
+  const int major = data[6];
+  Preamble p;
+  if (major == 1) {
+    p.header_len = data[8] | (data[9] << 8);
+    p.length = 10;
+  } else if (major == 2 || major == 3) {
+    if (size < 12) return std::nullopt;
+    p.header_len = data[8] | (data[9] << 8) | (data[10] << 16) | (static_cast<std::uint64_t>(data[11]) << 24);
+    p.length = 12;
+  } else {
+    throw Error(what + ": unsupported npy version " + std::to_string(major));
+  }
+  if (p.length + p.header_len > size) return std::nullopt;
+  return p;
+}
 }  // namespace detail
 
 inline std::int64_t Array::size() const { return detail::checked_count(shape, dtype_size(dtype), "array"); }
@@ -354,29 +386,19 @@ inline Array read(const std::string& path, std::uint64_t max_bytes = 0) {
 // being inflated) check the size it was told before producing the rest. Throws
 // Error("<what>: ...") on a bad magic, version or header, or a size that overflows.
 inline std::uint64_t declared_size(const unsigned char* data, std::size_t size, const std::string& what) {
-  if (std::memcmp(data, "\x93NUMPY", std::min<std::size_t>(size, 6)) != 0) throw Error(what + ": not an .npy file (bad magic)");
-  if (size < 12) return 0;
-  const int major = data[6];
-  std::uint64_t header_len = 0, preamble = 0;
-  if (major == 1) {
-    header_len = data[8] | (data[9] << 8);
-    preamble = 10;
-  } else if (major == 2 || major == 3) {
-    header_len = data[8] | (data[9] << 8) | (data[10] << 16) | (static_cast<std::uint64_t>(data[11]) << 24);
-    preamble = 12;
-  } else {
-    throw Error(what + ": unsupported npy version " + std::to_string(major));
-  }
-  if (preamble + header_len > size) return 0;
-  const std::string header(reinterpret_cast<const char*>(data) + preamble, static_cast<std::size_t>(header_len));
+  // Below 12 bytes (the longest preamble) only the magic is checked: the version and the header
+  // length are read once a version 2.0/3.0 length would be complete too.
+  const std::optional<detail::Preamble> p = detail::read_preamble(data, size < 12 ? std::min<std::size_t>(size, 6) : size, what);
+  if (!p) return 0;
+  const std::string header(reinterpret_cast<const char*>(data) + p->length, static_cast<std::size_t>(p->header_len));
   Array a;
   detail::parse_header_dict(header, what, a);
   const std::int64_t count = detail::checked_count(a.shape, dtype_size(a.dtype), what);
   std::uint64_t total = 0;
   if (!detail::mul_u64(static_cast<std::uint64_t>(count), dtype_size(a.dtype), total) ||
-      total > std::numeric_limits<std::uint64_t>::max() - preamble - header_len)
+      total > std::numeric_limits<std::uint64_t>::max() - p->length - p->header_len)
     throw Error(what + ": shape " + shape_string(a.shape) + " overflows the byte count");
-  return preamble + header_len + total;
+  return p->length + p->header_len + total;
 }
 
 // Parses a whole .npy image held in memory (`size` bytes at `data`, e.g. an .npz member), with
@@ -384,20 +406,9 @@ inline std::uint64_t declared_size(const unsigned char* data, std::size_t size, 
 inline Array parse(const unsigned char* data, std::size_t size, const std::string& what) {
   if (!detail::host_is_little_endian()) throw Error(what + ": this reader needs a little-endian host");
   if (size < 10) throw Error(what + ": truncated (no npy preamble)");
-  if (std::memcmp(data, "\x93NUMPY", 6) != 0) throw Error(what + ": not an .npy file (bad magic)");
-  const int major = data[6];
-  std::uint64_t header_len = 0, preamble = 0;
-  if (major == 1) {
-    header_len = data[8] | (data[9] << 8);
-    preamble = 10;
-  } else if (major == 2 || major == 3) {
-    if (size < 12) throw Error(what + ": truncated header");
-    header_len = data[8] | (data[9] << 8) | (data[10] << 16) | (static_cast<std::uint64_t>(data[11]) << 24);
-    preamble = 12;
-  } else {
-    throw Error(what + ": unsupported npy version " + std::to_string(major));
-  }
-  if (preamble + header_len > size) throw Error(what + ": truncated header");
+  const std::optional<detail::Preamble> p = detail::read_preamble(data, size, what);
+  if (!p) throw Error(what + ": truncated header");
+  const std::uint64_t preamble = p->length, header_len = p->header_len;
   const std::string header(reinterpret_cast<const char*>(data) + preamble, static_cast<std::size_t>(header_len));
   Array a;
   const bool fortran = detail::parse_header_dict(header, what, a);

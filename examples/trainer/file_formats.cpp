@@ -486,8 +486,24 @@ std::map<std::string, npy::Array> parse_npz(const std::vector<unsigned char>& by
 }
 
 namespace {
+// Appends the `bytes` low bytes of v to s, little-endian (ZIP's byte order).
 void put(std::string& s, std::uint64_t v, int bytes) {
   for (int k = 0; k < bytes; ++k) s += static_cast<char>((v >> (8 * k)) & 0xFFu);
+}
+
+// Appends the fields a stored member's local file header and its central directory entry share,
+// in the order both use: version needed 2.0, no flags, stored, 1980-01-01 00:00, the CRC, both
+// sizes (equal: nothing is compressed) and the name's length.
+void put_member_fields(std::string& s, std::uint32_t crc, std::uint64_t size, std::uint64_t name_size) {
+  put(s, 20, 2);
+  put(s, 0, 2);
+  put(s, 0, 2);
+  put(s, 0, 2);
+  put(s, 0x21, 2);
+  put(s, crc, 4);
+  put(s, size, 4);
+  put(s, size, 4);
+  put(s, name_size, 2);
 }
 }  // namespace
 
@@ -499,32 +515,16 @@ std::string npz_bytes(const std::vector<std::pair<std::string, std::string>>& me
       throw std::runtime_error("npz: member '" + name + "' too large for an archive without ZIP64");
     const std::uint32_t crc = crc32(reinterpret_cast<const unsigned char*>(data.data()), data.size());
     const std::uint64_t offset = out.size();
-    // Local file header: version 2.0, no flags, stored, 1980-01-01 00:00.
+    // Local file header.
     put(out, kLocalSig, 4);
-    put(out, 20, 2);
-    put(out, 0, 2);
-    put(out, 0, 2);
-    put(out, 0, 2);
-    put(out, 0x21, 2);
-    put(out, crc, 4);
-    put(out, data.size(), 4);
-    put(out, data.size(), 4);
-    put(out, name.size(), 2);
-    put(out, 0, 2);
+    put_member_fields(out, crc, data.size(), name.size());
+    put(out, 0, 2);  // extra
     out += name;
     out += data;
     // Its central directory entry.
     put(central, kCentralSig, 4);
     put(central, 20, 2);  // made by: MS-DOS attributes, version 2.0
-    put(central, 20, 2);
-    put(central, 0, 2);
-    put(central, 0, 2);
-    put(central, 0, 2);
-    put(central, 0x21, 2);
-    put(central, crc, 4);
-    put(central, data.size(), 4);
-    put(central, data.size(), 4);
-    put(central, name.size(), 2);
+    put_member_fields(central, crc, data.size(), name.size());
     put(central, 0, 2);  // extra
     put(central, 0, 2);  // comment
     put(central, 0, 2);  // disk

@@ -21,16 +21,16 @@ Needs numpy (exits 77, ctest's SKIP_RETURN_CODE, with one "skipped" line without
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
-import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from script_test import ScriptTest  # noqa: E402
 
 try:
     import numpy as np
 except ImportError:
-    print("ply_readers: skipped: numpy is not installed (scripts/deps.sh python3-numpy)")
-    sys.exit(77)
+    sys.exit(ScriptTest("ply_readers").skip("numpy is not installed (scripts/deps.sh python3-numpy)"))
 
 C0 = 0.28209479177387814
 LAYOUT = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
@@ -82,22 +82,15 @@ def main():
     ap.add_argument("--trainer", help="smg_trainer to run with --quick")
     ap.add_argument("--run", help="an existing run folder (OUT) instead")
     a = ap.parse_args()
+    test = ScriptTest("ply_readers")
+    expect = test.expect
     run = a.run
     if not run:
         run = tempfile.mkdtemp(prefix="smg_ply_readers_")
-        t0 = time.time()
-        subprocess.run([a.trainer, "--quick", "--stage2-iters", "60", "--quiet", "--no-pictures", "--no-view",
-                        "--out", run], check=True, stdout=subprocess.DEVNULL)
-        print("ply_readers: smg_trainer --quick --stage2-iters 60 in %.1f s" % (time.time() - t0))
+        test.run_quick_trainer(a.trainer, run, "--no-view")
     with open(os.path.join(run, "metrics.json")) as f:
         metrics = json.load(f)
     T, G, F = metrics["T"], metrics["gaussians"], metrics["gaussians_static"]
-    failures = []
-
-    def expect(ok, what):
-        print("ply_readers: %s %s" % ("ok  " if ok else "FAIL", what))
-        if not ok:
-            failures.append(what)
 
     names = sorted(os.listdir(os.path.join(run, "ply")))
     expect(names == sorted("frame_%d.ply" % t for t in range(T)), "one file per frame, frame_0..%d.ply" % (T - 1))
@@ -150,11 +143,7 @@ def main():
         expect(sorted(m.point_data) == sorted(cols) and
                all(np.array_equal(np.asarray(m.point_data[n], dtype=np.float32), np.asarray(v[n])) for n in cols),
                "meshio: the same %d per-vertex columns, bit for bit" % len(cols))
-    if failures:
-        print("ply_readers: %d check(s) failed" % len(failures))
-        return 1
-    print("ply_readers: all checks passed")
-    return 0
+    return test.finish()
 
 
 if __name__ == "__main__":

@@ -26,18 +26,13 @@ import json
 import os
 import shutil
 import struct
-import subprocess
 import sys
 import tempfile
 import time
 
-
-def find_chromium():
-    for name in ("chromium", "chromium-browser", "google-chrome"):
-        path = shutil.which(name)
-        if path:
-            return path
-    return None
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from browser import browser, find_chromium  # noqa: E402
+from script_test import ScriptTest  # noqa: E402
 
 
 def read_npy_float32(path):
@@ -62,90 +57,6 @@ def read_npy_float32(path):
     return shape, values
 
 
-class DevTools:
-    """The DevTools protocol over --remote-debugging-pipe: NUL-terminated JSON messages on fds 3/4."""
-
-    def __init__(self, chromium, profile):
-        to_chrome_r, self.to_chrome = os.pipe()
-        self.from_chrome, from_chrome_w = os.pipe()
-
-        def child_fds():  # the pipe ends may already be fds 3 or 4: copy them away first
-            r, w = os.dup(to_chrome_r), os.dup(from_chrome_w)
-            os.dup2(r, 3)
-            os.dup2(w, 4)
-
-        args = [chromium, "--headless=new", "--no-sandbox", "--remote-debugging-pipe", "--use-angle=swiftshader",
-                "--enable-unsafe-swiftshader", "--no-first-run", "--no-default-browser-check", "--disable-extensions",
-                "--disable-background-networking", "--mute-audio", "--hide-scrollbars",
-                "--user-data-dir=" + profile, "about:blank"]
-        self.proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.DEVNULL, close_fds=False, preexec_fn=child_fds)
-        os.close(to_chrome_r)
-        os.close(from_chrome_w)
-        self.next_id = 0
-        self.buffer = b""
-        self.events = []
-        self.session = None
-
-    def _read_message(self, deadline):
-        while b"\0" not in self.buffer:
-            if time.time() > deadline:
-                raise TimeoutError("no answer from chromium")
-            chunk = os.read(self.from_chrome, 1 << 20)
-            if not chunk:
-                raise RuntimeError("chromium closed the pipe")
-            self.buffer += chunk
-        raw, self.buffer = self.buffer.split(b"\0", 1)
-        return json.loads(raw)
-
-    def call(self, method, params=None, timeout=30, session=True):
-        self.next_id += 1
-        msg = {"id": self.next_id, "method": method, "params": params or {}}
-        if session and self.session:
-            msg["sessionId"] = self.session
-        os.write(self.to_chrome, json.dumps(msg).encode() + b"\0")
-        deadline = time.time() + timeout
-        while True:
-            m = self._read_message(deadline)
-            if m.get("id") == self.next_id:
-                if "error" in m:
-                    raise RuntimeError("%s: %s" % (method, m["error"]))
-                return m.get("result", {})
-            self.events.append(m)
-
-    def evaluate(self, expression, timeout=30):
-        r = self.call("Runtime.evaluate", {"expression": expression, "returnByValue": True, "awaitPromise": True},
-                      timeout=timeout)
-        if "exceptionDetails" in r:
-            raise RuntimeError("page exception in %r: %s" % (expression, json.dumps(r["exceptionDetails"])[:800]))
-        return r["result"].get("value")
-
-    def errors(self):
-        out = []
-        for m in self.events:
-            p = m.get("params", {})
-            if m.get("method") == "Runtime.exceptionThrown":
-                out.append("exception: " + json.dumps(p.get("exceptionDetails", {}))[:500])
-            elif m.get("method") == "Runtime.consoleAPICalled" and p.get("type") in ("error", "assert"):
-                out.append("console.%s: %s" % (p["type"], json.dumps(p.get("args", []))[:500]))
-            elif m.get("method") == "Log.entryAdded" and p.get("entry", {}).get("level") == "error":
-                out.append("log: " + p["entry"].get("text", "")[:500])
-        return out
-
-    def close(self):
-        try:
-            self.call("Browser.close", session=False, timeout=5)
-        except Exception:  # noqa: BLE001 - closing anyway
-            pass
-        try:
-            self.proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        os.close(self.to_chrome)
-        os.close(self.from_chrome)
-
-
 def screenshot(dt, path):
     # At 0.7 scale: the docs' pictures stay under 200 KiB.
     png = base64.b64decode(dt.call("Page.captureScreenshot", {"format": "png", "clip": {
@@ -164,21 +75,17 @@ def main():
     ap.add_argument("--fps-frames", type=int, default=30)
     a = ap.parse_args()
 
+    test = ScriptTest("view_html")
     chromium = find_chromium()
     if not chromium:
-        print("view_html: skipped: chromium is not installed (scripts/deps.sh chromium, as root)")
-        return 77
+        return test.skip("chromium is not installed (scripts/deps.sh chromium, as root)")
     work = a.work or tempfile.mkdtemp(prefix="smg_view_")
     os.makedirs(work, exist_ok=True)
     if a.page:
         run = a.page
     else:
         run = os.path.join(work, "run")
-        t0 = time.time()
-        # --stage2-iters 60 (quick: 300): the page is the same kind, the test 7 s faster.
-        subprocess.run([a.trainer, "--quick", "--stage2-iters", "60", "--quiet", "--no-pictures", "--no-ply", "--out", run],
-                       check=True, stdout=subprocess.DEVNULL)
-        print("view_html: smg_trainer --quick --stage2-iters 60 in %.1f s" % (time.time() - t0))
+        test.run_quick_trainer(a.trainer, run, "--no-ply")
     page = os.path.abspath(os.path.join(run, "view.html"))
     print("view_html: %s is %d bytes" % (page, os.path.getsize(page)))
     with open(os.path.join(run, "metrics.json")) as f:
@@ -187,106 +94,87 @@ def main():
     with open(page, encoding="utf-8") as f:
         html = f.read()
 
-    failures = []
-
-    def expect(ok, what):
-        print("view_html: %s %s" % ("ok  " if ok else "FAIL", what))
-        if not ok:
-            failures.append(what)
-
-    profile = tempfile.mkdtemp(prefix="smg_view_profile_")
-    dt = DevTools(chromium, profile)
+    expect = test.expect
     try:
-        target = dt.call("Target.createTarget", {"url": "about:blank"}, session=False)["targetId"]
-        dt.session = dt.call("Target.attachToTarget", {"targetId": target, "flatten": True}, session=False)["sessionId"]
-        for method in ("Runtime.enable", "Log.enable", "Page.enable", "Network.enable"):
-            dt.call(method)
-        dt.call("Emulation.setDeviceMetricsOverride",
-                {"width": 1280, "height": 760, "deviceScaleFactor": 1, "mobile": False})
-        dt.call("Page.navigate", {"url": "file://" + page})
-        deadline = time.time() + 30
-        while not dt.evaluate("!!(window.__smgView && window.__smgView.ready)"):
-            if time.time() > deadline or dt.errors():
-                break
-            time.sleep(0.1)
-        expect(dt.evaluate("!!(window.__smgView && window.__smgView.ready)") is True, "the page's script ran")
-        if failures:
-            raise RuntimeError("; ".join(dt.errors()) or "the page did not start")
+        with browser(chromium, "smg_view_profile_") as dt:
+            dt.open_page("file://" + page, 1280, 760, ("Runtime", "Log", "Page", "Network"))
+            deadline = time.time() + 30
+            while not dt.evaluate("!!(window.__smgView && window.__smgView.ready)"):
+                if time.time() > deadline or dt.errors():
+                    break
+                time.sleep(0.1)
+            expect(dt.evaluate("!!(window.__smgView && window.__smgView.ready)") is True, "the page's script ran")
+            if test.failures:
+                raise RuntimeError("; ".join(dt.errors()) or "the page did not start")
 
-        T, N = dt.evaluate("__smgView.frameCount"), dt.evaluate("__smgView.nodeCount")
-        expect((T, N, 3) == shape, "T, N = %d, %d as in view_nodes.npy %s" % (T, N, shape))
-        expect(T == metrics["T"] and N == metrics["nodes"], "T and N as in metrics.json")
-        expect(dt.evaluate("__smgView.header.metrics") == metrics, "the header's metrics equal metrics.json")
-        extent = metrics["extent"]
-        for t in (0, T // 2, T - 1):
-            got = dt.evaluate("__smgView.nodesAt(%d)" % t)
-            want = positions[t * N * 3:(t + 1) * N * 3]
-            err = max(abs(g - w) for g, w in zip(got, want))
-            expect(len(got) == N * 3 and err <= 1e-4 * extent,
-                   "node positions at frame %d round-trip: max error %.2e m (%.1e of the extent)" % (t, err, err / extent))
-        # The C++ base64 encoder against Python's decoder: the block decodes strictly, to the
-        # bytes the page decoded (its nodes array, quantised, read back through the header).
-        block = html.split('<script type="application/octet-stream" id="smg-data">', 1)[1].split("</script>", 1)[0]
-        blob = base64.b64decode(block.strip(), validate=True)
-        nodes = dt.evaluate("__smgView.header.arrays.nodes")
-        lo, step = dt.evaluate("__smgView.header.quant.lo"), dt.evaluate("__smgView.header.quant.step")
-        q = struct.unpack_from("<%dH" % (nodes["bytes"] // 2), blob, nodes["offset"])
-        page_t0 = dt.evaluate("__smgView.nodesAt(0)")
-        expect(len(blob) == dt.evaluate("atob(document.getElementById('smg-data').textContent.trim()).length")
-               and all(abs(lo[k % 3] + q[k] * step[k % 3] - page_t0[k]) <= 1e-6 * extent for k in range(N * 3)),
-               "the data block (%d bytes) decodes with Python's base64 to what the page decoded" % len(blob))
-        conf = dt.evaluate("[].concat(...Array.from({length: __smgView.frameCount}, (_, t) => __smgView.confidenceAt(t)))")
-        expect(len(conf) == T * N and all(0 <= c <= 1 for c in conf) and max(conf) > min(conf),
-               "confidences [T][N] in [0, 1], not constant")
+            T, N = dt.evaluate("__smgView.frameCount"), dt.evaluate("__smgView.nodeCount")
+            expect((T, N, 3) == shape, "T, N = %d, %d as in view_nodes.npy %s" % (T, N, shape))
+            expect(T == metrics["T"] and N == metrics["nodes"], "T and N as in metrics.json")
+            expect(dt.evaluate("__smgView.header.metrics") == metrics, "the header's metrics equal metrics.json")
+            extent = metrics["extent"]
+            for t in (0, T // 2, T - 1):
+                got = dt.evaluate("__smgView.nodesAt(%d)" % t)
+                want = positions[t * N * 3:(t + 1) * N * 3]
+                err = max(abs(g - w) for g, w in zip(got, want))
+                expect(len(got) == N * 3 and err <= 1e-4 * extent,
+                       "node positions at frame %d round-trip: max error %.2e m (%.1e of the extent)" % (t, err, err / extent))
+            # The C++ base64 encoder against Python's decoder: the block decodes strictly, to the
+            # bytes the page decoded (its nodes array, quantised, read back through the header).
+            block = html.split('<script type="application/octet-stream" id="smg-data">', 1)[1].split("</script>", 1)[0]
+            blob = base64.b64decode(block.strip(), validate=True)
+            nodes = dt.evaluate("__smgView.header.arrays.nodes")
+            lo, step = dt.evaluate("__smgView.header.quant.lo"), dt.evaluate("__smgView.header.quant.step")
+            q = struct.unpack_from("<%dH" % (nodes["bytes"] // 2), blob, nodes["offset"])
+            page_t0 = dt.evaluate("__smgView.nodesAt(0)")
+            expect(len(blob) == dt.evaluate("atob(document.getElementById('smg-data').textContent.trim()).length")
+                   and all(abs(lo[k % 3] + q[k] * step[k % 3] - page_t0[k]) <= 1e-6 * extent for k in range(N * 3)),
+                   "the data block (%d bytes) decodes with Python's base64 to what the page decoded" % len(blob))
+            conf = dt.evaluate("[].concat(...Array.from({length: __smgView.frameCount}, (_, t) => __smgView.confidenceAt(t)))")
+            expect(len(conf) == T * N and all(0 <= c <= 1 for c in conf) and max(conf) > min(conf),
+                   "confidences [T][N] in [0, 1], not constant")
 
-        first = dt.evaluate("__smgView.pixels()")
-        lit = first["lit"] / (first["width"] * first["height"])
-        expect(lit > 0.01, "the canvas is not blank: %.1f%% of %dx%d pixels drawn" % (100 * lit, first["width"], first["height"]))
-        if a.screenshots:  # without the Gaussian centres, whose noise would triple the PNGs
-            os.makedirs(a.screenshots, exist_ok=True)
-            dt.evaluate("__smgView.show('gaussians', false); __smgView.setFrame(%d)" % (T // 2))
-            screenshot(dt, os.path.join(a.screenshots, "view_frame.png"))
-            dt.evaluate("__smgView.show('gaussians', true); __smgView.setFrame(0)")
-        dt.evaluate("(() => { const s = document.getElementById('time'); s.value = String(%d); "
-                    "s.dispatchEvent(new Event('input')); })()" % (T - 1))
-        moved = dt.evaluate("__smgView.pixels()")
-        expect(dt.evaluate("__smgView.frame()") == T - 1 and moved["hash"] != first["hash"] and moved["lit"] > 0,
-               "moving the slider to frame %d changes the drawn pixels" % (T - 1))
-        pictures = dt.evaluate("document.querySelectorAll('#images img').length")
-        expect(pictures > 0, "the images panel shows %d pictures at the last frame" % pictures)
+            first = dt.evaluate("__smgView.pixels()")
+            lit = first["lit"] / (first["width"] * first["height"])
+            expect(lit > 0.01, "the canvas is not blank: %.1f%% of %dx%d pixels drawn" % (100 * lit, first["width"], first["height"]))
+            if a.screenshots:  # without the Gaussian centres, whose noise would triple the PNGs
+                os.makedirs(a.screenshots, exist_ok=True)
+                dt.evaluate("__smgView.show('gaussians', false); __smgView.setFrame(%d)" % (T // 2))
+                screenshot(dt, os.path.join(a.screenshots, "view_frame.png"))
+                dt.evaluate("__smgView.show('gaussians', true); __smgView.setFrame(0)")
+            dt.evaluate("(() => { const s = document.getElementById('time'); s.value = String(%d); "
+                        "s.dispatchEvent(new Event('input')); })()" % (T - 1))
+            moved = dt.evaluate("__smgView.pixels()")
+            expect(dt.evaluate("__smgView.frame()") == T - 1 and moved["hash"] != first["hash"] and moved["lit"] > 0,
+                   "moving the slider to frame %d changes the drawn pixels" % (T - 1))
+            pictures = dt.evaluate("document.querySelectorAll('#images img').length")
+            expect(pictures > 0, "the images panel shows %d pictures at the last frame" % pictures)
 
-        dt.evaluate("__smgView.setColour('class'); __smgView.select(0)")
-        expect(dt.evaluate("!document.getElementById('node-panel').hidden && "
-                           "document.getElementById('node-title').textContent.startsWith('node 0')"),
-               "selecting node 0 shows its panel and c(t) plot")
-        if a.screenshots:
-            dt.evaluate("__smgView.show('gaussians', false); __smgView.show('cut', true); "
-                        "__smgView.setFrame(%d); __smgView.select(%d)" % (T // 2, N // 2))
-            screenshot(dt, os.path.join(a.screenshots, "view_node.png"))
-            dt.evaluate("__smgView.show('gaussians', true); __smgView.show('cut', false)")
-        dt.evaluate("__smgView.select(-1); __smgView.setColour('confidence')")
+            dt.evaluate("__smgView.setColour('class'); __smgView.select(0)")
+            expect(dt.evaluate("!document.getElementById('node-panel').hidden && "
+                               "document.getElementById('node-title').textContent.startsWith('node 0')"),
+                   "selecting node 0 shows its panel and c(t) plot")
+            if a.screenshots:
+                dt.evaluate("__smgView.show('gaussians', false); __smgView.show('cut', true); "
+                            "__smgView.setFrame(%d); __smgView.select(%d)" % (T // 2, N // 2))
+                screenshot(dt, os.path.join(a.screenshots, "view_node.png"))
+                dt.evaluate("__smgView.show('gaussians', true); __smgView.show('cut', false)")
+            dt.evaluate("__smgView.select(-1); __smgView.setColour('confidence')")
 
-        c = dt.evaluate("__smgView.counts")
-        for mode in ("time", "orbit"):
-            fps = dt.evaluate("__smgView.measureFps(%d, '%s')" % (a.fps_frames, mode), timeout=120)
-            print("view_html: %s: %.1f frames per second over %d frames in headless Chromium (SwiftShader WebGL), "
-                  "%d nodes, %d edges, %d + %d Gaussian centres" % (mode, fps, a.fps_frames, N, c["edges"], c["S"], c["D"]))
-        fetched = sorted({m["params"]["request"]["url"].split(":", 1)[0] for m in dt.events
-                          if m.get("method") == "Network.requestWillBeSent"})
-        expect(set(fetched) <= {"file", "blob", "data"}, "nothing fetched but the page and its own images (%s)"
-               % ", ".join(fetched))
-        errors = dt.errors()
-        expect(not errors, "no console errors" + ("" if not errors else ": " + " | ".join(errors)))
+            c = dt.evaluate("__smgView.counts")
+            for mode in ("time", "orbit"):
+                fps = dt.evaluate("__smgView.measureFps(%d, '%s')" % (a.fps_frames, mode), timeout=120)
+                print("view_html: %s: %.1f frames per second over %d frames in headless Chromium (SwiftShader WebGL), "
+                      "%d nodes, %d edges, %d + %d Gaussian centres" % (mode, fps, a.fps_frames, N, c["edges"], c["S"], c["D"]))
+            fetched = sorted({m["params"]["request"]["url"].split(":", 1)[0] for m in dt.events
+                              if m.get("method") == "Network.requestWillBeSent"})
+            expect(set(fetched) <= {"file", "blob", "data"}, "nothing fetched but the page and its own images (%s)"
+                   % ", ".join(fetched))
+            errors = dt.errors()
+            expect(not errors, "no console errors" + ("" if not errors else ": " + " | ".join(errors)))
     finally:
-        dt.close()
-        shutil.rmtree(profile, ignore_errors=True)
         if not a.work and not a.page:
             shutil.rmtree(work, ignore_errors=True)
-    if failures:
-        print("view_html: %d check(s) failed" % len(failures))
-        return 1
-    print("view_html: all checks passed")
-    return 0
+    return test.finish()
 
 
 if __name__ == "__main__":

@@ -9,8 +9,8 @@
 Runs `smg_trainer --quick` (which writes OUT/ply/frame_<t>.ply by default) unless --ply names a file,
 installs the viewer with `npm ci` into --modules (package.json and package-lock.json of this folder;
 reused while the lock file is unchanged), serves index.html, node_modules and the PLY over HTTP on
-127.0.0.1, and drives Chromium over the DevTools protocol (tests/pipeline/test_view_html.py's
-client, standard library only). It checks that:
+127.0.0.1, and drives Chromium over the DevTools protocol (the client in tests/support/browser.py
+that tests/pipeline/test_view_html.py uses too, standard library only). It checks that:
   * the viewer's PLY loader reads as many splats as the file's header declares (the trainer's
     Gaussian count), with no console error or uncaught exception;
   * the screenshot is not blank: at least 2 % of its pixels differ from the black background.
@@ -32,13 +32,9 @@ import time
 import zlib
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "pipeline"))
-from test_view_html import DevTools, find_chromium  # noqa: E402
-
-
-def skip(why):
-    print("ply_viewer: skipped: " + why)
-    return 77
+sys.path.insert(0, os.path.join(HERE, "..", "support"))
+from browser import browser, find_chromium  # noqa: E402
+from script_test import ScriptTest  # noqa: E402
 
 
 def ply_header(path):
@@ -151,25 +147,23 @@ def main():
     ap.add_argument("--modules", help="where npm installs the viewer (default: a temporary folder)")
     ap.add_argument("--screenshot", help="write the viewer's picture here (PNG)")
     a = ap.parse_args()
+    test = ScriptTest("ply_viewer")
     chromium = find_chromium()
     if not chromium:
-        return skip("chromium is not installed (scripts/deps.sh chromium, as root)")
+        return test.skip("chromium is not installed (scripts/deps.sh chromium, as root)")
     if not shutil.which("npm"):
-        return skip("npm is not installed (scripts/deps.sh npm, as root)")
+        return test.skip("npm is not installed (scripts/deps.sh npm, as root)")
     modules = a.modules or tempfile.mkdtemp(prefix="smg_ply_npm_")
     why = install_viewer(modules)
     if why:
-        return skip(why)
+        return test.skip(why)
     if a.ply:
         ply = a.ply
     else:
         run = a.run
         if not run:
             run = tempfile.mkdtemp(prefix="smg_ply_run_")
-            t0 = time.time()
-            subprocess.run([a.trainer, "--quick", "--stage2-iters", "60", "--quiet", "--no-pictures", "--no-view",
-                            "--out", run], check=True, stdout=subprocess.DEVNULL)
-            print("ply_viewer: smg_trainer --quick --stage2-iters 60 in %.1f s" % (time.time() - t0))
+            test.run_quick_trainer(a.trainer, run, "--no-view")
         frames = sorted(int(n[6:-4]) for n in os.listdir(os.path.join(run, "ply")))
         ply = os.path.join(run, "ply", "frame_%d.ply" % frames[len(frames) // 2])
     count, names, _ = ply_header(ply)
@@ -184,57 +178,38 @@ def main():
         server.server_address[1], os.path.basename(ply), ",".join("%.4f" % v for v in pos),
         ",".join("%.4f" % v for v in at))
 
-    failures = []
-
-    def expect(ok, what):
-        print("ply_viewer: %s %s" % ("ok  " if ok else "FAIL", what))
-        if not ok:
-            failures.append(what)
-
-    profile = tempfile.mkdtemp(prefix="smg_ply_profile_")
+    expect = test.expect
     t_start = time.time()
-    dt = DevTools(chromium, profile)
     try:
-        target = dt.call("Target.createTarget", {"url": "about:blank"}, session=False)["targetId"]
-        dt.session = dt.call("Target.attachToTarget", {"targetId": target, "flatten": True}, session=False)["sessionId"]
-        for method in ("Runtime.enable", "Log.enable", "Page.enable"):
-            dt.call(method)
-        dt.call("Emulation.setDeviceMetricsOverride", {"width": 800, "height": 600, "deviceScaleFactor": 1,
-                                                       "mobile": False})
-        dt.call("Page.navigate", {"url": url})
-        t0 = time.time()
-        state = {}
-        while time.time() < t0 + 60:
-            state = dt.evaluate("window.__plyTest || {}") or {}
-            if state.get("ready") or state.get("error"):
-                break
-            time.sleep(0.2)
-        print("ply_viewer: page loaded, file read and %d frames drawn in %.1f s" % (state.get("frames", 0), time.time() - t0))
-        expect(not state.get("error"), "the viewer loaded the file (%s)" % (state.get("error") or "no error")[:300])
-        expect(state.get("count") == count,
-               "the viewer's PLY loader read %s splats; the header declares %d" % (state.get("count"), count))
-        errors = dt.errors()
-        expect(not errors, "no console error or exception (%s)" % "; ".join(errors)[:300])
-        png = base64.b64decode(dt.call("Page.captureScreenshot", {"format": "png"})["data"])
-        if a.screenshot:  # at 0.7 scale: the docs' picture stays near 150 KiB
-            small = base64.b64decode(dt.call("Page.captureScreenshot", {"format": "png", "clip": {
-                "x": 0, "y": 40, "width": 800, "height": 460, "scale": 0.7}})["data"])
-            with open(a.screenshot, "wb") as f:
-                f.write(small)
-            print("ply_viewer: screenshot %s (%d bytes)" % (a.screenshot, len(small)))
-        w, h, bpp, rows = png_pixels(png)
-        lit = sum(1 for row in rows for i in range(0, len(row), bpp) if max(row[i:i + 3]) > 24)
-        expect(lit >= 0.02 * w * h, "the screenshot is not blank: %.1f %% of %dx%d pixels lit" % (100.0 * lit / (w * h), w, h))
+        with browser(chromium, "smg_ply_profile_") as dt:
+            dt.open_page(url, 800, 600)
+            t0 = time.time()
+            state = {}
+            while time.time() < t0 + 60:
+                state = dt.evaluate("window.__plyTest || {}") or {}
+                if state.get("ready") or state.get("error"):
+                    break
+                time.sleep(0.2)
+            print("ply_viewer: page loaded, file read and %d frames drawn in %.1f s" % (state.get("frames", 0), time.time() - t0))
+            expect(not state.get("error"), "the viewer loaded the file (%s)" % (state.get("error") or "no error")[:300])
+            expect(state.get("count") == count,
+                   "the viewer's PLY loader read %s splats; the header declares %d" % (state.get("count"), count))
+            errors = dt.errors()
+            expect(not errors, "no console error or exception (%s)" % "; ".join(errors)[:300])
+            png = base64.b64decode(dt.call("Page.captureScreenshot", {"format": "png"})["data"])
+            if a.screenshot:  # at 0.7 scale: the docs' picture stays near 150 KiB
+                small = base64.b64decode(dt.call("Page.captureScreenshot", {"format": "png", "clip": {
+                    "x": 0, "y": 40, "width": 800, "height": 460, "scale": 0.7}})["data"])
+                with open(a.screenshot, "wb") as f:
+                    f.write(small)
+                print("ply_viewer: screenshot %s (%d bytes)" % (a.screenshot, len(small)))
+            w, h, bpp, rows = png_pixels(png)
+            lit = sum(1 for row in rows for i in range(0, len(row), bpp) if max(row[i:i + 3]) > 24)
+            expect(lit >= 0.02 * w * h, "the screenshot is not blank: %.1f %% of %dx%d pixels lit" % (100.0 * lit / (w * h), w, h))
     finally:
-        dt.close()
         server.shutdown()
-        shutil.rmtree(profile, ignore_errors=True)
     print("ply_viewer: browser part in %.1f s" % (time.time() - t_start))
-    if failures:
-        print("ply_viewer: %d check(s) failed" % len(failures))
-        return 1
-    print("ply_viewer: all checks passed")
-    return 0
+    return test.finish()
 
 
 if __name__ == "__main__":
