@@ -30,23 +30,38 @@ template <class S>
 struct FusedOut {
   smg::RegularizerResult<S> e;
   std::vector<S> conf, gx, gr;
+  // gr as the rotation gradient: raw quaternions [T][N][4] or the right tangent [T][N][3].
+  smg::RotationGradientView<S> rotation_gradient(const Scene<S>& s, bool raw) {
+    if (raw) return smg::QuaternionsView<S>(gr.data(), s.T, s.N);
+    return smg::TangentsView<S>(gr.data(), s.T, s.N);
+  }
 };
+
+// Zeroed gradient buffers (rotations raw [4] or tangent [3] per node) and confidences of −1.
+template <class S>
+FusedOut<S> fused_buffers(const Scene<S>& s, bool raw) {
+  FusedOut<S> r;
+  const std::size_t TN = static_cast<std::size_t>(s.T * s.N);
+  r.conf.assign(TN, S(-1));
+  r.gx.assign(TN * 3, S(0));
+  r.gr.assign(TN * (raw ? 4 : 3), S(0));
+  return r;
+}
+
+smg::ParallelOptions threads_option(int threads) {
+  smg::ParallelOptions par;
+  par.threads = threads;
+  return par;
+}
 
 // The fused step; raw: rotation gradient as raw quaternions [T][N][4].
 template <class S>
 FusedOut<S> fused_run(const Scene<S>& s, const smg::RegularizerOptions& o, int threads,
                       bool raw = false, bool grad = true, bool vis = true,
                       smg::EnergyWorkspace<S>* ws = nullptr) {
-  FusedOut<S> r;
-  const std::size_t TN = static_cast<std::size_t>(s.T * s.N);
-  r.conf.assign(TN, S(-1));
-  r.gx.assign(TN * 3, S(0));
-  r.gr.assign(TN * (raw ? 4 : 3), S(0));
-  smg::ParallelOptions par;
-  par.threads = threads;
-  smg::RotationGradientView<S> gr;
-  if (grad) gr = raw ? smg::RotationGradientView<S>(smg::QuaternionsView<S>(r.gr.data(), s.T, s.N))
-                     : smg::RotationGradientView<S>(smg::TangentsView<S>(r.gr.data(), s.T, s.N));
+  FusedOut<S> r = fused_buffers(s, raw);
+  const smg::ParallelOptions par = threads_option(threads);
+  const smg::RotationGradientView<S> gr = grad ? r.rotation_gradient(s, raw) : smg::RotationGradientView<S>();
   const smg::VisibilityView<const std::uint8_t> v =
       vis ? s.visibility() : smg::VisibilityView<const std::uint8_t>();
   const smg::FrameScalarsView<S> c =
@@ -65,16 +80,9 @@ FusedOut<S> fused_run(const Scene<S>& s, const smg::RegularizerOptions& o, int t
 template <class S>
 FusedOut<S> fused_separate(const Scene<S>& s, const smg::RegularizerOptions& o, int threads,
                            bool raw = false, bool vis = true) {
-  FusedOut<S> r;
-  const std::size_t TN = static_cast<std::size_t>(s.T * s.N);
-  r.conf.assign(TN, S(-1));
-  r.gx.assign(TN * 3, S(0));
-  r.gr.assign(TN * (raw ? 4 : 3), S(0));
-  smg::ParallelOptions par;
-  par.threads = threads;
-  const smg::RotationGradientView<S> gr =
-      raw ? smg::RotationGradientView<S>(smg::QuaternionsView<S>(r.gr.data(), s.T, s.N))
-          : smg::RotationGradientView<S>(smg::TangentsView<S>(r.gr.data(), s.T, s.N));
+  FusedOut<S> r = fused_buffers(s, raw);
+  const smg::ParallelOptions par = threads_option(threads);
+  const smg::RotationGradientView<S> gr = r.rotation_gradient(s, raw);
   const smg::PositionsView<S> gx(r.gx.data(), s.T, s.N);
   smg::FrameScalarsView<const S> c;
   if (o.terms.confidence) {

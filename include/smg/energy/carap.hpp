@@ -23,7 +23,6 @@
 #include "smg/core/config.hpp"
 
 #include <algorithm>
-#include <vector>
 
 #include "smg/core/parallel.hpp"
 #include "smg/core/rotation_gradient.hpp"

@@ -24,22 +24,15 @@
 
 #include "smg/core/config.hpp"
 
-#include <algorithm>
-#include <type_traits>
-#include <vector>
-
 #include "smg/core/parallel.hpp"
 #include "smg/core/scalar.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
 #include "smg/energy/common.hpp"
-#include "smg/energy/lanes.hpp"
-#include "smg/energy/lrm_term.hpp"
 #include "smg/energy/driver.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/terms/confidence.hpp"
 #include "smg/energy/terms/lrm.hpp"
-#include "smg/energy/velocity.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"
 
