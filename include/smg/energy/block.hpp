@@ -10,6 +10,8 @@
 //   bool on() const                         computes anything at all (an off term costs nothing)
 //   Index reach() const                     frames past a block's end it reads or writes (max δ)
 //   Index lanes() const                     block lengths must be a multiple of this (SIMD lanes)
+//   Index preferred_block() const           frames per block it runs best with (0: no preference;
+//                                           used only when every energy term that is on has one)
 //   Index stored(Index nr, Index nown) const  frames a block of nr (nown owned) must store
 //   bool reads_rotations() const, bool position_gradient() const, bool rotation_gradient() const
 //   Index slot_scalars(const BlockPlan&) const   scratch of one slot (a block in flight)
@@ -185,6 +187,8 @@ struct BlockView {
 // The defaults of the term concept, for terms to inherit and override.
 struct TermDefaults {
   Index lanes() const { return 1; }
+  // Frames per block the term runs best with alone (0: the partition's rule, carap_block_frames).
+  Index preferred_block() const { return 0; }
   Index stored(Index nr, Index) const { return nr; }
   bool reads_rotations() const { return false; }
   bool position_gradient() const { return true; }

@@ -68,16 +68,19 @@ BlockPlan driver_plan(Index T, Index N, Index K, bool want_x, bool want_r, Index
   p.T = T;
   p.N = N;
   p.K = K;
-  Index lanes = 1;
-  bool pos = false, rot = false;
+  Index lanes = 1, preferred = 0;
+  bool pos = false, rot = false, all_prefer = true;
   ((terms.on() ? (p.G = std::max(p.G, terms.reach()), lanes = std::max(lanes, terms.lanes()),
                   pos = pos || terms.position_gradient(), rot = rot || terms.rotation_gradient(),
+                  preferred = std::max(preferred, terms.preferred_block()),
+                  all_prefer = all_prefer && (terms.reach() == 0 || terms.preferred_block() > 0),
                   0)
                : 0),
    ...);
   p.want_x = want_x && pos;
   p.want_r = want_r && rot;
-  p.B = carap_block_frames(T, p.G);
+  // The partition's rule, unless every energy term that is on prefers its own block length.
+  p.B = all_prefer && preferred > 0 ? preferred : carap_block_frames(T, p.G);
   if (lanes > 1) p.B = BlockPlan::round_up(p.B, lanes);
   p.blocks = T > 0 ? (T + p.B - 1) / p.B : 0;
   p.span = BlockPlan::padded(driver_stored(p.B + p.G, p.B, terms...));
@@ -134,12 +137,15 @@ E drive(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>* worksp
   WorkspaceRef<S> ws(workspace);
   const Index fixed_terms = driver_fixed_scalars(p, terms...) - driver_spill_scalars(p) -
                             BlockPlan::kAlign;
+  // The spill and the terms' shared scratch in one workspace buffer (none when both are empty:
+  // then no pointer below is offset).
   S* spill = nullptr;
   if (driver_spill_scalars(p) + fixed_terms > 0)
     spill = ws->spill(static_cast<std::size_t>(driver_spill_scalars(p) + fixed_terms));
   {
-    S* f = spill + driver_spill_scalars(p);
-    ((terms.on() ? (terms.bind(p, f, io.graph), f += terms.fixed_scalars(p), 0) : 0), ...);
+    S* f = spill ? spill + driver_spill_scalars(p) : nullptr;
+    ((terms.on() ? (terms.bind(p, f, io.graph), f = f ? f + terms.fixed_scalars(p) : f, 0) : 0),
+     ...);
   }
   const Index per_slot = driver_slot_scalars<S>(p, terms...);
   // The slots' base on a 64-byte boundary (BlockPlan::chunk; kAlign covers the workspace's).
@@ -151,7 +157,7 @@ E drive(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>* worksp
   rot.G = p.G;
   rot.N = N;
   S* spill_x = spill;
-  rot.spill = spill + (p.want_x ? p.blocks * p.G * N * 3 : 0);
+  rot.spill = spill && p.want_x ? spill + p.blocks * p.G * N * 3 : spill;
   bool reads_q = false;
   ((reads_q = reads_q || (terms.on() && terms.reads_rotations())), ...);
 
