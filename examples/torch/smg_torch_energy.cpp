@@ -225,9 +225,6 @@ py::tuple regularizers_impl(const at::Tensor& positions, const OptTensor& quats,
   const at::Tensor c = o.terms.confidence ? at::empty({in.T, in.N}, in.ref.options()) : at::Tensor();
   at::Tensor energies = at::zeros({4}, in.ref.options().dtype(at::kDouble));
   if (in.ref.cuda()) {
-    if (o.terms.accel)
-      value_error("accel: not yet on CUDA tensors (smg::cuda::regularizers has no smoothness "
-                  "term); use CPU tensors or accel=False");
     cuda(cuda_ops().regularizers)(in, o, validate, energies, c, gx, gq);
     return py::make_tuple(energies.to(in.ref.options().dtype()), opt(c), opt(gx), opt(gq));
   }

@@ -1,10 +1,10 @@
 // The fused regulariser step on the GPU (smg/cuda/regularizers.cuh) against the CPU
 // smg::regularizers().
 //
-// Suite "cuda-host" (runs without a GPU): the kernels' per-element steps (confidence_inputs_at,
-// confidence_at, fused_rigid_node_at, lrm_term_at, lrm_gather_at, lrm_velocity_chunk_at) run in
-// host loops in the launcher's phase order, with chunks of
-// 1, 2, 3 frames and the whole sequence, for every subset of the terms, float and double, int32
+// Suite "cuda-host" (runs without a GPU): the CUDA driver (cuda/driver.cuh) through its
+// HostBackend, which runs the kernels' per-element steps (confidence_inputs_at, confidence_at,
+// fused_rigid_node_at, AccelElement, lrm_term_at, lrm_gather_at, lrm_velocity_chunk_at) in host
+// loops in the launcher's phase order, with chunks of 1, 2, 3 frames and the whole sequence, for every subset of the terms, float and double, int32
 // and int64 indices, tangent and raw rotation gradients, mean normalisation and hard cases; the
 // plan's memory bound; the host-side argument checks. Double agrees to 1e-11 relative to the
 // largest value (sums associated differently: the rigid gradient of a node is summed over its
@@ -102,88 +102,30 @@ void host_reverse(const std::vector<I>& idx, Index N, std::vector<std::int32_t>&
     if (idx[e] >= 0) ent[static_cast<std::size_t>(fill[static_cast<std::size_t>(idx[e])]++)] = std::int64_t(e);
 }
 
-// The launcher's three phases in host loops over the kernels' per-element steps; chunk lengths
-// given (0: the plan's).
+// The CUDA driver itself (cuda/driver.cuh: the launcher's plan, phases, chunks and per-element
+// steps) through its HostBackend; chunk lengths given (0: the plan's).
 template <class S, class I>
 Out<S> host_scheme(const Case<S, I>& s, const smg::RegularizerOptions& o, const Flags& f,
                    Index conf_chunk, Index lrm_chunk) {
   namespace cd = smg::cuda::detail;
-  using Acc = smg::Accumulator<S>;
   Out<S> r = outputs<S>(s.T, s.N, f);
   const Index T = s.T, N = s.N, K = s.K;
   const bool c_out = f.conf_out && o.terms.confidence;
   cd::FusedPlan p = cd::fused_plan<S, I>(T, N, K, o, f.grad_x, f.grad_r, true, f.vis, c_out);
   if (conf_chunk > 0) p.conf_chunk = conf_chunk;
   if (lrm_chunk > 0) p.lrm_chunk = lrm_chunk;
-  const auto graph = s.graph();
-  const auto x = s.positions();
   std::vector<std::int32_t> off;
   std::vector<std::int64_t> ent;
   host_reverse(s.idx, N, off, ent);
-  const std::int32_t edges = off.back();
-  std::vector<S> conf_scratch(static_cast<std::size_t>(T * N), S(-1));
-  S* conf = c_out ? r.conf.data() : conf_scratch.data();
-  if (p.confidence) {
-    std::vector<S> inv_w(static_cast<std::size_t>(N));
-    for (Index i = 0; i < N; ++i) inv_w[static_cast<std::size_t>(i)] = smg::inverse_row_weight(graph, i);
-    const smg::ConfidenceConstants<S> cp(o.confidence);
-    for (Index c0 = 0; c0 < T; c0 += p.conf_chunk) {
-      const Index nf = std::min(p.conf_chunk, T - c0);
-      std::vector<S> u(static_cast<std::size_t>(3 * N * nf)), e(static_cast<std::size_t>(N * nf));
-      for (Index l = 0; l < nf; ++l)
-        for (Index i = 0; i < N; ++i)
-          cd::confidence_inputs_at(l, i, c0, x, graph, inv_w.data(), u.data(), e.data());
-      for (Index l = 0; l < nf; ++l)
-        for (Index i = 0; i < N; ++i)
-          cd::confidence_at(l, i, c0, graph, inv_w.data(), u.data(), e.data(), cp,
-                            f.vis ? s.v.data() : nullptr, conf, static_cast<S*>(nullptr),
-                            static_cast<S*>(nullptr));
-    }
-  }
-  const S* conf_in = (p.confidence && (p.rigid || p.lrm)) ? conf : nullptr;
-  S* gx = p.want_x ? r.gx.data() : nullptr;
-  if (p.rigid) {
-    const cd::FusedRigidConstants<S> c = cd::fused_rigid_constants<S>(o, T, &edges);
-    S* gt = p.want_r && !f.raw ? r.gr.data() : nullptr;
-    S* graw = p.want_r && f.raw ? r.gr.data() : nullptr;
-    for (Index t = 0; t < T; ++t)
-      for (Index n = 0; n < N; ++n) {
-        S e[2] = {S(0), S(0)};
-        cd::fused_rigid_node_at(t, n, c, x, s.rotations(), conf_in, graph, off.data(), ent.data(),
-                                gx, gt, graw, e);
-        r.e.carap += Acc(e[0]);
-        r.e.arap += Acc(e[1]);
-      }
-  }
-  if (p.lrm) {
-    const cd::LrmKernelArgs<S> args = cd::fused_lrm_args<S>(o, T, p.want_x, &edges);
-    const smg::FrameScalarsView<const S> cv =
-        conf_in ? smg::FrameScalarsView<const S>(conf_in, T, N) : smg::FrameScalarsView<const S>();
-    Acc sum(0);
-    for (Index c0 = 0; c0 < T; c0 += p.lrm_chunk) {
-      const Index nf = std::min(p.lrm_chunk, T - c0), c1 = c0 + nf, n = nf * N;
-      std::vector<Acc> terms(static_cast<std::size_t>(n));
-      std::vector<S> ge(static_cast<std::size_t>(6 * n * K), S(0)), gn(static_cast<std::size_t>(6 * n));
-      S* gxe = p.want_x ? ge.data() : nullptr;
-      S* gue = p.want_x ? ge.data() + 3 * n * K : nullptr;
-      for (Index e = 0; e < n; ++e)
-        cd::lrm_term_at<S, I, 32>(c0 * N + e, x, cv, graph, args, terms.data(), gxe, gue, {},
-                                  c0 * N);
-      for (const Acc& v : terms) sum += v;
-      if (!p.want_x) continue;
-      for (Index e = 0; e < n; ++e)
-        cd::lrm_gather_at(e, N, K, off.data(), ent.data(), gxe, gue, gn.data(), gn.data() + 3 * n);
-      const Index s0 = c0 > 0 ? c0 - 1 : 0, s1 = std::min(T, c1 + 1);
-      for (Index t = s0; t < s1; ++t)
-        for (Index j = 0; j < N; ++j)
-          cd::lrm_velocity_chunk_at(t, j, c0, c1, T, N, gn.data(), gn.data() + 3 * n,
-                                    smg::PositionsView<S>(r.gx.data(), T, N));
-    }
-    double scale = o.lrm.weight;
-    if (o.lrm.normalization == smg::Normalization::mean)
-      scale = T * edges > 0 ? scale / double(T * edges) : 0.0;
-    r.e.lrm = sum * Acc(scale);
-  }
+  r.e.carap = 1e30;  // the driver overwrites the result
+  const smg::Status st = cd::drive<S, I>(
+      cd::HostBackend{}, p, o, s.positions(), s.rotations(),
+      f.vis ? s.visibility() : smg::VisibilityView<const std::uint8_t>(), s.graph(), off.data(),
+      ent.data(), off.data() + N, &r.e,
+      c_out ? smg::FrameScalarsView<S>(r.conf.data(), T, N) : smg::FrameScalarsView<S>(),
+      f.grad_x ? smg::PositionsView<S>(r.gx.data(), T, N) : smg::PositionsView<S>(),
+      rotation_view(r.gr, T, N, f));
+  REQUIRE_MESSAGE(st, st.message());
   return r;
 }
 
@@ -211,6 +153,7 @@ void check_same(const Out<S>& a, const Out<S>& b, const smg::RegularizerOptions&
   CHECK(rel(double(a.e.carap), double(b.e.carap)) <= tol<S>());
   CHECK(rel(double(a.e.arap), double(b.e.arap)) <= tol<S>());
   CHECK(rel(double(a.e.lrm), double(b.e.lrm)) <= tol<S>());
+  CHECK(rel(double(a.e.accel), double(b.e.accel)) <= tol<S>());
   if (f.conf_out && o.terms.confidence)
     CHECK(std::memcmp(a.conf.data(), b.conf.data(), a.conf.size() * sizeof(S)) == 0);
   CHECK(rel(a.gx, b.gx) <= tol<S>());
@@ -230,7 +173,7 @@ void subsets_case(std::uint64_t seed) {
   CAPTURE(sizeof(S));
   CAPTURE(sizeof(I));
   const Case<S, I> s(scene(9, 23, 6, seed));
-  for (unsigned mask = 1; mask < 16; ++mask) {
+  for (unsigned mask = 1; mask < 32; ++mask) {
     CAPTURE(mask);
     const smg::RegularizerOptions o = options(mask);
     for (const bool raw : {false, true}) {
@@ -258,7 +201,8 @@ TEST_SUITE("cuda-host") {
   TEST_CASE("cuda regularizers: host scheme, outputs left out, mean normalisation, no visibility") {
     using namespace fused_cuda_test;
     const Case<double, std::int32_t> s(scene(12, 31, 8, 21));
-    smg::RegularizerOptions o = options(15);
+    smg::RegularizerOptions o = options(31);
+    o.accel.normalization = smg::Normalization::mean;
     o.carap.normalization = smg::Normalization::mean;
     o.arap.normalization = smg::Normalization::mean;
     o.lrm.normalization = smg::Normalization::mean;
@@ -274,9 +218,28 @@ TEST_SUITE("cuda-host") {
     }
   }
 
+  TEST_CASE("cuda regularizers: host scheme, smoothness forms, weighted or not, with and without the others") {
+    using namespace fused_cuda_test;
+    const Case<double, std::int32_t> s(scene(8, 17, 5, 22));
+    for (const unsigned mask : {16u, 17u, 31u})
+      for (const bool velocity : {false, true})
+        for (const bool weighted : {false, true}) {
+          CAPTURE(mask);
+          CAPTURE(velocity);
+          CAPTURE(weighted);
+          smg::RegularizerOptions o = options(mask);
+          o.accel.form = velocity ? smg::AccelForm::velocity : smg::AccelForm::acceleration;
+          o.accel.confidence_weighted = weighted;
+          Flags f;
+          const Out<double> ref = cpu(s, o, f);
+          CHECK(double(ref.e.accel) > 0.0);
+          check_same(host_scheme(s, o, f, 3, 2), ref, o, f, "accel");
+        }
+  }
+
   TEST_CASE("cuda regularizers: host scheme on hard cases") {
     using namespace fused_cuda_test;
-    const smg::RegularizerOptions o = options(15);
+    const smg::RegularizerOptions o = options(31);
     Flags f;
     SUBCASE("one frame: no pairs, LRM without velocity") {
       const Case<double, std::int32_t> s(scene(1, 12, 4, 31));
@@ -433,7 +396,7 @@ void gpu_case(std::uint64_t seed, Index T, Index N, Index K) {
   CAPTURE(seed);
   CAPTURE(sizeof(S));
   const Case<S, I> s(scene(T, N, K, seed));
-  for (const unsigned mask : {15u, 11u, 5u, 8u, 3u}) {
+  for (const unsigned mask : {31u, 15u, 11u, 5u, 8u, 3u, 16u, 17u}) {
     CAPTURE(mask);
     const smg::RegularizerOptions o = options(mask);
     for (const bool raw : {false, true}) {

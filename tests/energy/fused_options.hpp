@@ -1,6 +1,6 @@
 // tests/energy/fused_options.hpp — the options the fused-step tests (CPU: test_regularizers.cpp,
 // CUDA: tests/cuda/test_cuda_regularizers.cu) run: a subset of the terms by bit mask
-// (1 confidence, 2 C-ARAP, 4 ARAP, 8 LRM, 16 smoothness; the CUDA step has no 16 yet) and non-default values where a default would hide a
+// (1 confidence, 2 C-ARAP, 4 ARAP, 8 LRM, 16 smoothness) and non-default values where a default would hide a
 // mix-up between terms (ARAP's gaps share δ = 1 with C-ARAP's and add δ = 3 of their own).
 #pragma once
 

@@ -307,8 +307,9 @@ def test_cuda_dqb_query_frames_out_of_range_without_validate():
 @pytest.mark.parametrize("dtype,tol", [(torch.float64, 1e-11), (torch.float32, 1e-5)])
 @pytest.mark.parametrize("int64", [True, False])
 def test_cuda_regularizers_match_cpu(dtype, tol, int64):
-    """The fused step on CUDA (smg::cuda::regularizers) against the CPU fused step: energies,
-    confidences and both gradients; two CUDA runs bitwise."""
+    """The fused step on CUDA (smg::cuda::regularizers) against the CPU fused step, every term on
+    (trajectory smoothness too): energies, confidences and both gradients; two CUDA runs
+    bitwise."""
     x, q, idx, w, _ = _scene(dtype, int64, T=12, N=60, K=6)
     vis = (torch.rand(x.shape[:2], generator=torch.Generator().manual_seed(3)) < 0.9).to(torch.uint8)
     out = {}
@@ -317,9 +318,10 @@ def test_cuda_regularizers_match_cpu(dtype, tol, int64):
         xs = x.detach().to(d).clone().requires_grad_()
         qs = q.detach().to(d).clone().requires_grad_()
         r = smg.regularizers(xs, qs, (idx.to(d), w.to(d)), vis.to(d), arap=True,
-                             lrm={"huber_delta": 0.05})
+                             lrm={"huber_delta": 0.05},
+                             accel={"confidence_weighted": True, "weight": 0.5})
         r.total.backward()
-        out[dev] = (torch.stack([r.carap, r.arap, r.lrm]).detach().cpu(), r.confidence.cpu(),
+        out[dev] = (torch.stack([r.carap, r.arap, r.lrm, r.accel]).detach().cpu(), r.confidence.cpu(),
                     xs.grad.cpu(), qs.grad.cpu())
     for a, b in zip(out["cuda"], out["cpu"]):
         assert _rel(a, b) <= tol

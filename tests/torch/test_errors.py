@@ -107,8 +107,6 @@ def test_cuda_not_implemented():
         # The fused step runs on CUDA (tests/torch/test_cuda.py); mixed devices are refused.
         with pytest.raises(ValueError, match="graph.weights"):
             smg.regularizers(x.cuda(), q.cuda(), (idx.cuda(), w))
-        with pytest.raises(ValueError, match="accel: not yet on CUDA"):
-            smg.regularizers(x.cuda(), q.cuda(), (idx.cuda(), w.cuda()), accel=True)
     else:
         with pytest.raises(NotImplementedError, match="built with CUDA"):
             smg.carap(x.cuda(), q.cuda(), (idx.cuda(), w.cuda()), c.cuda())

@@ -304,8 +304,8 @@ def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: Grap
     """The regulariser step fused (smg::regularizers, docs/math/energy.md "The fused regulariser
     pass"): the confidences (E2-E6; visibility [T, N] or None = all visible), C-ARAP (E7-E10),
     plain ARAP, LRM (E11-E16) and trajectory smoothness (accel, E21: squared accelerations or
-    velocities of the node trajectories, as MoSca and Shape-of-Motion regularise; CPU tensors
-    only so far) in one pass over the graph. Each term is False (off), True (the
+    velocities of the node trajectories, as MoSca and Shape-of-Motion regularise) in one pass
+    over the graph. Each term is False (off), True (the
     defaults of node_confidences / carap / arap / lrm) or a dict of its options
     (REGULARIZER_DEFAULTS; `weight` scales the term). With confidence off, C-ARAP and LRM use
     c = 1. quats [T, N, 4] may be None without carap and arap. Returns Regularizers(total, carap,

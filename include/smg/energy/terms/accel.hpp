@@ -14,6 +14,7 @@
 #include <algorithm>
 
 #include "smg/core/scalar.hpp"
+#include "smg/core/views.hpp"
 #include "smg/energy/block.hpp"
 #include "smg/energy/options.hpp"
 
@@ -35,6 +36,64 @@ SMG_FORCE_INLINE SMG_HOST_DEVICE S accel_term(S f, S ax, S ay, S az, S& gx, S& g
 inline Index accel_term_count(const AccelOptions& o, Index frames, Index nodes) {
   const Index span = o.form == AccelForm::acceleration ? 2 : 1;
   return std::max<Index>(0, frames - span) * nodes;
+}
+
+// (E21) as one element (frame t, node i) of the CUDA driver (cuda/driver.cuh), a step without
+// scratch that a kernel thread or a host loop runs: the energy of the term whose earliest frame
+// is t into `energy`, and the gradient of x_i^t from every term containing frame t (earliest
+// frames t − order … t, in that order) added to grad_x [T][N][3] when not null. x [T][N][3]; conf
+// [T][N] or null (c ≡ 1; read only when weighted). Host values: make_accel_element.
+template <class S>
+struct AccelElement {
+  Literal<S> k = Literal<S>(0);  // the weight, / the number of terms with Normalization::mean
+  bool weighted = false;
+  int order = 2;  // 2: acceleration, 1: velocity
+
+  // The difference a of the term with earliest frame u (a[d] as the CPU block form writes it).
+  SMG_HOST_DEVICE void difference(PositionsView<const S> x, Index u, Index i, S* a) const {
+    const S* r0 = x.ptr(u, i);
+    const S* r1 = x.ptr(u + 1, i);
+    if (order == 2) {
+      const S* r2 = x.ptr(u + 2, i);
+      for (int d = 0; d < 3; ++d) a[d] = S(r2[d] - Literal<S>(2) * r1[d] + r0[d]);
+    } else {
+      for (int d = 0; d < 3; ++d) a[d] = S(r1[d] - r0[d]);
+    }
+  }
+
+  SMG_HOST_DEVICE void at(Index t, Index i, PositionsView<const S> x, const S* conf, S* grad_x,
+                          S& energy) const {
+    const Index T = x.frames(), N = x.nodes();
+    S g[3] = {S(0), S(0), S(0)};
+    for (Index u = t - order; u <= t; ++u) {
+      if (u < 0 || u + order >= T) continue;
+      const S f = weighted && conf != nullptr ? S(S(k) * conf[u * N + i]) : S(k);
+      S a[3], ga[3];
+      difference(x, u, i, a);
+      const S ev = accel_term<S, Literal<S>>(f, a[0], a[1], a[2], ga[0], ga[1], ga[2]);
+      if (u == t) energy += ev;
+      // ∂a/∂x^t: (1, −2, 1) or (−1, 1) by the position of t in the term.
+      const Index p = t - u;
+      const S m = order == 2 ? (p == 1 ? S(-2) : S(1)) : (p == 0 ? S(-1) : S(1));
+      for (int d = 0; d < 3; ++d) g[d] += m * ga[d];
+    }
+    if (grad_x != nullptr)
+      for (int d = 0; d < 3; ++d) grad_x[(t * N + i) * 3 + d] += g[d];
+  }
+};
+
+// The element step of `o` over T frames and N nodes (the scale formed on the host, in double, as
+// the CPU term forms it).
+template <class S>
+AccelElement<S> make_accel_element(const AccelOptions& o, Index frames, Index nodes) {
+  AccelElement<S> e;
+  const Index terms = accel_term_count(o, frames, nodes);
+  double scale = o.weight;
+  if (o.normalization == Normalization::mean) scale = terms > 0 ? scale / double(terms) : 0.0;
+  e.k = Literal<S>(scale);
+  e.weighted = o.confidence_weighted;
+  e.order = o.form == AccelForm::acceleration ? 2 : 1;
+  return e;
 }
 
 namespace detail {
