@@ -1004,6 +1004,29 @@ for rel in sorted(f for f in tracked_files() if f.startswith(TERMS_DIR + "/") an
             problem("tests/support/operators.hpp", 1, "no operator '%s' for %s in the list" % (op, rel))
 if op_list is None:
     problem("tests/support/operators.hpp", 1, "no `using Operators = std::tuple<...>` list")
+import importlib.util  # noqa: E402
+
+# The terms' table of docs/api.md is scripts/terms_table.py's output (generated from the code),
+# and every term reaches every place the table lists.
+_tspec = importlib.util.spec_from_file_location("smg_terms_table", os.path.join(ROOT, "scripts", "terms_table.py"))
+terms_table = importlib.util.module_from_spec(_tspec)
+try:
+    _tspec.loader.exec_module(terms_table)
+    api = TEXT.get("docs/api.md", "")
+    tb, te = terms_table.BEGIN, terms_table.END
+    if tb not in api or te not in api:
+        problem("docs/api.md", 1, "no '%s' ... '%s' block (scripts/terms_table.py --write docs/api.md)" % (tb, te))
+    elif api[api.index(tb) + len(tb):api.index(te)].lstrip("\n") != terms_table.table():
+        problem("docs/api.md", 1, "the terms' table is out of date: run scripts/terms_table.py --write docs/api.md")
+    for flag, r in terms_table.rows():
+        if r is None:
+            problem("include/smg/energy/regularizers.hpp", 1, "no term of RegularizerTermSet configures RegularizerTerms::%s" % flag)
+            continue
+        for col in ("options", "call", "torch", "bench", "cuda", "tests"):
+            if r[col] == "—":
+                problem("docs/api.md", 1, "term '%s' has no %s (scripts/terms_table.py)" % (flag, col))
+except (OSError, SyntaxError) as e:
+    problem("scripts/terms_table.py", 1, "cannot load: %s" % e)
 
 # ---------------------------------------------------------------------------------------------
 # (g) generated text is current

@@ -26,6 +26,7 @@ A run whose metrics.json exists is not repeated (delete OUT to start over)."""
 import concurrent.futures
 import datetime
 import json
+import math
 import os
 import platform
 import subprocess
@@ -69,6 +70,19 @@ def run(trainer, out, scene, failures, seed, variant, stage2=False):
         cmd += ["--stage2-iters", "0", "--no-image-eval"]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     return json.load(open(path))
+
+
+def signal(m, k):
+    """Run-time signal k of metrics.json `m` as a float: the trainer writes null (NaN) when no
+    node sample was observed, and its rule then keeps the default, C-ARAP."""
+    v = m["signals"].get(k)
+    return float("nan") if v is None else float(v)
+
+
+def picks_carap(m):
+    """The trainer's --alpha auto rule (pipeline.cpp): C-ARAP unless the low-confidence share is at
+    least the threshold (NaN, nothing observed: C-ARAP)."""
+    return not (signal(m, "low_confidence") >= rule_threshold(m))
 
 
 def rule_threshold(m):
@@ -208,8 +222,11 @@ def main():
     worst_auto = -1e9
     for scene in SCENES:
         for fl in FAILURES:
-            sig = {k: mean_ci([res[(scene, fl, sd, "full", False)]["signals"][k] for sd in seeds])[0]
-                   for k in ("low_confidence", "visibility_flips", "observed")}
+            def mean_signal(k):
+                xs = [signal(res[(scene, fl, sd, "full", False)], k) for sd in seeds]
+                xs = [x for x in xs if not math.isnan(x)]
+                return mean_ci(xs)[0] if xs else float("nan")
+            sig = {k: mean_signal(k) for k in ("low_confidence", "visibility_flips", "observed")}
             design = cell(res, scene, fl, seeds, "full", "no-carap", q1)
 
             def vs_best(ss):
@@ -221,7 +238,7 @@ def main():
             # held-out seeds the --alpha auto runs are real, and must equal the picked variant's.
             for sd in seeds:
                 full = res[(scene, fl, sd, "full", False)]
-                pick = "full" if full["signals"]["low_confidence"] < rule_threshold(full) else "no-carap"
+                pick = "full" if picks_carap(full) else "no-carap"
                 res[(scene, fl, sd, "auto", False)] = res[(scene, fl, sd, pick, False)]
             for sd in hold:
                 auto = res[(scene, fl, sd, "auto", False)]

@@ -98,11 +98,16 @@ Index driver_slot_scalars(const BlockPlan& p, const Terms&... terms) {
 inline Index driver_spill_scalars(const BlockPlan& p) {
   return (p.want_x ? p.blocks * p.G * p.N * 3 : 0) + (p.want_r ? p.blocks * p.G * p.N * 3 : 0);
 }
+// The terms' shared scratch (fixed_scalars of every term that is on).
 template <class... Terms>
-Index driver_fixed_scalars(const BlockPlan& p, const Terms&... terms) {
-  Index s = driver_spill_scalars(p) + BlockPlan::kAlign;
+Index driver_term_fixed_scalars(const BlockPlan& p, const Terms&... terms) {
+  Index s = 0;
   ((s += terms.on() ? terms.fixed_scalars(p) : 0), ...);
   return s;
+}
+template <class... Terms>
+Index driver_fixed_scalars(const BlockPlan& p, const Terms&... terms) {
+  return driver_spill_scalars(p) + BlockPlan::kAlign + driver_term_fixed_scalars(p, terms...);
 }
 template <class S, class... Terms>
 Index driver_total_scalars(const BlockPlan& p, const Terms&... terms) {
@@ -135,8 +140,7 @@ E drive(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>* worksp
   const Index T = p.T, N = p.N, K = p.K;
   if (T == 0 || N == 0) return result;
   WorkspaceRef<S> ws(workspace);
-  const Index fixed_terms = driver_fixed_scalars(p, terms...) - driver_spill_scalars(p) -
-                            BlockPlan::kAlign;
+  const Index fixed_terms = driver_term_fixed_scalars(p, terms...);
   // The spill and the terms' shared scratch in one workspace buffer (none when both are empty:
   // then no pointer below is offset).
   S* spill = nullptr;
@@ -156,7 +160,8 @@ E drive(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>* worksp
   rot.grq = io.grq;
   rot.G = p.G;
   rot.N = N;
-  S* spill_x = spill;
+  // Block b's position spill: G frames of [N][3] (the rotation spill follows, RotationSink).
+  auto spill_x = [&](Index b) { return spill + b * p.G * N * 3; };
   rot.spill = spill && p.want_x ? spill + p.blocks * p.G * N * 3 : spill;
   bool reads_q = false;
   ((reads_q = reads_q || (terms.on() && terms.reads_rotations())), ...);
@@ -226,7 +231,7 @@ E drive(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>* worksp
     if (v.GBx)
       for (Index l = 0; l < v.nr; ++l) {
         const bool own = l < v.nown;
-        S* row = own ? io.gx.ptr(v.t0 + l, 0) : spill_x + b * p.G * N * 3 + (l - v.nown) * N * 3;
+        S* row = own ? io.gx.ptr(v.t0 + l, 0) : spill_x(b) + (l - v.nown) * N * 3;
         for (Index j = 0; j < N; ++j) {
           const S* src = v.GBx + j * n3 + l;
           if (own) {
@@ -275,7 +280,7 @@ E drive(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>* worksp
               const Index te = std::min(T, t1 + p.G);
               if (s < t1 || s >= te) continue;
               if (p.want_x) {
-                const S* src = spill_x + b * p.G * N * 3 + (s - t1) * N * 3;
+                const S* src = spill_x(b) + (s - t1) * N * 3;
                 S* dst = io.gx.ptr(s, 0);
                 for (Index c = 0; c < 3 * N; ++c) dst[c] += src[c];
               }

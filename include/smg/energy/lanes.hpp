@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstring>
 #include <type_traits>
+#include <utility>
 
 #include <Eigen/Core>
 
@@ -192,6 +193,34 @@ SMG_HOST_DEVICE SMG_LANE_INLINE V lane_sqrt(const V& a) {
     using std::sqrt;
     return sqrt(a);
   }
+}
+
+// (fill, a_0, …, a_{W−2}): the lanes moved up by one, `fill` into lane 0, in registers (one
+// shuffle) where a store and an overlapping load would stall on store forwarding (LRM's
+// velocity part, terms/lrm.hpp).
+// (Not under nvcc, whose front end does not expand a pack inside the builtin's arguments; the
+// CPU terms' lanes do not run in CUDA translation units.)
+#if SMG_HAVE_VECTOR_EXTENSIONS && defined(__has_builtin) && !defined(__CUDACC__)
+#if __has_builtin(__builtin_shufflevector)
+#define SMG_HAVE_SHUFFLEVECTOR 1
+#endif
+#endif
+template <class S, int W, std::size_t... L>
+SMG_LANE_INLINE Lanes<S, W> lanes_shift_up(const Lanes<S, W>& a, S fill,
+                                           std::index_sequence<L...>) {
+  Lanes<S, W> r;
+#ifdef SMG_HAVE_SHUFFLEVECTOR
+  const Lanes<S, W> f = Lanes<S, W>::constant(fill);
+  r.v = __builtin_shufflevector(a.v, f.v, W, static_cast<int>(L)...);
+#else
+  r[0] = fill;
+  ((r[static_cast<int>(L) + 1] = a[static_cast<int>(L)]), ...);
+#endif
+  return r;
+}
+template <class S, int W>
+SMG_LANE_INLINE Lanes<S, W> lanes_shift_up(const Lanes<S, W>& a, S fill) {
+  return lanes_shift_up(a, fill, std::make_index_sequence<W - 1>());
 }
 
 // Lane v (W scalars) from / to memory; W = 1 for scalar lanes.

@@ -164,6 +164,12 @@ struct LrmTerm : TermDefaults {
     // With one frame u ≡ 0 is a constant (E1): no velocity term reaches the positions.
     if (!params.gradient) return e;
     const bool moving = T >= 2;
+    // A full group that does not hold frame T − 1 adds its parts as whole lanes: dst[l] gets
+    // ∂L/∂u^{l−1} (u^{l−1} = x^l − x^{l−1}, moved up one lane), then ∂L/∂x^l, then −∂L/∂u^l,
+    // and dst[W] gets ∂L/∂u^{W−1}: the scalar loop's additions in its order, element by
+    // element, so the results are bit-identical (lane 0 adds −0, the exact identity). dst[W]
+    // is in the block's stored span (stored()).
+    const bool whole = moving && nl == W && last < 0;
     const L s_scale = scale;
     for (Index kk = 0; kk < K; ++kk) {
       const Index j = idx[kk];
@@ -172,6 +178,18 @@ struct LrmTerm : TermDefaults {
       for (int c = 0; c < 3; ++c) {
         V gxs = s_scale * gxl[c * K + kk], gus = s_scale * gul[c * K + kk];
         S* dst = rec + c * ne;
+        if constexpr (W > 1) {
+          if (whole) {
+            V d;
+            lane_load(d, dst);
+            d += lanes_shift_up(gus, S(-0.0));
+            d += gxs;
+            d -= gus;
+            lane_store(d, dst);
+            dst[W] += lane_ref<V, S>(gus, W - 1);
+            continue;
+          }
+        }
         for (Index l = 0; l < nl; ++l) {
           const S vx = lane_ref<V, S>(gxs, l), vu = lane_ref<V, S>(gus, l);
           dst[l] += vx;

@@ -1,0 +1,160 @@
+#!/usr/bin/env python3
+"""The regulariser terms' table of docs/api.md, generated from the code (issue 35: the term list
+drives the docs' API table): one row per flag of RegularizerTerms, read from
+
+  - the fused step's list, RegularizerTermSet (include/smg/energy/regularizers.hpp): the term
+    struct that each flag configures, and so its header in include/smg/energy/terms/;
+  - that header's top comment: the equation labels (E..);
+  - RegularizerOptions (include/smg/energy/options.hpp): the flag's options struct;
+  - the energy headers: the separate C++ call (a function named for the flag, or node_<flag>s);
+  - smg_torch's REGULARIZER_DEFAULTS (examples/torch/smg_torch/__init__.py): the keyword of
+    smg_torch.regularizers;
+  - bench/bench_energy.cpp: its BM_<flag> row;
+  - the CUDA driver (include/smg/cuda/driver.cuh): whether the term runs in the element pass
+    (a member of ElementTerms) or a phase of its own, and
+  - tests/support/operators.hpp: whether the cross-cutting tests' operator list covers it.
+
+  scripts/terms_table.py              print the table
+  scripts/terms_table.py --write FILE fill FILE's <!-- terms:begin --> ... <!-- terms:end -->
+
+scripts/check_docs.py fails when docs/api.md's table differs from this output."""
+import argparse
+import glob
+import os
+import re
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BEGIN, END = "<!-- terms:begin -->", "<!-- terms:end -->"
+
+
+def read(rel):
+    with open(os.path.join(ROOT, rel), encoding="utf-8") as f:
+        return f.read()
+
+
+def block(text, start, end="\n};"):
+    i = text.find(start)
+    if i < 0:
+        return ""
+    j = text.find(end, i)
+    return text[i:j if j >= 0 else len(text)]
+
+
+def top_comment(text):
+    lines = []
+    for line in text.splitlines():
+        if not line.startswith("//"):
+            break
+        lines.append(line[2:].strip())
+    return " ".join(lines)
+
+
+def labels(comment):
+    """The term's own equations: the first (E..) label or range "(E2)-(E6)" its header's top
+    comment cites (later ones are references to other equations)."""
+    m = re.search(r"\(E(\d+)\)(?:\s*[-–]\s*\(E(\d+)\))?", comment)
+    if not m:
+        return ""
+    return "E%s–E%s" % (m.group(1), m.group(2)) if m.group(2) else "E" + m.group(1)
+
+
+def rows():
+    regs = read("include/smg/energy/regularizers.hpp")
+    term_set = block(regs, "struct RegularizerTermSet")
+    members = re.findall(r"(\w+Term)<S, I> (\w+);", term_set)
+    ctor = block(term_set, "RegularizerTermSet(", "\n  }")
+    options = block(read("include/smg/energy/options.hpp"), "struct RegularizerOptions")
+    option_type = dict((f, t) for t, f in re.findall(r"(\w+Options) (\w+);", options))
+    flags_struct = block(read("include/smg/energy/options.hpp"), "struct RegularizerTerms")
+    flags = re.findall(r"bool (\w+) = ", flags_struct)
+    headers = {}
+    for path in sorted(glob.glob(os.path.join(ROOT, "include/smg/energy/terms/*.hpp"))):
+        text = open(path, encoding="utf-8").read()
+        for st in re.findall(r"struct (\w+Term) : TermDefaults", text):
+            headers[st] = (os.path.relpath(path, os.path.join(ROOT, "include/smg")), text)
+    energy_src = "".join(open(p, encoding="utf-8").read()
+                         for p in sorted(glob.glob(os.path.join(ROOT, "include/smg/energy/*.hpp"))))
+    torch_init = read("examples/torch/smg_torch/__init__.py")
+    torch_keys = re.findall(r'"(\w+)": dict\(', block(torch_init, "REGULARIZER_DEFAULTS", "\n}"))
+    bench = read("bench/bench_energy.cpp")
+    driver = read("include/smg/cuda/driver.cuh")
+    element = block(driver, "struct ElementTerms")
+    # ElementTerms' first line of members: "bool rigid = false, accel = false;"
+    element_members = re.findall(r"(\w+) = false", element.split("\n")[1] if "\n" in element else "")
+    drive = block(driver, "Status drive(", "\n}\n")
+    operators = read("tests/support/operators.hpp")
+    op_names = set(re.findall(r'static constexpr const char\* name = "(\w+)"', operators))
+
+    out = []
+    for flag in flags:
+        member, struct = next(((m, s) for s, m in members
+                               if re.search(r"on\.%s\b" % flag, "\n".join(
+                                   l for l in ctor.splitlines() if re.search(r"\b%s\." % m, l)))),
+                              (None, None))
+        if member is None:
+            out.append((flag, None))
+            continue
+        header, htext = headers.get(struct, ("?", ""))
+        call = next((c for c in (flag, "node_%ss" % flag)
+                     if re.search(r"[\w>]\s+%s\(" % c, energy_src)), "—")
+        if member in element_members:
+            cuda = "element pass"
+        elif re.search(r"\bp\.%s\b" % member, drive):
+            cuda = "own phase"
+        else:
+            cuda = "—"
+        out.append((flag, dict(
+            header="`%s` (`%s`)" % (header, struct),
+            eqs=labels(top_comment(htext)) or "—",
+            options="`%s`" % option_type[flag] if flag in option_type else "—",
+            call="`%s`" % call if call != "—" else call,
+            torch="`%s=`" % flag if flag in torch_keys else "—",
+            bench="`BM_%s`" % flag if re.search(r"\bBM_%s\b" % flag, bench) else "—",
+            cuda=cuda,
+            tests="yes" if (flag in op_names or call.strip("`") in op_names
+                            or flag + "s" in op_names) else "—")))
+    return out
+
+
+def table():
+    lines = ["| `RegularizerTerms::` | term header (struct) | equations | options | separate call | "
+             "`smg_torch.regularizers` | bench row | CUDA driver | operator list |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for flag, r in rows():
+        if r is None:
+            lines.append("| `%s` | (no term configures it) | | | | | | | |" % flag)
+            continue
+        lines.append("| `%s` | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+            flag, r["header"], r["eqs"], r["options"], r["call"], r["torch"], r["bench"],
+            r["cuda"], r["tests"]))
+    return "\n".join(lines) + "\n"
+
+
+def fill(text, body):
+    if BEGIN not in text or END not in text:
+        return None
+    i, j = text.index(BEGIN) + len(BEGIN), text.index(END)
+    return text[:i] + "\n" + body + text[j:]
+
+
+def main():
+    ap = argparse.ArgumentParser(prog="terms_table.py", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--write", metavar="FILE", help="fill FILE's terms block")
+    a = ap.parse_args()
+    body = table()
+    if not a.write:
+        sys.stdout.write(body)
+        return 0
+    text = open(a.write, encoding="utf-8").read()
+    new = fill(text, body)
+    if new is None:
+        sys.exit("terms_table.py: %s has no '%s' ... '%s' block" % (a.write, BEGIN, END))
+    if new != text:
+        with open(a.write, "w", encoding="utf-8") as f:
+            f.write(new)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
