@@ -7,6 +7,9 @@
 //   - bit-identical results for 1, 2 and 3 threads;
 //   - finite results on the hard cases (all confidences zero, zero-length edges, coincident
 //     frames, huge and tiny coordinates, one and two frames).
+//   - argument errors: the validator takes the good arguments and refuses a NaN position, an
+//     out-of-range neighbour, a bad confidence, visibility or quaternion (where the operator
+//     reads them) and an output of the wrong shape, each with a message naming the argument.
 // The int32/int64 graphs, the caller's executor and mutable views are tests/api's, over the
 // same list.
 #include <doctest/doctest.h>
@@ -236,5 +239,69 @@ TEST_CASE("every operator stays finite on the hard cases") {
       if (c.name == "coincident frames" && std::string(Op::name) == "accel")
         CHECK(d.energy == 0.0);  // a still trajectory has no acceleration
     }
+  });
+}
+
+TEST_CASE("every operator's validator takes good arguments and names a bad one") {
+  namespace t = smg::test;
+  const Scene<double> s = term_scene(6, 9, 3, 3510);
+  const smg::Index T = s.T, N = s.N, K = s.K;
+  const std::size_t TN = static_cast<std::size_t>(T * N);
+  std::vector<double> gx(3 * TN), gr(3 * TN), c(TN), big(3 * (TN + N));
+  const t::OperatorOutputs<double> out{{gx.data(), T, N}, {gr.data(), T, N}, {c.data(), T, N}};
+  // Bad copies of each input: a NaN position, an out-of-range neighbour, a NaN confidence, a
+  // visibility of 2, a zero quaternion.
+  std::vector<double> x_nan = s.x, c_nan = s.c, q_zero = s.q;
+  x_nan[3 * (2 * N + 4) + 1] = std::nan("");
+  c_nan[static_cast<std::size_t>(3 * N + 2)] = std::nan("");
+  for (int k = 0; k < 4; ++k) q_zero[static_cast<std::size_t>(4 * (N + 5) + k)] = 0.0;
+  std::vector<std::int32_t> idx_bad = s.idx;
+  idx_bad[static_cast<std::size_t>(4 * K + 1)] = static_cast<std::int32_t>(N);
+  std::vector<std::uint8_t> v_bad = s.v;
+  v_bad[7] = 2;
+  const t::OperatorInputs<double> good = t::inputs_of(s, s.graph(), s.confidence());
+  // Its message names the argument at its start ("positions: ...", "graph: ...").
+  auto names = [](const smg::Status& st, const char* arg) {
+    INFO(st.message());
+    return !st && std::string(st.message()).rfind(arg, 0) == 0;
+  };
+  t::for_each_operator([&](auto op) {
+    using Op = decltype(op);
+    CAPTURE(Op::name);
+    const smg::Status ok = Op::validate(good, out);
+    CHECK_MESSAGE(ok, ok.message());
+    t::OperatorInputs<double> in = good;
+    in.positions = {x_nan.data(), T, N};
+    CHECK(names(Op::validate(in, out), "positions"));
+    if (Op::reads & t::kReadsGraph) {
+      in = good;
+      in.graph = {idx_bad.data(), s.w.data(), N, K};
+      CHECK(names(Op::validate(in, out), "graph"));
+    }
+    if (Op::reads & t::kReadsConfidence) {
+      in = good;
+      in.confidence = {c_nan.data(), T, N};
+      CHECK(names(Op::validate(in, out), "confidence"));
+      in.confidence = {c.data(), T + 1, N};  // a wrong shape
+      CHECK(names(Op::validate(in, out), "confidence"));
+    }
+    if (Op::reads & t::kReadsVisibility) {
+      in = good;
+      in.visibility = {v_bad.data(), T, N};
+      CHECK(names(Op::validate(in, out), "visibility"));
+    }
+    if (Op::reads & t::kReadsRotations) {
+      in = good;
+      in.rotations = {q_zero.data(), T, N};
+      CHECK(names(Op::validate(in, out), "rotations"));
+    }
+    // An output of the wrong shape, [T + 1][N]: whichever the operator writes.
+    t::OperatorOutputs<double> bad = out;
+    bad.positions = {big.data(), T + 1, N};
+    bad.confidence = {big.data(), T + 1, N};
+    const smg::Status st = Op::validate(good, bad);
+    CHECK(!st);
+    const std::string m = st.message();
+    CHECK((m.rfind("grad_positions", 0) == 0 || m.rfind("confidence", 0) == 0));
   });
 }

@@ -37,11 +37,17 @@ struct OperatorOutputs {
   FrameScalarsView<S> confidence;
 };
 
+// Which optional inputs an operator reads (its `reads`).
+constexpr unsigned kReadsGraph = 1, kReadsConfidence = 2, kReadsVisibility = 4, kReadsRotations = 8;
+
 // Each operator: `name` (also the smg_assert_probe mode that misuses it), `exact_gradient` (its
 // outputs are the exact gradient of its energy in the given inputs: tests/energy/test_terms.cpp
-// checks them against central differences and AutoDiffScalar) and run(in, out, workspace,
-// parallel), with default options; returns the energy in Accumulator<S> (0 for the confidences, which have none).
-// Preconditions: the operator's validate_* with the same views.
+// checks them against central differences and AutoDiffScalar), run(in, out, workspace,
+// parallel), with default options, which returns the energy in Accumulator<S> (0 for the
+// confidences, which have none), and validate(in, out): its validate_* with the same views and
+// options (run's precondition), whose one-line errors name the argument (test_terms.cpp checks
+// them by the list). `reads` says which of the optional inputs the operator reads (a bad one of
+// those must be refused).
 struct Confidences {
   static constexpr const char* name = "confidences";
   static constexpr bool exact_gradient = false;  // no energy
@@ -51,6 +57,11 @@ struct Confidences {
     node_confidences<S>(in.positions, in.visibility, in.graph, ConfidenceOptions{}, out.confidence, {}, {}, workspace,
                         parallel);
     return Accumulator<S>(0);
+  }
+  static constexpr unsigned reads = kReadsGraph | kReadsVisibility;
+  template <class S, class I>
+  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
+    return validate_confidence<S>(in.positions, in.visibility, in.graph, ConfidenceOptions{}, out.confidence);
   }
 };
 
@@ -63,6 +74,12 @@ struct Carap {
     return carap<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions, out.rotations,
                     workspace, parallel);
   }
+  static constexpr unsigned reads = kReadsGraph | kReadsConfidence | kReadsRotations;
+  template <class S, class I>
+  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
+    return validate_carap<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
+                             out.rotations);
+  }
 };
 
 struct Arap {
@@ -72,6 +89,11 @@ struct Arap {
   static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
     return arap<S>(in.positions, in.rotations, in.graph, ArapOptions{}, out.positions, out.rotations, workspace, parallel);
+  }
+  static constexpr unsigned reads = kReadsGraph | kReadsRotations;
+  template <class S, class I>
+  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
+    return validate_arap<S>(in.positions, in.rotations, in.graph, ArapOptions{}, out.positions, out.rotations);
   }
 };
 
@@ -85,6 +107,12 @@ struct CarapDirected {
     return carap_directed<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
                              out.rotations, parallel);
   }
+  static constexpr unsigned reads = kReadsGraph | kReadsConfidence | kReadsRotations;
+  template <class S, class I>
+  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
+    return validate_carap<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
+                             out.rotations);
+  }
 };
 
 struct Lrm {
@@ -94,6 +122,11 @@ struct Lrm {
   static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
     return lrm<S>(in.positions, in.confidence, in.graph, LrmOptions{}, out.positions, workspace, parallel);
+  }
+  static constexpr unsigned reads = kReadsGraph | kReadsConfidence;
+  template <class S, class I>
+  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
+    return validate_lrm<S>(in.positions, in.confidence, in.graph, LrmOptions{}, out.positions);
   }
 };
 
@@ -108,6 +141,13 @@ struct Accel {
     o.confidence_weighted = true;
     return accel<S>(in.positions, in.confidence, o, out.positions, workspace, parallel);
   }
+  static constexpr unsigned reads = kReadsConfidence;
+  template <class S, class I>
+  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
+    AccelOptions o;
+    o.confidence_weighted = true;
+    return validate_accel<S>(in.positions, in.confidence, o, out.positions);
+  }
 };
 
 // The fused step (regularizers.hpp) with every term: the confidences it computes (from the
@@ -115,18 +155,27 @@ struct Accel {
 // sum.
 struct Regularizers {
   static constexpr const char* name = "regularizers";
+  static RegularizerOptions options() {
+    RegularizerOptions o;
+    o.terms.arap = true;
+    o.terms.accel = true;
+    return o;
+  }
   // Its gradient holds the confidences it computes constant (stop-gradient): central
   // differences would move them (test_regularizers.cpp checks it with the confidences off).
   static constexpr bool exact_gradient = false;
   template <class S, class I>
   static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    RegularizerOptions o;
-    o.terms.arap = true;
-    o.terms.accel = true;
-    return regularizers<S>(in.positions, in.rotations, in.visibility, in.graph, o, out.confidence,
+    return regularizers<S>(in.positions, in.rotations, in.visibility, in.graph, options(), out.confidence,
                            out.positions, out.rotations, workspace, parallel)
         .total();
+  }
+  static constexpr unsigned reads = kReadsGraph | kReadsVisibility | kReadsRotations;
+  template <class S, class I>
+  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
+    return validate_regularizers<S>(in.positions, in.rotations, in.visibility, in.graph, options(), out.confidence,
+                                    out.positions, out.rotations);
   }
 };
 
