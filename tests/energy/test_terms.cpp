@@ -301,7 +301,7 @@ TEST_CASE("every operator's validator takes good arguments and names a bad one")
     bad.confidence = {big.data(), T + 1, N};
     const smg::Status st = Op::validate(good, bad);
     CHECK(!st);
-    const std::string m = st.message();
+    const std::string& m = st.message();
     CHECK((m.rfind("grad_positions", 0) == 0 || m.rfind("confidence", 0) == 0));
   });
 }

@@ -76,7 +76,9 @@ struct LrmTerm : TermDefaults {
   // hold 4·N·20 or more: 1.6 MB at N = 5000, float), and the blocks spread over the threads
   // evenly. Measured on bench_energy's LRM gradient rows (N = 5000, T = 100, K = 16, 2 threads):
   // float 53.8 ms with the partition's rule, 54 with W, 51.3 with 2W (the former kernel 46.5);
-  // double 94-107 ms (the former kernel 127-136).
+  // double 94-107 ms (the former kernel 127-136). With the whole-lane scatter of group() (one
+  // run, best of two rounds, old kernel of 6db459c beside it): float 36.8 ms (6db459c: 38.2),
+  // double 68.1 ms (104).
   Index preferred_block() const { return 2 * W; }
   // Lane groups start at multiples of W; the last group's velocities read one frame past it.
   Index stored(Index nr, Index nown) const {
