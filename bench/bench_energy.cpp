@@ -41,6 +41,7 @@
 #include "smg/energy.hpp"
 #include "smg/graph/node_order.hpp"
 #include "support/finite_diff.hpp"
+#include "support/operators.hpp"
 
 namespace {
 
@@ -308,6 +309,21 @@ void BM_accel(benchmark::State& state) {
   set_errors<S>(
       state, [&](const Reference& r) { return relative_error(gx, r.accel_x); },
       [](const Reference& r, const Reference& o) { return relative_error(r.accel_x, o.accel_x); });
+}
+
+// ---- Every operator of the cross-cutting tests' list (tests/support/operators.hpp), with the
+// list's options, energy and every output it writes: list/<name><S>. A term added to the list
+// gets its row here with no code of its own. ns_per_term is per (frame, node) ----
+template <class Op, class S>
+void BM_listed(benchmark::State& state) {
+  const Scene<S>& s = scene_as<S>();
+  std::vector<S> gx(s.x.size()), gr(s.x.size()), c(s.x.size() / 3);
+  smg::EnergyWorkspace<S> ws;
+  time_energy(state, static_cast<double>(cfg.T) * static_cast<double>(cfg.N), [&] {
+    const smg::test::OperatorOutputs<S> out{grad_view(gx, s, true), tangent_view(gr, s, true),
+                                            {c.data(), s.T, s.N}};
+    return double(Op::run(smg::test::inputs_of(s, s.graph(), s.confidence()), out, &ws, threads(state)));
+  });
 }
 
 // ---- The target: C-ARAP + LRM, energy + exact gradient, into one gradient buffer ----
@@ -744,6 +760,11 @@ int main(int argc, char** argv) {
   if (db) add("BM_arap<double, true>", BM_arap<double, true>);
   if (fl) add("BM_accel<float>", BM_accel<float>);
   if (db) add("BM_accel<double>", BM_accel<double>);
+  smg::test::for_each_operator([&](auto op) {
+    using Op = decltype(op);
+    if (fl) add(std::string("list/") + Op::name + "<float>", BM_listed<Op, float>);
+    if (db) add(std::string("list/") + Op::name + "<double>", BM_listed<Op, double>);
+  });
   if (fl) add("BM_carap_plus_lrm<float>", BM_carap_plus_lrm<float>);
   if (db) add("BM_carap_plus_lrm<double>", BM_carap_plus_lrm<double>);
   if (fl) add("BM_regularizers<float, false>", BM_regularizers<float, false>);
