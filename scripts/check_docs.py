@@ -1030,7 +1030,6 @@ except (OSError, SyntaxError) as e:
 
 # ---------------------------------------------------------------------------------------------
 # (g) generated text is current
-import importlib.util  # noqa: E402
 
 _spec = importlib.util.spec_from_file_location("smg_bench_report", os.path.join(ROOT, "bench", "report.py"))
 report = importlib.util.module_from_spec(_spec)

@@ -110,8 +110,7 @@ struct CarapDirected {
   static constexpr unsigned reads = kReadsGraph | kReadsConfidence | kReadsRotations;
   template <class S, class I>
   static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
-    return validate_carap<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
-                             out.rotations);
+    return Carap::validate(in, out);  // the same arguments and options as carap()
   }
 };
 

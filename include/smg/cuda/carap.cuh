@@ -43,10 +43,7 @@ struct CarapConstants {
   // γ_δ times the overall scale, as the CPU computes it (in double, then rounded to S).
   __device__ Literal<S> gamma(int g) const {
     double scale = weight;
-    if (edge_count != nullptr) {
-      const Index terms = pairs * static_cast<Index>(*edge_count);
-      scale = terms > 0 ? scale / static_cast<double>(terms) : 0.0;
-    }
+    if (edge_count != nullptr) scale = scale_over_count(scale, pairs, edge_count);
     return Literal<S>(gap_weight[g] * scale);
   }
 };

@@ -189,6 +189,13 @@ struct alignas(4 * sizeof(S)) Vec4 {
 };
 
 namespace detail {
+// scale / (factor · *count), 0 when there are no terms: Normalization::mean over a number of terms
+// known only where the edge count lives (device memory in kernels, host memory in host loops).
+SMG_HOST_DEVICE inline double scale_over_count(double scale, Index factor, const std::int32_t* count) {
+  const Index terms = factor * static_cast<Index>(*count);
+  return terms > 0 ? scale / static_cast<double>(terms) : 0.0;
+}
+
 // Fixed decomposition of the deterministic sum: kSumBlocks blocks of kThreads threads, each
 // thread summing a fixed strided subset, then a fixed tree in shared memory; a second launch
 // sums the kSumBlocks partials the same way. The order depends on n only.
@@ -222,10 +229,7 @@ __global__ void sum_final_kernel(const T* partial, int n, double scale, T* out, 
   __shared__ T shared[kThreads];
   T v(0);
   for (int k = threadIdx.x; k < n; k += blockDim.x) v += partial[k];
-  if (count != nullptr) {  // the mean: scale / (count_factor · *count), 0 for no terms
-    const Index terms = count_factor * static_cast<Index>(*count);
-    scale = terms > 0 ? scale / static_cast<double>(terms) : 0.0;
-  }
+  if (count != nullptr) scale = scale_over_count(scale, count_factor, count);  // the mean
   const T s = block_tree_sum(v, shared) * static_cast<T>(scale);
   if (threadIdx.x == 0) *out = accumulate ? *out + s : s;
 }

@@ -76,7 +76,7 @@ FusedPlan fused_plan(Index T, Index N, Index K, const RegularizerOptions& o, boo
       for (const Gap& g : *list) any_gap = any_gap || (g.delta >= 1 && g.delta < T && g.weight != 0.0);
   p.rigid = any_gap && K > 0;
   p.lrm = on.lrm && K > 0;
-  p.accel = on.accel && accel_term_count(o.accel, T, N) > 0 && o.accel.weight != 0.0;
+  p.accel = on.accel && accel_active(o.accel, T, N);
   p.confidence = on.confidence &&
                  (conf_out || p.rigid || p.lrm || (p.accel && o.accel.confidence_weighted));
   p.want_x = want_x && (p.rigid || p.lrm || p.accel);
@@ -351,10 +351,7 @@ struct HostBackend {
     T v(0);
     for (Index k = 0; k < n; ++k) v += static_cast<T>(in[k]);
     double sc = static_cast<double>(scale);
-    if (count != nullptr) {
-      const Index terms = count_factor * static_cast<Index>(*count);
-      sc = terms > 0 ? sc / static_cast<double>(terms) : 0.0;
-    }
+    if (count != nullptr) sc = scale_over_count(sc, count_factor, count);  // as sum_final_kernel
     const T s = v * static_cast<T>(sc);
     *out = accumulate ? *out + s : s;
     return Status::ok();
@@ -383,21 +380,20 @@ Status drive(const Backend& be, const FusedPlan& p, const RegularizerOptions& o,
              FrameScalarsView<S> confidence, PositionsView<S> grad_positions,
              RotationGradientView<S> grad_rotations) {
   using Acc = Accumulator<S>;
-  using Buffers = Backend;
   const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
   if (Status s = be.clear(result); !s) return s;
   if (T == 0 || N == 0 || !(p.confidence || p.rigid || p.lrm || p.accel)) return Status::ok();
   if (Status s = check_frame_items(N, "positions"); !s) return s;
 
   // Phase 1: confidences into the caller's output or [T][N] scratch.
-  typename Buffers::template Buffer<S> conf_buf;
+  typename Backend::template Buffer<S> conf_buf;
   S* conf = confidence.data();
   if (p.conf_scratch) {
     if (Status s = be.allocate(conf_buf, static_cast<std::size_t>(T * N)); !s) return s;
     conf = conf_buf.get();
   }
   if (p.confidence) {
-    typename Buffers::template Buffer<S> inv_w, u, e;
+    typename Backend::template Buffer<S> inv_w, u, e;
     if (Status s = be.allocate(inv_w, static_cast<std::size_t>(N)); !s) return s;
     if (Status s = be.allocate(u, static_cast<std::size_t>(3 * N * p.conf_chunk)); !s) return s;
     if (Status s = be.allocate(e, static_cast<std::size_t>(N * p.conf_chunk)); !s) return s;
@@ -445,8 +441,8 @@ Status drive(const Backend& be, const FusedPlan& p, const RegularizerOptions& o,
     const bool mean = o.lrm.normalization == Normalization::mean;
     const LrmKernelArgs<S> args = fused_lrm_args<S>(o, T, p.want_x, edge_count);
     const Index chunk = p.lrm_chunk;
-    typename Buffers::template Buffer<Acc> terms;
-    typename Buffers::template Buffer<S> edges, nodes;
+    typename Backend::template Buffer<Acc> terms;
+    typename Backend::template Buffer<S> edges, nodes;
     if (Status s = be.allocate(terms, static_cast<std::size_t>(N * chunk)); !s) return s;
     if (p.want_x) {
       if (Status s = be.allocate(edges, static_cast<std::size_t>(6 * N * K * chunk)); !s) return s;

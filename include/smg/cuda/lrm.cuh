@@ -48,8 +48,7 @@ struct LrmKernelArgs {
 
   SMG_HOST_DEVICE Literal<S> gradient_scale() const {
     if (edge_count == nullptr) return scale;
-    const Index terms = frames * static_cast<Index>(*edge_count);
-    return Literal<S>(terms > 0 ? weight / static_cast<double>(terms) : 0.0);
+    return Literal<S>(scale_over_count(weight, frames, edge_count));
   }
 };
 

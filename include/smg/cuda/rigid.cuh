@@ -46,10 +46,7 @@ struct FusedRigidConstants {
   // γ_δ · weight / (number of terms with Normalization::mean) of gap g for energy en.
   SMG_HOST_DEVICE Literal<S> gamma(int en, int g) const {
     double scale = gap_weight[en][g];
-    if (mean[en]) {
-      const Index terms = pairs[en] * static_cast<Index>(*edge_count);
-      scale = terms > 0 ? scale / static_cast<double>(terms) : 0.0;
-    }
+    if (mean[en]) scale = scale_over_count(scale, pairs[en], edge_count);
     return Literal<S>(scale);
   }
 };

@@ -38,6 +38,24 @@ inline Index accel_term_count(const AccelOptions& o, Index frames, Index nodes) 
   return std::max<Index>(0, frames - span) * nodes;
 }
 
+// The term's difference along one coordinate from the frames' values x0, x1[, x2] (order 2:
+// x2 − 2 x1 + x0, acceleration; order 1: x1 − x0, velocity).
+template <class S, class L>
+SMG_FORCE_INLINE SMG_HOST_DEVICE S accel_difference(int order, S x0, S x1, S x2) {
+  return order == 2 ? S(x2 - L(2) * x1 + x0) : S(x1 - x0);
+}
+
+// Whether (E21) contributes anything over T frames and N nodes (a term exists, the weight is not
+// 0), and k, the factor of every term: the weight, / accel_term_count with Normalization::mean.
+inline bool accel_active(const AccelOptions& o, Index frames, Index nodes) {
+  return accel_term_count(o, frames, nodes) > 0 && o.weight != 0.0;
+}
+inline double accel_scale(const AccelOptions& o, Index frames, Index nodes) {
+  const Index terms = accel_term_count(o, frames, nodes);
+  return o.normalization == Normalization::mean && terms > 0 ? o.weight / static_cast<double>(terms)
+                                                             : o.weight;
+}
+
 // (E21) as one element (frame t, node i) of the CUDA driver (cuda/driver.cuh), a step without
 // scratch that a kernel thread or a host loop runs: the energy of the term whose earliest frame
 // is t into `energy`, and the gradient of x_i^t from every term containing frame t (earliest
@@ -49,16 +67,12 @@ struct AccelElement {
   bool weighted = false;
   int order = 2;  // 2: acceleration, 1: velocity
 
-  // The difference a of the term with earliest frame u (a[d] as the CPU block form writes it).
+  // The difference a of the term with earliest frame u.
   SMG_HOST_DEVICE void difference(PositionsView<const S> x, Index u, Index i, S* a) const {
     const S* r0 = x.ptr(u, i);
     const S* r1 = x.ptr(u + 1, i);
-    if (order == 2) {
-      const S* r2 = x.ptr(u + 2, i);
-      for (int d = 0; d < 3; ++d) a[d] = S(r2[d] - Literal<S>(2) * r1[d] + r0[d]);
-    } else {
-      for (int d = 0; d < 3; ++d) a[d] = S(r1[d] - r0[d]);
-    }
+    const S* r2 = order == 2 ? x.ptr(u + 2, i) : r1;
+    for (int d = 0; d < 3; ++d) a[d] = accel_difference<S, Literal<S>>(order, r0[d], r1[d], r2[d]);
   }
 
   SMG_HOST_DEVICE void at(Index t, Index i, PositionsView<const S> x, const S* conf, S* grad_x,
@@ -87,10 +101,7 @@ struct AccelElement {
 template <class S>
 AccelElement<S> make_accel_element(const AccelOptions& o, Index frames, Index nodes) {
   AccelElement<S> e;
-  const Index terms = accel_term_count(o, frames, nodes);
-  double scale = o.weight;
-  if (o.normalization == Normalization::mean) scale = terms > 0 ? scale / double(terms) : 0.0;
-  e.k = Literal<S>(scale);
+  e.k = Literal<S>(accel_scale(o, frames, nodes));
   e.weighted = o.confidence_weighted;
   e.order = o.form == AccelForm::acceleration ? 2 : 1;
   return e;
@@ -112,10 +123,8 @@ struct AccelTerm : TermDefaults {
     T = frames;
     order = o.form == AccelForm::acceleration ? 2 : 1;
     weighted = o.confidence_weighted;
-    const Index terms = accel_term_count(o, frames, nodes);
-    scale_d = o.weight;
-    if (o.normalization == Normalization::mean && terms > 0) scale_d /= static_cast<double>(terms);
-    enabled = terms > 0 && o.weight != 0.0;
+    scale_d = accel_scale(o, frames, nodes);
+    enabled = accel_active(o, frames, nodes);
   }
 
   bool on() const { return enabled; }
@@ -138,7 +147,8 @@ struct AccelTerm : TermDefaults {
       S a[3];
       for (int d = 0; d < 3; ++d) {
         const S* r = X + d * ne + l;
-        a[d] = order == 2 ? S(r[2] - L(2) * r[1] + r[0]) : S(r[1] - r[0]);
+        a[d] = accel_difference<S, L>(static_cast<int>(order), r[0], r[1],
+                                      order == 2 ? r[2] : r[1]);
       }
       S g[3];
       e += Acc(accel_term<S, L>(weighted ? S(k * c[l]) : S(k), a[0], a[1], a[2], g[0], g[1], g[2]));
