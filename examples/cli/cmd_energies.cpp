@@ -203,40 +203,14 @@ void compute(const Invocation& inv, const Params& prm, const Tensor<double>& x_d
 
 void run_energies(const Invocation& inv, JsonLine& summary) {
   const Params prm = read_params(inv.args);
-  const CaseDir& c = inv.case_dir;
-  const auto x = c.load<double>("positions.npy", {{"T"}, {"N"}, {"", 3}});
-  const std::int64_t T = x.dim(0), N = x.dim(1);
-  ok(smg::validate_positions<double>({x.ptr(), T, N}, T, N, c.file("positions.npy")));
+  // Inputs in the computation's precision, confidences, 5 gradients, the workspace (~4 per-node
+  // frame tables) and the graph's per-edge work.
+  const double s = inv.use_float ? 4 : 8;
+  const EnergyCase c = load_energy_case(inv, (3 * 8 + 4 * 8 + 1) + s * (3 + 4 + 1 + 15 + 12));
   if (inv.use_float)
-    require_coordinates<float>(x.data, c.file("positions.npy"));
+    compute<float>(inv, prm, c.x, c.q, c.vis, c.g, summary);
   else
-    require_coordinates<double>(x.data, c.file("positions.npy"));
-  {
-    // Inputs in the computation's precision, confidences, 5 gradients, the workspace (~4 per-node
-    // frame tables) and the graph's per-edge work.
-    const double s = inv.use_float ? 4 : 8, tn = double(T) * double(N);
-    check_memory(tn * (3 * 8 + 4 * 8 + 1) + tn * s * (3 + 4 + 1 + 15 + 12), inv.max_bytes,
-                 c.file("positions.npy") + ": T = " + std::to_string(T) + " frames x N = " + std::to_string(N) + " nodes");
-  }
-  std::vector<double> q;
-  if (auto qs = c.load_optional<double>("quats.npy", {{"T", T}, {"N", N}, {"", 4}})) {
-    ok(smg::validate_quaternions<double>({qs->ptr(), T, N}, T, N,
-                                         smg::QuaternionNorm::normalize_on_entry, c.file("quats.npy")));
-    q = std::move(qs->data);
-  } else {
-    q.assign(static_cast<std::size_t>(T * N * 4), 0.0);
-    for (std::int64_t k = 0; k < T * N; ++k) q[static_cast<std::size_t>(4 * k)] = 1.0;
-  }
-  std::vector<std::uint8_t> vis;
-  if (auto v = c.load_optional<std::uint8_t>("visibility.npy", {{"T", T}, {"N", N}}))
-    vis = std::move(v->data);
-  else
-    vis.assign(static_cast<std::size_t>(T * N), 1);
-  const CaseGraph g = load_or_build_graph(inv, x);
-  if (inv.use_float)
-    compute<float>(inv, prm, x, q, vis, g, summary);
-  else
-    compute<double>(inv, prm, x, q, vis, g, summary);
+    compute<double>(inv, prm, c.x, c.q, c.vis, c.g, summary);
 }
 
 }  // namespace

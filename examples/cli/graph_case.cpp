@@ -6,6 +6,7 @@
 #include <utility>
 #include <string>
 
+#include "smg/core/validate.hpp"
 #include "smg/graph.hpp"
 
 namespace cli {
@@ -205,6 +206,34 @@ CaseGraph load_or_build_graph(const Invocation& inv, const Tensor<double>& posit
   g.weights = w.data;
   g.built = false;
   return g;
+}
+
+EnergyCase load_energy_case(const Invocation& inv, double bytes_per_frame_node) {
+  const CaseDir& c = inv.case_dir;
+  EnergyCase e;
+  e.x = c.load<double>("positions.npy", {{"T"}, {"N"}, {"", 3}});
+  const std::int64_t T = e.x.dim(0), N = e.x.dim(1);
+  ok(smg::validate_positions<double>({e.x.ptr(), T, N}, T, N, c.file("positions.npy")));
+  if (inv.use_float)
+    require_coordinates<float>(e.x.data, c.file("positions.npy"));
+  else
+    require_coordinates<double>(e.x.data, c.file("positions.npy"));
+  check_memory(double(T) * double(N) * bytes_per_frame_node, inv.max_bytes,
+               c.file("positions.npy") + ": T = " + std::to_string(T) + " frames x N = " + std::to_string(N) + " nodes");
+  if (auto qs = c.load_optional<double>("quats.npy", {{"T", T}, {"N", N}, {"", 4}})) {
+    ok(smg::validate_quaternions<double>({qs->ptr(), T, N}, T, N,
+                                         smg::QuaternionNorm::normalize_on_entry, c.file("quats.npy")));
+    e.q = std::move(qs->data);
+  } else {
+    e.q.assign(static_cast<std::size_t>(T * N * 4), 0.0);
+    for (std::int64_t k = 0; k < T * N; ++k) e.q[static_cast<std::size_t>(4 * k)] = 1.0;
+  }
+  if (auto v = c.load_optional<std::uint8_t>("visibility.npy", {{"T", T}, {"N", N}}))
+    e.vis = std::move(v->data);
+  else
+    e.vis.assign(static_cast<std::size_t>(T * N), 1);
+  e.g = load_or_build_graph(inv, e.x);
+  return e;
 }
 
 void add_graph_summary(const CaseGraph& g, JsonLine& summary) {

@@ -43,6 +43,19 @@ CaseGraph load_or_build_graph(const Invocation& inv, const Tensor<double>& posit
 // graph is purely geometric (no semantic gate, gated = false). Computes in float with --float.
 CaseGraph build_case_graph(const Invocation& inv, const Tensor<double>& positions);
 
+// The inputs of the energy subcommands (`energies`, `regularizers`): positions.npy [T][N][3]
+// (required, checked, within max_coordinate of the precision), quats.npy [T][N][4] (absent:
+// identity), visibility.npy [T][N] (absent: all visible) and the graph (load_or_build_graph).
+// `bytes_per_frame_node` is the subcommand's estimate of its memory per (frame, node) for
+// --max-memory-gb, checked before anything but positions is read.
+struct EnergyCase {
+  Tensor<double> x;
+  std::vector<double> q;
+  std::vector<std::uint8_t> vis;
+  CaseGraph g;
+};
+EnergyCase load_energy_case(const Invocation& inv, double bytes_per_frame_node);
+
 // Adds the build statistics of a built graph to a summary line ("gated", "edges", ...).
 void add_graph_summary(const CaseGraph& g, JsonLine& summary);
 

@@ -17,7 +17,7 @@ namespace {
 
 std::vector<cli::Subcommand> registry() {
   return {cli::check_subcommand(), cli::graph_subcommand(), cli::energies_subcommand(),
-          cli::dqb_subcommand(), cli::render_subcommand()};
+          cli::regularizers_subcommand(), cli::dqb_subcommand(), cli::render_subcommand()};
 }
 
 std::vector<cli::FlagSpec> common_flags() {

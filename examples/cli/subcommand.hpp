@@ -120,6 +120,7 @@ struct Subcommand {
 Subcommand check_subcommand();
 Subcommand graph_subcommand();
 Subcommand energies_subcommand();
+Subcommand regularizers_subcommand();
 Subcommand dqb_subcommand();
 Subcommand render_subcommand();
 

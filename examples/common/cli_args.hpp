@@ -108,6 +108,8 @@ class Args {
     for (const auto& item : split(get(name))) out.push_back(to_int(name, item));
     return out;
   }
+  // The comma-separated items of a flag's value, as given.
+  std::vector<std::string> get_strings(const std::string& name) const { return split(get(name)); }
   // One of `choices`, else a UsageError listing them.
   std::string get_choice(const std::string& name, const std::vector<std::string>& choices) const {
     const std::string v = get(name);

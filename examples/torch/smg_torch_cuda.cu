@@ -12,6 +12,8 @@
 // validate=True nothing is read back to the host: dqb's launches, its driver incidence included,
 // are stream-ordered and never synchronise.
 // smg's scratch memory comes from PyTorch's caching allocator (smg::cuda::set_allocator).
+#include <type_traits>
+
 #include <c10/cuda/CUDACachingAllocator.h>
 #include <c10/cuda/CUDAGuard.h>
 #include <c10/cuda/CUDAStream.h>
@@ -175,8 +177,9 @@ void dqb_backward_cuda(const SkinInputs& in, const smg::SkinOptions& opt, const 
   });
 }
 
-// regularizers: smg::cuda::regularizers (the fused step) into energies [4] (float64: the
-// RegularizerResult<S> of either dtype is four doubles), c, gx and gq when defined.
+// regularizers: smg::cuda::regularizers (the fused step) into energies [E] (float64: the
+// RegularizerResult<S> of either dtype is E doubles, E = energy_names().size()), c, gx and gq
+// when defined.
 void regularizers_cuda(const EnergyInputs& in, const smg::RegularizerOptions& o, bool validate,
                        const at::Tensor& energies, const at::Tensor& c, const at::Tensor& gx,
                        const at::Tensor& gq) {
@@ -186,8 +189,11 @@ void regularizers_cuda(const EnergyInputs& in, const smg::RegularizerOptions& o,
   dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
     using S = decltype(s);
     using I = decltype(i);
-    static_assert(sizeof(smg::RegularizerResult<S>) == 4 * sizeof(double),
-                  "RegularizerResult<S> must be the four doubles of the energies tensor");
+    static_assert(std::is_same<smg::Accumulator<S>, double>::value &&
+                      sizeof(smg::RegularizerResult<S>) % sizeof(double) == 0,
+                  "RegularizerResult<S> must be the doubles of the energies tensor");
+    if (energies.numel() * int64_t(sizeof(double)) != int64_t(sizeof(smg::RegularizerResult<S>)))
+      value_error("regularizers: the energies tensor does not match RegularizerResult");
     const auto gv = graph_view<S, I>(in.g);
     const smg::PositionsView<const S> xv(cptr<S>(in.x), in.T, in.N);
     const smg::QuaternionsView<const S> qv =

@@ -151,79 +151,34 @@ py::tuple lrm_impl(const at::Tensor& positions, const at::Tensor& indices, const
   return py::make_tuple(at::scalar_tensor(e, in.ref.options()), opt(gx));
 }
 
-// regularizers(positions, quats or None, indices, weights, visibility or None, terms, conf,
-// carap, arap, lrm, accel, grad_positions, grad_quats, validate) -> (energies [4] = (carap, arap,
-// lrm, accel) of positions' dtype, confidence [T, N] or None, grad_positions or None, grad_quats
-// or None): smg::regularizers, the fused step (confidences, C-ARAP, ARAP, LRM, smoothness in one
-// pass). `terms` is a dict of five bools; conf, carap, arap, lrm and accel are dicts with every
-// option of that term (the
-// Python wrapper fills the defaults). Each term's options are checked on their own first, so that
-// a message names the term ("carap.alpha: ..."). CUDA tensors run smg::cuda::regularizers
+// regularizers(positions, quats or None, indices, weights, visibility or None, terms, options,
+// grad_positions, grad_quats, validate) -> (energies [E] of positions' dtype, in energy_names()'s
+// order; confidence [T, N] or None; grad_positions or None; grad_quats or None):
+// smg::regularizers, the fused step. `terms` maps each term of smg::for_each_term to a bool,
+// `options` each term to the dict of all its options (the Python wrapper fills the defaults,
+// option_defaults()). Each term's options are checked on their own first, so that a message
+// names the term ("carap.alpha: ..."). CUDA tensors run smg::cuda::regularizers
 // (smg/cuda/regularizers.cuh) on the tensors' current stream.
 py::tuple regularizers_impl(const at::Tensor& positions, const OptTensor& quats,
                             const at::Tensor& indices, const at::Tensor& weights,
                             const OptTensor& visibility, const py::dict& terms,
-                            const py::dict& conf, const py::dict& carap, const py::dict& arap,
-                            const py::dict& lrm, const py::dict& accel, bool grad_x, bool grad_q,
-                            bool validate) {
+                            const py::dict& options, bool grad_x, bool grad_q, bool validate) {
   smg::RegularizerOptions o;
-  auto flag = [&](const char* name) { return terms[name].cast<bool>(); };
-  o.terms.confidence = flag("confidence");
-  o.terms.carap = flag("carap");
-  o.terms.arap = flag("arap");
-  o.terms.lrm = flag("lrm");
-  o.terms.accel = flag("accel");
-  auto num = [](const py::dict& d, const char* name) { return d[name].cast<double>(); };
-  // gap_list's own messages ("gaps[0]: ...") prefixed with the term, like the option checks.
-  auto gaps_of = [](const py::dict& d, const char* term) {
-    const py::object gw = d["gap_weights"];
-    std::optional<std::vector<double>> w;
-    if (!gw.is_none()) w = gw.cast<std::vector<double>>();
-    try {
-      return gap_list(d["gaps"].cast<py::sequence>(), w);
-    } catch (const py::value_error& e) {
-      value_error(std::string(term) + "." + e.what());
-    }
-  };
-  o.confidence = confidence_options(num(conf, "kappa_m"), num(conf, "kappa_r"),
-                                    num(conf, "lambda_m"), num(conf, "lambda_r"), num(conf, "eps"));
-  o.carap.alpha = num(carap, "alpha");
-  o.carap.lambda_c = num(carap, "lambda_c");
-  o.carap.lambda_l = num(carap, "lambda_l");
-  o.carap.gaps = gaps_of(carap, "carap");
-  o.carap.normalization = normalization(carap["normalize"].cast<bool>());
-  o.carap.weight = num(carap, "weight");
-  o.arap.lambda_c = num(arap, "lambda_c");
-  o.arap.lambda_l = num(arap, "lambda_l");
-  o.arap.gaps = gaps_of(arap, "arap");
-  o.arap.normalization = normalization(arap["normalize"].cast<bool>());
-  o.arap.weight = num(arap, "weight");
-  o.lrm = lrm_options(num(lrm, "alpha"), num(lrm, "huber_delta"), lrm["detach_omega"].cast<bool>(),
-                      lrm["normalize"].cast<bool>());
-  o.lrm.weight = num(lrm, "weight");
-  const std::string form = accel["form"].cast<std::string>();
-  if (form != "acceleration" && form != "velocity")
-    value_error("accel.form: must be 'acceleration' or 'velocity', got '" + form + "'");
-  o.accel.form = form == "velocity" ? smg::AccelForm::velocity : smg::AccelForm::acceleration;
-  o.accel.confidence_weighted = accel["confidence_weighted"].cast<bool>();
-  o.accel.normalization = normalization(accel["normalize"].cast<bool>());
-  o.accel.weight = num(accel, "weight");
-  // Each term's options first, the message prefixed with the term ("carap.alpha: must be ...").
-  auto term_ok = [](bool on, const smg::Status& st, const char* term) {
-    if (on && !st) value_error(std::string(term) + "." + python_message(st.message(), {}));
-  };
-  term_ok(o.terms.confidence, smg::validate_options(o.confidence), "confidence");
-  term_ok(o.terms.carap, smg::validate_options(o.carap), "carap");
-  term_ok(o.terms.arap, smg::validate_options(o.arap), "arap");
-  term_ok(o.terms.lrm, smg::validate_options(o.lrm), "lrm");
-  term_ok(o.terms.accel, smg::validate_options(o.accel), "accel");
+  smg::for_each_term(o, [&](const char* term, bool& on, auto& opts) {
+    on = terms[term].cast<bool>();
+    read_term_options(options[term].cast<py::dict>(), term, opts);
+    if (on)
+      if (const smg::Status st = smg::validate_options(opts); !st)
+        value_error(std::string(term) + "." + python_message(st.message(), {}));
+  });
   const bool rigid = o.terms.carap || o.terms.arap;
   if (rigid && !quats) value_error("quats: needed for carap or arap");
   const EnergyInputs in = prepare(positions, rigid ? quats : std::nullopt, indices, weights,
                                   std::nullopt, visibility, validate);
   const at::Tensor gx = zeros_if(grad_x, in, 3), gq = zeros_if(grad_q && rigid, in, 4);
   const at::Tensor c = o.terms.confidence ? at::empty({in.T, in.N}, in.ref.options()) : at::Tensor();
-  at::Tensor energies = at::zeros({4}, in.ref.options().dtype(at::kDouble));
+  at::Tensor energies =
+      at::zeros({static_cast<int64_t>(energy_names().size())}, in.ref.options().dtype(at::kDouble));
   if (in.ref.cuda()) {
     cuda(cuda_ops().regularizers)(in, o, validate, energies, c, gx, gq);
     return py::make_tuple(energies.to(in.ref.options().dtype()), opt(c), opt(gx), opt(gq));
@@ -251,10 +206,7 @@ py::tuple regularizers_impl(const at::Tensor& positions, const OptTensor& quats,
       r = smg::regularizers<S>(xv, qv, vv, gv, o, cv, gxv, gqv, nullptr, parallel_options());
     }
     double* e = energies.data_ptr<double>();
-    e[0] = double(r.carap);
-    e[1] = double(r.arap);
-    e[2] = double(r.lrm);
-    e[3] = double(r.accel);
+    smg::RegularizerResult<S>::each_energy([&](const char*, const auto& v) { *e++ = double(v); }, r);
     return 0;
   });
   return py::make_tuple(energies.to(in.ref.options().dtype()), opt(c), opt(gx), opt(gq));
@@ -356,8 +308,12 @@ void register_energy(py::module_& m) {
       "positions"_a, "quats"_a, "indices"_a, "weights"_a, "lambda_c"_a, "lambda_l"_a, "gaps"_a,
       "gap_weights"_a, "normalize"_a, "grad_positions"_a, "grad_quats"_a, "validate"_a);
   m.def("regularizers", &regularizers_impl, "positions"_a, "quats"_a, "indices"_a, "weights"_a,
-        "visibility"_a, "terms"_a, "confidence"_a, "carap"_a, "arap"_a, "lrm"_a, "accel"_a,
-        "grad_positions"_a, "grad_quats"_a, "validate"_a);
+        "visibility"_a, "terms"_a, "options"_a, "grad_positions"_a, "grad_quats"_a, "validate"_a);
+  // The fused step's term list (smg::for_each_term), which the Python wrapper is built from:
+  // {term: on by default}, {term: {option: default}} and the energies' names in order.
+  m.def("regularizer_terms", &term_defaults);
+  m.def("regularizer_options", &option_defaults);
+  m.def("regularizer_energies", &energy_names);
   m.def("_library_seconds", &library_seconds, "op"_a, "positions"_a, "quats"_a, "indices"_a, "weights"_a,
         "confidence"_a, "repeat"_a);
   m.def("lrm", &lrm_impl, "positions"_a, "indices"_a, "weights"_a, "confidence"_a, "alpha"_a,

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "smg/energy/block.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/skin/skin_views.hpp"
 #include "smg_torch_checks.hpp"
@@ -73,6 +74,94 @@ inline smg::LrmOptions lrm_options(double alpha, double huber_delta, bool detach
   o.detach_omega = detach_omega;
   o.normalization = normalization(normalize);
   return o;
+}
+
+// ---- The fused step's options, term by term (smg::for_each_term, smg::for_each_option) ------
+// Each option is a key of its term's dict (smg_torch.REGULARIZER_DEFAULTS, built from
+// option_defaults below): the field's name, except that a GapList is the two keys "gaps" and
+// "gap_weights" and a Normalization the bool "normalize". Read and written by the field's type,
+// so a term or an option added to the library's lists reaches Python with no edit here.
+
+// One option from its term's dict; messages are prefixed with the term ("carap.gaps[0]: ...").
+inline void read_option(const py::dict& d, const char* name, double& v) { v = d[name].cast<double>(); }
+inline void read_option(const py::dict& d, const char* name, bool& v) { v = d[name].cast<bool>(); }
+inline void read_option(const py::dict& d, const char*, smg::Normalization& v) {
+  v = normalization(d["normalize"].cast<bool>());
+}
+inline void read_option(const py::dict& d, const char*, smg::GapList& v) {
+  const py::object gw = d["gap_weights"];
+  std::optional<std::vector<double>> w;
+  if (!gw.is_none()) w = gw.cast<std::vector<double>>();
+  v = gap_list(d["gaps"].cast<py::sequence>(), w);
+}
+inline void read_option(const py::dict& d, const char* name, smg::AccelForm& v) {
+  const std::string form = d[name].cast<std::string>();
+  std::string known;
+  for (const smg::AccelForm f : smg::kAccelForms) {
+    if (form == smg::to_string(f)) {
+      v = f;
+      return;
+    }
+    known += std::string(known.empty() ? "'" : " or '") + smg::to_string(f) + "'";
+  }
+  value_error(std::string(name) + ": must be " + known + ", got '" + form + "'");
+}
+
+// One option's default into its term's dict (the inverse of read_option).
+inline void write_option(py::dict& d, const char* name, double v) { d[name] = py::float_(v); }
+inline void write_option(py::dict& d, const char* name, bool v) { d[name] = py::bool_(v); }
+inline void write_option(py::dict& d, const char*, smg::Normalization v) {
+  d["normalize"] = py::bool_(v == smg::Normalization::mean);
+}
+inline void write_option(py::dict& d, const char*, const smg::GapList& v) {
+  py::list deltas, weights;
+  bool all_one = true;
+  for (const smg::Gap& g : v) {
+    deltas.append(g.delta);
+    weights.append(g.weight);
+    all_one = all_one && g.weight == 1.0;
+  }
+  d["gaps"] = py::tuple(deltas);
+  d["gap_weights"] = all_one ? py::object(py::none()) : py::object(py::tuple(weights));
+}
+inline void write_option(py::dict& d, const char* name, smg::AccelForm v) {
+  d[name] = py::str(smg::to_string(v));
+}
+
+// options[term] -> that term's options; the term's prefix on every message ("lrm.alpha: ...").
+template <class Options>
+void read_term_options(const py::dict& d, const char* term, Options& o) {
+  try {
+    smg::for_each_option(o, [&](const char* name, auto& field) { read_option(d, name, field); });
+  } catch (const py::value_error& e) {
+    value_error(std::string(term) + "." + e.what());
+  }
+}
+
+// {term: {option: default}} of RegularizerOptions{} and {term: on by default}.
+inline py::dict option_defaults() {
+  const smg::RegularizerOptions o;
+  py::dict out;
+  smg::for_each_term(o, [&](const char* term, bool, const auto& options) {
+    py::dict d;
+    smg::for_each_option(options, [&](const char* name, const auto& field) { write_option(d, name, field); });
+    out[term] = d;
+  });
+  return out;
+}
+inline py::dict term_defaults() {
+  const smg::RegularizerOptions o;
+  py::dict out;
+  smg::for_each_term(o, [&](const char* term, bool on, const auto&) { out[term] = py::bool_(on); });
+  return out;
+}
+
+// The names of the energies of the fused step, in the order of its energies tensor.
+inline std::vector<std::string> energy_names() {
+  std::vector<std::string> names;
+  smg::RegularizerResult<double> r;
+  smg::RegularizerResult<double>::each_energy([&](const char* n, const double&) { names.emplace_back(n); }, r);
+  return names;
 }
 
 inline smg::SkinOptions skin_options(bool lbs) {

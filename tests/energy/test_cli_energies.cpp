@@ -202,4 +202,93 @@ TEST_CASE("smg_cli energies: errors are one line, exit code 2, nothing written")
   fs::remove_all(c);
 }
 
+// `smg_cli regularizers` is generated from the library's term list (smg::for_each_term,
+// smg::for_each_option): every term and option of the list must be reachable by its flag, and
+// the outputs must be smg::regularizers' own, bitwise.
+TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the library's") {
+  smg::test::Rng rng(904);
+  const Scene<double> s = smg::test::random_scene(7, 20, 5, rng, true);
+  const auto [c, o] = case_and_output("4", s, true, true);
+
+  // Every term and every option of the list has its flag in --help.
+  Run r = run_cli("regularizers --help");
+  REQUIRE(r.code == 0);
+  const smg::RegularizerOptions defaults;
+  int terms = 0;
+  smg::for_each_term(defaults, [&](const char* term, bool, const auto& options) {
+    ++terms;
+    CHECK(r.out.find(std::string(term)) != std::string::npos);
+    smg::for_each_option(options, [&](const char* name, const auto&) {
+      std::string flag = std::string("--") + term + "-" + name;
+      for (char& ch : flag)
+        if (ch == '_') ch = '-';
+      if (flag.find("-normalization") != std::string::npos) flag.replace(flag.find("-normalization"), 14, "-normalize");
+      INFO(flag);
+      CHECK(r.out.find(flag) != std::string::npos);
+    });
+  });
+  // The list has every flag of RegularizerTerms (a struct of bools).
+  CHECK(static_cast<std::size_t>(terms) * sizeof(bool) == sizeof(smg::RegularizerTerms));
+
+  // One term at a time, then all with options off their defaults: energies and gradients equal
+  // the library call's.
+  std::vector<std::pair<std::string, smg::RegularizerOptions>> runs;
+  smg::for_each_term(defaults, [&](const char* term, bool, const auto&) {
+    smg::RegularizerOptions one;
+    smg::for_each_term(one, [&](const char* t, bool& on, const auto&) { on = std::string(t) == term; });
+    runs.push_back({std::string("--terms ") + term, one});
+  });
+  smg::RegularizerOptions all;
+  smg::for_each_term(all, [](const char*, bool& on, const auto&) { on = true; });
+  all.carap.alpha = 0.5;
+  all.arap.gaps = {{1, 1.0}, {3, 0.5}};
+  all.lrm.huber_delta = 0.02;
+  all.lrm.detach_omega = true;
+  all.accel.form = smg::AccelForm::velocity;
+  all.accel.confidence_weighted = true;
+  all.accel.normalization = smg::Normalization::mean;
+  all.confidence.kappa_m = 1.5;
+  runs.push_back({"--terms confidence,carap,arap,lrm,accel --carap-alpha 0.5 --arap-gaps 1,3 "
+                  "--arap-gap-weights 1,0.5 --lrm-huber-delta 0.02 --lrm-detach-omega --accel-form velocity "
+                  "--accel-confidence-weighted --accel-normalize --confidence-kappa-m 1.5",
+                  all});
+  for (const auto& [flags, opts] : runs) {
+    INFO(flags);
+    fs::remove_all(o);
+    r = run_cli("regularizers " + c.string() + " " + o.string() + " " + flags);
+    REQUIRE(r.code == 0);
+    CHECK(r.err.empty());
+    const std::size_t tn = static_cast<std::size_t>(s.T * s.N);
+    std::vector<double> conf(tn), gx(3 * tn, 0.0), gr(3 * tn, 0.0);
+    const bool rigid = opts.terms.carap || opts.terms.arap;
+    const smg::RegularizerResult<double> e = smg::regularizers<double>(
+        s.positions(), s.rotations(), s.visibility(), s.graph(), opts,
+        opts.terms.confidence ? smg::FrameScalarsView<double>(conf.data(), s.T, s.N) : smg::FrameScalarsView<double>(),
+        {gx.data(), s.T, s.N},
+        rigid ? smg::RotationGradientView<double>(gr.data(), s.T, s.N) : smg::RotationGradientView<double>());
+    smg::RegularizerResult<double>::each_energy(
+        [&](const char* name, const double& v) { CHECK(json_number(r.out, name) == doctest::Approx(v).epsilon(1e-9)); },
+        e);
+    CHECK(json_number(r.out, "total") == doctest::Approx(double(e.total())).epsilon(1e-9));
+    const std::vector<std::int64_t> tn2 = {s.T, s.N}, tn3 = {s.T, s.N, 3};
+    CHECK(max_diff(load(o / "grad_positions.npy", npy::DType::f64, tn3), gx) == 0.0);
+    CHECK(fs::exists(o / "grad_rotations.npy") == rigid);
+    if (rigid) CHECK(max_diff(load(o / "grad_rotations.npy", npy::DType::f64, tn3), gr) == 0.0);
+    CHECK(fs::exists(o / "confidence.npy") == opts.terms.confidence);
+    if (opts.terms.confidence) CHECK(max_diff(load(o / "confidence.npy", npy::DType::f64, tn2), conf) == 0.0);
+  }
+
+  // Errors name the flag; nothing is written.
+  fs::remove_all(o);
+  r = run_cli("regularizers " + c.string() + " " + o.string() + " --terms carap,jerk");
+  CHECK(r.code == 2);
+  CHECK(r.err == "smg_cli regularizers: error: --terms: unknown term 'jerk' (known: confidence, carap, arap, lrm, accel)\n");
+  r = run_cli("regularizers " + c.string() + " " + o.string() + " --lrm-alpha 1.5");
+  CHECK(r.err == "smg_cli regularizers: error: --lrm-alpha: alpha must be in [0, 1], got 1.5\n");
+  r = run_cli("regularizers " + c.string() + " " + o.string() + " --terms accel --accel-form jerk");
+  CHECK(r.err == "smg_cli regularizers: error: --accel-form: must be one of acceleration | velocity, got 'jerk'\n");
+  CHECK(!fs::exists(o));
+  fs::remove_all(c);
+}
+
 #endif

@@ -234,19 +234,17 @@ class Regularizers(NamedTuple):
     accel: Optional[torch.Tensor] = None
 
 
-#: The options of each term of regularizers, with their defaults (those of node_confidences,
-#: carap, arap and lrm; weight multiplies the term and its gradient).
-REGULARIZER_DEFAULTS = {
-    "confidence": dict(kappa_m=2.5, kappa_r=2.5, lambda_m=1.0, lambda_r=1.0, eps=1e-4),
-    "carap": dict(alpha=0.6, lambda_c=1.0, lambda_l=1.0, gaps=(1, 2, 4), gap_weights=None,
-                  normalize=False, weight=1.0),
-    "arap": dict(lambda_c=1.0, lambda_l=1.0, gaps=(1, 2, 4), gap_weights=None, normalize=False,
-                 weight=1.0),
-    "lrm": dict(alpha=0.6, huber_delta=0.01, detach_omega=False, normalize=False, weight=1.0),
-    # trajectory smoothness (E21): form "acceleration" or "velocity"; confidence_weighted uses
-    # c at the earliest frame of each term (1 otherwise)
-    "accel": dict(form="acceleration", confidence_weighted=False, normalize=False, weight=1.0),
-}
+#: The options of each term of regularizers, with their defaults: read from the library's term
+#: list (smg::for_each_term / smg::for_each_option, smg/energy/options.hpp), so they are the C++
+#: defaults, which are node_confidences', carap's, arap's and lrm's. `weight` multiplies the
+#: term and its gradient; a GapList is `gaps` + `gap_weights` (None = all 1), a Normalization
+#: the bool `normalize`; accel's `form` is "acceleration" or "velocity", its
+#: `confidence_weighted` uses c at the earliest frame of each term (1 otherwise).
+REGULARIZER_DEFAULTS = _C.regularizer_options()
+#: The terms of regularizers in the driver's order, each on (True) or off by default.
+REGULARIZER_TERMS = _C.regularizer_terms()
+#: The energies regularizers returns, in the order of its energies tensor.
+_REGULARIZER_ENERGIES = tuple(_C.regularizer_energies())
 
 
 def _term_options(name, value):
@@ -264,15 +262,10 @@ def _term_options(name, value):
         out[key] = v
     if "gaps" in out:
         out["gaps"], out["gap_weights"] = _gap_args(out["gaps"], out["gap_weights"])
-    for key in ("kappa_m", "kappa_r", "lambda_m", "lambda_r", "eps", "alpha", "lambda_c", "lambda_l",
-                "huber_delta", "weight"):
-        if key in out:
-            out[key] = float(out[key])
-    if "form" in out:
-        out["form"] = str(out["form"])
-    for key in ("normalize", "detach_omega", "confidence_weighted"):
-        if key in out:
-            out[key] = bool(out[key])
+    # Each option converted to its default's type (float, bool or str); gaps were above.
+    for key, default in REGULARIZER_DEFAULTS[name].items():
+        if isinstance(default, (bool, float, str)):
+            out[key] = type(default)(out[key])
     return True, out
 
 
@@ -282,8 +275,7 @@ class _RegularizersFunction(torch.autograd.Function):
         need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
         e, c, gx, gq = _C.regularizers(
             positions.detach(), None if quats is None else quats.detach(), idx, w.detach(),
-            visibility, terms, opts["confidence"], opts["carap"], opts["arap"], opts["lrm"],
-            opts["accel"], need_x, need_q and quats is not None, validate)
+            visibility, terms, opts, need_x, need_q and quats is not None, validate)
         ctx.grads = (gx, gq)
         total = e.sum()
         if c is None:
@@ -317,13 +309,14 @@ def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: Grap
     Devices: CPU and CUDA tensors."""
     idx, w = _graph(g)
     _check(positions=positions, quats=quats, indices=idx, weights=w, visibility=visibility)
+    given = dict(confidence=confidence, carap=carap, arap=arap, lrm=lrm, accel=accel)
     terms, opts = {}, {}
-    for name, value in (("confidence", confidence), ("carap", carap), ("arap", arap), ("lrm", lrm),
-                        ("accel", accel)):
-        terms[name], opts[name] = _term_options(name, value)
+    for name in REGULARIZER_TERMS:
+        terms[name], opts[name] = _term_options(name, given[name])
     total, e, c = _RegularizersFunction.apply(positions, quats, idx, w, visibility, terms, opts,
                                               bool(validate))
-    return Regularizers(total, e[0], e[1], e[2], c if terms["confidence"] else None, e[3])
+    energies = dict(zip(_REGULARIZER_ENERGIES, e))
+    return Regularizers(total=total, confidence=c if terms["confidence"] else None, **energies)
 
 
 def _library_seconds(op: str, positions: torch.Tensor, quats: Optional[torch.Tensor], g: GraphLike,

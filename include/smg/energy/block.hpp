@@ -42,19 +42,31 @@ namespace smg {
 
 // The energies of one fused step, each as the separate operator returns it (0 for a term that
 // is off), in Accumulator<S> (double for float). Plain doubles in this order: the torch CUDA
-// glue reads it as a [4] tensor.
+// glue reads it as a tensor of each_energy's length.
 template <class S>
 struct RegularizerResult {
   Accumulator<S> carap = Accumulator<S>(0);
   Accumulator<S> arap = Accumulator<S>(0);
   Accumulator<S> lrm = Accumulator<S>(0);
   Accumulator<S> accel = Accumulator<S>(0);
-  Accumulator<S> total() const { return carap + arap + lrm + accel; }
+
+  // f(name, r.<energy>...) for each energy, in the order above, of one or more results. The list
+  // of energies: total(), +=, the torch glue's energies tensor and smg_torch.Regularizers' names
+  // and smg_cli's summary follow it, so a term's energy is added here and nowhere else.
+  template <class F, class... R>
+  static void each_energy(F&& f, R&... r) {
+    f("carap", r.carap...);
+    f("arap", r.arap...);
+    f("lrm", r.lrm...);
+    f("accel", r.accel...);
+  }
+  Accumulator<S> total() const {
+    Accumulator<S> t(0);
+    each_energy([&](const char*, const Accumulator<S>& e) { t += e; }, *this);
+    return t;
+  }
   RegularizerResult& operator+=(const RegularizerResult& o) {
-    carap += o.carap;
-    arap += o.arap;
-    lrm += o.lrm;
-    accel += o.accel;
+    each_energy([](const char*, Accumulator<S>& a, const Accumulator<S>& b) { a += b; }, *this, o);
     return *this;
   }
 };

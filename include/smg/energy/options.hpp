@@ -15,6 +15,7 @@
 #include <initializer_list>
 #include <sstream>
 #include <string>
+#include <type_traits>
 
 #include "smg/core/status.hpp"
 
@@ -119,6 +120,11 @@ struct LrmOptions {
 // the squared second differences x^{t+2} − 2x^{t+1} + x^t (acceleration) or first differences
 // (velocity) of every node, weighted by c_{t,i} at the earliest frame or by 1.
 enum class AccelForm { acceleration, velocity };
+// The forms and their names ("acceleration", "velocity"), as the bindings spell them.
+inline constexpr AccelForm kAccelForms[] = {AccelForm::acceleration, AccelForm::velocity};
+inline const char* to_string(AccelForm f) {
+  return f == AccelForm::velocity ? "velocity" : "acceleration";
+}
 struct AccelOptions {
   AccelForm form = AccelForm::acceleration;
   bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
@@ -145,6 +151,71 @@ struct RegularizerOptions {
   LrmOptions lrm;
   AccelOptions accel;
 };
+
+namespace detail {
+// SFINAE: O is T or const T (the visitors below take both).
+template <class O, class T>
+using IfOptions = std::enable_if_t<std::is_same<std::remove_const_t<O>, T>::value, int>;
+}  // namespace detail
+
+// for_each_option(options, f): f(name, field) for every field of one term's options, in
+// declaration order, by the field's name; `options` const or mutable. Why: the bindings
+// (smg_torch.regularizers, smg_cli regularizers) read, default and print every option through
+// these lists, so an option is declared in its struct and named once, here. Field types: double,
+// bool, GapList, Normalization, AccelForm.
+template <class O, class F, detail::IfOptions<O, ConfidenceOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("kappa_m", o.kappa_m);
+  f("kappa_r", o.kappa_r);
+  f("lambda_m", o.lambda_m);
+  f("lambda_r", o.lambda_r);
+  f("eps", o.eps);
+}
+template <class O, class F, detail::IfOptions<O, CarapOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("alpha", o.alpha);
+  f("lambda_c", o.lambda_c);
+  f("lambda_l", o.lambda_l);
+  f("gaps", o.gaps);
+  f("normalization", o.normalization);
+  f("weight", o.weight);
+}
+template <class O, class F, detail::IfOptions<O, ArapOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("lambda_c", o.lambda_c);
+  f("lambda_l", o.lambda_l);
+  f("gaps", o.gaps);
+  f("normalization", o.normalization);
+  f("weight", o.weight);
+}
+template <class O, class F, detail::IfOptions<O, LrmOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("alpha", o.alpha);
+  f("huber_delta", o.huber_delta);
+  f("detach_omega", o.detach_omega);
+  f("normalization", o.normalization);
+  f("weight", o.weight);
+}
+template <class O, class F, detail::IfOptions<O, AccelOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("form", o.form);
+  f("confidence_weighted", o.confidence_weighted);
+  f("normalization", o.normalization);
+  f("weight", o.weight);
+}
+
+// The term list of the fused step: f(name, on, options) for every term of RegularizerOptions, in
+// the driver's order, with on = o.terms.<name> (bool& or const bool&). validate_options below,
+// smg_torch.regularizers (its options, defaults and argument names) and smg_cli regularizers
+// (its flags) loop over it: a term added here is exposed by all of them.
+template <class RO, class F, detail::IfOptions<RO, RegularizerOptions> = 0>
+void for_each_term(RO& o, F&& f) {
+  f("confidence", o.terms.confidence, o.confidence);
+  f("carap", o.terms.carap, o.carap);
+  f("arap", o.terms.arap, o.arap);
+  f("lrm", o.terms.lrm, o.lrm);
+  f("accel", o.terms.accel, o.accel);
+}
 
 namespace detail {
 inline bool finite_in(double v, double lo, double hi) {
@@ -248,17 +319,11 @@ inline CarapOptions carap_options_for_arap(const ArapOptions& o) {
 // The options of every term of the fused step that is on (regularizers(), CPU and CUDA); the
 // first bad one's message.
 inline Status validate_options(const RegularizerOptions& o) {
-  if (o.terms.confidence)
-    if (Status s = validate_options(o.confidence); !s) return s;
-  if (o.terms.carap)
-    if (Status s = validate_options(o.carap); !s) return s;
-  if (o.terms.arap)
-    if (Status s = validate_options(o.arap); !s) return s;
-  if (o.terms.lrm)
-    if (Status s = validate_options(o.lrm); !s) return s;
-  if (o.terms.accel)
-    if (Status s = validate_options(o.accel); !s) return s;
-  return Status::ok();
+  Status first = Status::ok();
+  for_each_term(o, [&](const char*, bool on, const auto& term) {
+    if (on && first) first = validate_options(term);
+  });
+  return first;
 }
 
 }  // namespace smg
