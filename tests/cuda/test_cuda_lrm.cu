@@ -308,3 +308,37 @@ TEST_CASE("cuda lrm: validation before launch") {
   CHECK(s.message().find("graph: K=33") != std::string::npos);
   st.sync();
 }
+
+// The launcher's host-side checks read only shapes, so they run without a GPU: host arrays stand
+// in for device ones. The exact words pin the messages shared with smg::cuda::regularizers
+// (check_neighbors_shape, check_lrm_max_k, check_reverse_graph).
+TEST_SUITE("cuda-host") {
+  TEST_CASE("cuda lrm: host-side argument checks, word for word") {
+    const Index T = 3, N = 10, K = 4;
+    std::vector<double> x(static_cast<std::size_t>(T * N * 3), 0.0);
+    std::vector<std::int32_t> idx(static_cast<std::size_t>(N * (smg::cuda::kLrmMaxK + 1)), -1);
+    std::vector<double> w(idx.size(), 0.0);
+    const smg::PositionsView<const double> xv(x.data(), T, N);
+    const smg::NeighborsView<double> g(idx.data(), w.data(), N, K);
+    smg::cuda::ReverseGraph rev;  // shape only: nothing is read
+    rev.nodes = N;
+    rev.k = K;
+    const smg::LrmOptions o;
+    auto msg = [](const smg::Status& s) { return std::string(s.message()); };
+    CHECK(smg::cuda::validate_lrm_cuda<double, std::int32_t>(xv, {}, g, o, rev).is_ok());
+    CHECK(msg(smg::cuda::validate_lrm_cuda<double, std::int32_t>(
+              xv, {}, smg::NeighborsView<double>(idx.data(), w.data(), N - 1, K), o, rev)) ==
+          "graph: expected indices and weights of shape [N=10][K], got [9][4] and [9][4]");
+    const Index wide = smg::cuda::kLrmMaxK + 1;
+    smg::cuda::ReverseGraph rev_wide;
+    rev_wide.nodes = N;
+    rev_wide.k = wide;
+    CHECK(msg(smg::cuda::validate_lrm_cuda<double, std::int32_t>(
+              xv, {}, smg::NeighborsView<double>(idx.data(), w.data(), N, wide), o, rev_wide)) ==
+          "graph: K=33 neighbours per node exceeds the CUDA LRM kernel's maximum of 32");
+    smg::cuda::ReverseGraph other;  // not built for this graph
+    CHECK(msg(smg::cuda::validate_lrm_cuda<double, std::int32_t>(xv, {}, g, o, other)) ==
+          "reverse: built for a graph of shape [N=0][K=0], this graph is [N=10][K=4] "
+          "(build_reverse_graph(graph.indices.data(), N, K, stream, reverse))");
+  }
+}

@@ -11,6 +11,7 @@
 #include "smg/core/so3.hpp"
 #include "smg/core/views.hpp"
 #include "smg/energy/confidence.hpp"
+#include "smg/energy/options.hpp"
 #include "smg/graph/neighbors.hpp"
 #include "support/random.hpp"
 
@@ -222,6 +223,16 @@ inline Scene<double> rigid_bodies_scene(Index T, Index N, Index K, unsigned seed
   node_confidences<double>(s.positions(), s.visibility(), s.graph(), {}, {c.data(), s.T, s.N});
   s.c = c;
   return s;
+}
+
+// LRM options with Huber threshold δ_H = huber_delta and ω detached or not: the pair of settings
+// the LRM tests sweep (small δ_H reaches both Huber branches; detach_omega drops ω's dependence
+// on the positions), other options at their defaults.
+inline LrmOptions lrm_options(double huber_delta, bool detach_omega) {
+  LrmOptions o;
+  o.huber_delta = huber_delta;
+  o.detach_omega = detach_omega;
+  return o;
 }
 
 }  // namespace smg::test

@@ -78,9 +78,7 @@ TEST_CASE("LRM: AutoDiffScalar through the kernel equals the analytic gradient")
   const smg::NeighborsView<AD> g(s.idx.data(), a.w.data(), s.N, s.K);
   for (double delta : {0.02, 10.0})
     for (bool detach : {false, true}) {
-      smg::LrmOptions o;
-      o.huber_delta = delta;
-      o.detach_omega = detach;
+      const smg::LrmOptions o = smg::test::lrm_options(delta, detach);
       CAPTURE(delta);
       CAPTURE(detach);
       const AD e = smg::lrm<AD>({a.x.data(), s.T, s.N}, {a.c.data(), s.T, s.N}, g, o, {}, nullptr,

@@ -61,9 +61,7 @@ TEST_CASE("LRM gradient matches central finite differences") {
     const Scene<double> s = smg::test::random_scene(2 + rep * 2, 9, 5, rng);
     for (double delta : {0.01, 0.05, 10.0})
       for (bool detach : {false, true}) {
-        smg::LrmOptions o;
-        o.huber_delta = delta;
-        o.detach_omega = detach;
+        const smg::LrmOptions o = smg::test::lrm_options(delta, detach);
         CAPTURE(delta);
         CAPTURE(detach);
         std::vector<double> g;
@@ -91,9 +89,7 @@ TEST_CASE("LRM with omega held constant equals autodiff of the reference with om
   for (Index k = 0; k < s.T * s.N; ++k)
     for (int c = 0; c < 3; ++c) X[k](c) = AD(s.x[3 * k + c], n, 3 * k + c);
   for (bool detach : {true, false}) {
-    smg::LrmOptions o;
-    o.huber_delta = 0.02;
-    o.detach_omega = detach;
+    const smg::LrmOptions o = smg::test::lrm_options(0.02, detach);
     CAPTURE(detach);
     const AD e = smg::test::ref::lrm<AD>(s, X, &s.c, o, 1e-10);
     std::vector<double> g;

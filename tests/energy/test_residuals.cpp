@@ -101,9 +101,7 @@ TEST_CASE("LRM residuals: block energies, IRLS sum of squares and 2 J_f^T f") {
   const Scene<double> s = smg::test::random_scene(6, 14, 5, rng);
   for (double delta : {0.02, 50.0})
     for (bool detach : {false, true}) {
-      smg::LrmOptions o;
-      o.huber_delta = delta;
-      o.detach_omega = detach;
+      smg::LrmOptions o = smg::test::lrm_options(delta, detach);
       o.weight = 1.5;
       CAPTURE(delta);
       CAPTURE(detach);
@@ -134,9 +132,7 @@ TEST_CASE("LRM residual blocks: Jacobians match finite differences of the raw re
   smg::test::random_graph(s, 5, 3, rng);
   const double h = 1e-6;
   for (bool detach : {false, true}) {
-    smg::LrmOptions o;
-    o.huber_delta = 0.02;
-    o.detach_omega = detach;
+    const smg::LrmOptions o = smg::test::lrm_options(0.02, detach);
     for (Index t : {Index(1), s.T - 1})
       for (Index i = 0; i < s.N; i += 3) {
         CAPTURE(detach);

@@ -30,16 +30,27 @@ template <class T, int Dim>
 using VectorMap = std::conditional_t<std::is_const_v<T>,
                                      Eigen::Map<const Eigen::Matrix<std::remove_const_t<T>, Dim, 1>>,
                                      Eigen::Map<Eigen::Matrix<std::remove_const_t<T>, Dim, 1>>>;
+
+// What every view over elements T names alike: its element type as given (const for an input)
+// and its value type. A base of SequenceView and TableView, so that both spell them once (empty:
+// no size or layout cost).
+template <class T>
+struct ViewElementTypes {
+  using Element = T;
+  using Value = std::remove_const_t<T>;
+};
+
+// The one conversion between views of the same layout: from elements U to T = const U (mutable
+// to const). Enables the converting constructors of SequenceView and TableView.
+template <class U, class T>
+using EnableAddConst = std::enable_if_t<std::is_same_v<const U, T> && !std::is_same_v<U, T>>;
 }  // namespace detail
 
 // [frames][nodes][dim] array. Dim is a compile-time channel count (3 for positions, 4 for
 // quaternions, 1 for per-frame scalars) or Eigen::Dynamic (feature samples: dim() = C).
 template <class T, int Dim>
-class SequenceView {
+class SequenceView : public detail::ViewElementTypes<T> {
  public:
-  using Element = T;
-  using Value = std::remove_const_t<T>;
-
   SequenceView() = default;
   // Fixed channel count.
   SMG_HOST_DEVICE SequenceView(T* data, Index frames, Index nodes)
@@ -52,7 +63,7 @@ class SequenceView {
     static_assert(Dim == Eigen::Dynamic, "the channel count is fixed by the type");
   }
   // Mutable -> const.
-  template <class U, class = std::enable_if_t<std::is_same_v<const U, T> && !std::is_same_v<U, T>>>
+  template <class U, class = detail::EnableAddConst<U, T>>
   SMG_HOST_DEVICE SequenceView(const SequenceView<U, Dim>& other)  // NOLINT(google-explicit-constructor)
       : data_(other.data()), frames_(other.frames()), nodes_(other.nodes()), dim_(other.dim()) {}
 
@@ -89,17 +100,14 @@ class SequenceView {
 // [rows][cols] array. Cols is compile-time or Eigen::Dynamic (features [N][C], graph
 // indices/weights [N][K]).
 template <class T, int Cols>
-class TableView {
+class TableView : public detail::ViewElementTypes<T> {
  public:
-  using Element = T;
-  using Value = std::remove_const_t<T>;
-
   TableView() = default;
   SMG_HOST_DEVICE TableView(T* data, Index rows, Index cols) : data_(data), rows_(rows), cols_(cols) {}
   SMG_HOST_DEVICE TableView(T* data, Index rows) : data_(data), rows_(rows), cols_(Cols) {
     static_assert(Cols != Eigen::Dynamic, "pass the column count for a dynamic view");
   }
-  template <class U, class = std::enable_if_t<std::is_same_v<const U, T> && !std::is_same_v<U, T>>>
+  template <class U, class = detail::EnableAddConst<U, T>>
   SMG_HOST_DEVICE TableView(const TableView<U, Cols>& other)  // NOLINT(google-explicit-constructor)
       : data_(other.data()), rows_(other.rows()), cols_(other.cols()) {}
 

@@ -192,6 +192,32 @@ Status lrm_launch(PositionsView<const S> positions, FrameScalarsView<const S> co
   return Status::ok();
 }
 
+// Checks K against kLrmMaxK: the kernel's neighbour arrays are sized at compile time, so a wider
+// graph cannot run. Shared by smg::cuda::lrm and smg::cuda::regularizers (with LRM on), so that
+// both refuse it in the same words.
+inline Status check_lrm_max_k(Index k) {
+  if (k <= kLrmMaxK) return Status::ok();
+  std::ostringstream s;
+  s << "graph: K=" << k << " neighbours per node exceeds the CUDA LRM kernel's maximum of "
+    << kLrmMaxK;
+  return Status::error(s.str());
+}
+
+// Checks that `reverse` was built for a graph of shape [nodes][k] and holds its offsets: the
+// launchers gather edge gradients and read edge counts through it, so one built for another
+// graph (or without offsets) would read out of bounds. Shared by smg::cuda::lrm and
+// smg::cuda::regularizers.
+inline Status check_reverse_graph(const ReverseGraph& reverse, Index nodes, Index k) {
+  if (reverse.nodes == nodes && reverse.k == k &&
+      !(reverse.entries.size() > 0 && reverse.offsets.get() == nullptr))
+    return Status::ok();
+  std::ostringstream s;
+  s << "reverse: built for a graph of shape [N=" << reverse.nodes << "][K=" << reverse.k
+    << "], this graph is [N=" << nodes << "][K=" << k
+    << "] (build_reverse_graph(graph.indices.data(), N, K, stream, reverse))";
+  return Status::error(s.str());
+}
+
 }  // namespace detail
 
 // Checks the shapes and options of smg::cuda::lrm on the host (the views are over device memory,
@@ -214,34 +240,14 @@ Status validate_lrm_cuda(PositionsView<const S> positions, FrameScalarsView<cons
                                             confidence.nodes(), -1, T, N, -1, "T", "N");
         !s)
       return s;
-  if (graph.indices.rows() != N || graph.weights.rows() != N ||
-      graph.indices.cols() != graph.weights.cols()) {
-    std::ostringstream s;
-    s << "graph: expected indices and weights of shape [N=" << N << "][K], got ["
-      << graph.indices.rows() << "][" << graph.indices.cols() << "] and [" << graph.weights.rows()
-      << "][" << graph.weights.cols() << "]";
-    return Status::error(s.str());
-  }
+  if (Status s = smg::detail::check_neighbors_shape(graph, N, "graph"); !s) return s;
   if (N * graph.k() > 0 && (graph.indices.data() == nullptr || graph.weights.data() == nullptr))
     return Status::error("graph: null data pointer for a non-empty array");
-  if (graph.k() > kLrmMaxK) {
-    std::ostringstream s;
-    s << "graph: K=" << graph.k() << " neighbours per node exceeds the CUDA LRM kernel's maximum of "
-      << kLrmMaxK;
-    return Status::error(s.str());
-  }
+  if (Status s = detail::check_lrm_max_k(graph.k()); !s) return s;
   if (Status s = validate_options(options); !s) return s;
   if (Status s = validate_optional_output(grad_positions, T, N, "grad_positions"); !s) return s;
   if (Status s = validate_optional_output(omega, T, N, "omega"); !s) return s;
-  if (reverse.nodes != N || reverse.k != graph.k() ||
-      (reverse.entries.size() > 0 && reverse.offsets.get() == nullptr)) {
-    std::ostringstream s;
-    s << "reverse: built for a graph of shape [N=" << reverse.nodes << "][K=" << reverse.k
-      << "], this graph is [N=" << N << "][K=" << graph.k()
-      << "] (build_reverse_graph(graph.indices.data(), N, K, stream, reverse))";
-    return Status::error(s.str());
-  }
-  return Status::ok();
+  return detail::check_reverse_graph(reverse, N, graph.k());
 }
 
 // LRM energy (E14) and gradient (E15)-(E16) on the GPU: the same quantity as smg::lrm() with the

@@ -71,19 +71,9 @@ Status validate_regularizers_shapes(smg::detail::NonDeducedT<PositionsView<const
     if (Status s = shape(rotations.frames(), rotations.nodes(), "rotations", "[4]"); !s) return s;
   if (visibility.data() != nullptr)
     if (Status s = shape(visibility.frames(), visibility.nodes(), "visibility", ""); !s) return s;
-  if (graph.indices.rows() != N || graph.weights.rows() != N || graph.weights.cols() != K) {
-    std::ostringstream s;
-    s << "graph: expected indices and weights of shape [N=" << N << "][K], got ["
-      << graph.indices.rows() << "][" << K << "] and [" << graph.weights.rows() << "]["
-      << graph.weights.cols() << "]";
-    return Status::error(s.str());
-  }
-  if (on.lrm && K > kLrmMaxK) {
-    std::ostringstream s;
-    s << "graph: K=" << K << " neighbours per node exceeds the CUDA LRM kernel's maximum of "
-      << kLrmMaxK;
-    return Status::error(s.str());
-  }
+  if (Status s = smg::detail::check_neighbors_shape(graph, N, "graph"); !s) return s;
+  if (on.lrm)
+    if (Status s = detail::check_lrm_max_k(K); !s) return s;
   if (Status s = validate_options(options); !s) return s;
   if (confidence.data() != nullptr) {
     if (!on.confidence)
@@ -99,14 +89,7 @@ Status validate_regularizers_shapes(smg::detail::NonDeducedT<PositionsView<const
                          grad_rotations.is_raw() ? "[4]" : "[3]");
         !s)
       return s;
-  if (reverse.nodes != N || reverse.k != K) {
-    std::ostringstream s;
-    s << "reverse: built for a graph of shape [N=" << reverse.nodes << "][K=" << reverse.k
-      << "], this graph is [N=" << N << "][K=" << K
-      << "] (build_reverse_graph(graph.indices.data(), N, K, stream, reverse))";
-    return Status::error(s.str());
-  }
-  return Status::ok();
+  return detail::check_reverse_graph(reverse, N, K);
 }
 
 // The CPU validate_regularizers on device inputs (copied to the host once; synchronises

@@ -16,7 +16,6 @@
 #include "smg/energy/driver.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/terms/accel.hpp"
-#include "smg/energy/terms/confidence.hpp"
 #include "smg/energy/workspace.hpp"
 
 namespace smg {
@@ -52,15 +51,15 @@ Accumulator<S> accel(detail::NonDeducedT<PositionsView<const S>> positions,
   SMG_ASSERT(detail::absent_or_shape(grad_positions, T, N), "accel: grad_positions shape");
   if (T == 0 || N == 0) return Accumulator<S>(0);
   using I = std::int32_t;
-  detail::ConfidenceTerm<S, I> conf;
-  conf.given = options.confidence_weighted ? confidence : FrameScalarsView<const S>();
   detail::AccelTerm<S, I> term;
   term.configure(options, T, N);
   if (!term.on()) return Accumulator<S>(0);
   // No graph: the term reads each node's own trajectory only.
-  return detail::drive_views<S, I>(positions, QuaternionsView<const S>(), false,
-                                   NeighborsView<S, I>(nullptr, nullptr, N, 0), grad_positions,
-                                   RotationGradientView<S>(), workspace, parallel, conf, term)
+  return detail::drive_one_term<S, I>(
+             positions, QuaternionsView<const S>(),
+             options.confidence_weighted ? confidence : FrameScalarsView<const S>(),
+             NeighborsView<S, I>(nullptr, nullptr, N, 0), grad_positions, RotationGradientView<S>(),
+             workspace, parallel, term)
       .accel;
 }
 

@@ -88,6 +88,16 @@ bool absent_or_shape(const V& v, Index T, Index N) {
   return view_absent(v) || (v.frames() == T && v.nodes() == N);
 }
 
+// The debug assertions' test of the views every graph operator (carap, lrm, regularizers) takes
+// alike: confidence [T][N] or absent, graph [N][K] (indices and weights), grad_positions
+// [T][N][3] or absent. Written once so that the operators assert the same preconditions.
+template <class V, class S, class I>
+bool graph_operator_shapes(const V& confidence, const NeighborsView<S, I>& graph,
+                           PositionsView<S> grad_positions, Index T, Index N) {
+  return absent_or_shape(confidence, T, N) && graph.nodes() == N && graph.weights.rows() == N &&
+         graph.weights.cols() == graph.k() && absent_or_shape(grad_positions, T, N);
+}
+
 // The gradient outputs every regulariser takes, checked alike: positions [T][N][3] and
 // rotations (right tangent [T][N][3] or raw quaternions [T][N][4]), each may be empty.
 template <class S>

@@ -32,7 +32,6 @@
 #include "smg/energy/common.hpp"
 #include "smg/energy/driver.hpp"
 #include "smg/energy/options.hpp"
-#include "smg/energy/terms/confidence.hpp"
 #include "smg/energy/terms/rigid.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"
@@ -87,21 +86,17 @@ Accumulator<S> carap(detail::NonDeducedT<PositionsView<const S>> positions,
   const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
   // Debug-build checks of the preconditions that would otherwise read or write out of bounds.
   SMG_ASSERT(rotations.frames() == T && rotations.nodes() == N, "carap: rotations shape");
-  SMG_ASSERT(detail::absent_or_shape(confidence, T, N), "carap: confidence shape");
-  SMG_ASSERT(graph.nodes() == N && graph.weights.rows() == N && graph.weights.cols() == K,
-             "carap: graph shape");
-  SMG_ASSERT(detail::absent_or_shape(grad_positions, T, N), "carap: grad_positions shape");
+  SMG_ASSERT(detail::graph_operator_shapes(confidence, graph, grad_positions, T, N),
+             "carap: confidence, graph or grad_positions shape");
   SMG_ASSERT(detail::absent_or_shape(grad_rotations, T, N), "carap: grad_rotations shape");
   if (T == 0 || N == 0 || K == 0) return Accumulator<S>(0);
-  // One term of the driver: the caller's confidences (or 1) and C-ARAP alone.
-  detail::ConfidenceTerm<S, I> conf;
-  conf.given = confidence;
+  // One term of the driver: C-ARAP alone, with the caller's confidences (or 1).
   detail::RigidTerm<S, I> rigid;
   rigid.configure(&options, nullptr, T, edge_count(graph));
   rigid.want_rotations = !grad_rotations.empty();
   if (!rigid.on()) return Accumulator<S>(0);
-  return detail::drive_views<S, I>(positions, rotations, false, graph, grad_positions,
-                                   grad_rotations, workspace, parallel, conf, rigid)
+  return detail::drive_one_term<S, I>(positions, rotations, confidence, graph, grad_positions,
+                                      grad_rotations, workspace, parallel, rigid)
       .carap;
 }
 

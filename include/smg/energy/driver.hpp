@@ -32,6 +32,7 @@
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
 #include "smg/energy/block.hpp"
+#include "smg/energy/terms/confidence.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"
 
@@ -331,6 +332,23 @@ RegularizerResult<S> drive_views(PositionsView<const S> positions, QuaternionsVi
     io.grq = grad_rotations.raw();
   }
   return drive<RegularizerResult<S>>(io, p, workspace, parallel, terms...);
+}
+
+// A one-term operator's pass (carap(), lrm(), accel()): its term with the caller's confidences
+// (`confidence`, or 1 where empty) and no confidence computation, through drive_views. Returns
+// the energies.
+template <class S, class I, class Term>
+RegularizerResult<S> drive_one_term(PositionsView<const S> positions,
+                                    QuaternionsView<const S> rotations,
+                                    FrameScalarsView<const S> confidence,
+                                    const NeighborsView<S, I>& graph, PositionsView<S> grad_positions,
+                                    RotationGradientView<S> grad_rotations,
+                                    EnergyWorkspace<S>* workspace, ParallelOptions parallel,
+                                    Term& term) {
+  ConfidenceTerm<S, I> conf;
+  conf.given = confidence;
+  return drive_views<S, I>(positions, rotations, false, graph, grad_positions, grad_rotations,
+                           workspace, parallel, conf, term);
 }
 
 }  // inline namespace SMG_ISA_NAMESPACE

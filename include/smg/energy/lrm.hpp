@@ -31,7 +31,6 @@
 #include "smg/energy/common.hpp"
 #include "smg/energy/driver.hpp"
 #include "smg/energy/options.hpp"
-#include "smg/energy/terms/confidence.hpp"
 #include "smg/energy/terms/lrm.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"
@@ -75,22 +74,18 @@ Accumulator<S> lrm(detail::NonDeducedT<PositionsView<const S>> positions,
                    PositionsView<S> grad_positions = {}, EnergyWorkspace<S>* workspace = nullptr,
                    ParallelOptions parallel = {}, TangentsView<S> omega = {}) {
   const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
-  SMG_ASSERT(detail::absent_or_shape(confidence, T, N), "lrm: confidence shape");
-  SMG_ASSERT(graph.nodes() == N && graph.weights.rows() == N && graph.weights.cols() == K,
-             "lrm: graph shape");
-  SMG_ASSERT(detail::absent_or_shape(grad_positions, T, N), "lrm: grad_positions shape");
+  SMG_ASSERT(detail::graph_operator_shapes(confidence, graph, grad_positions, T, N),
+             "lrm: confidence, graph or grad_positions shape");
   SMG_ASSERT(detail::absent_or_shape(omega, T, N), "lrm: omega shape");
   if (T == 0 || N == 0 || K == 0) return Accumulator<S>(0);
-  // One term of the driver: the caller's confidences (or 1) and LRM alone.
-  detail::ConfidenceTerm<S, I> conf;
-  conf.given = confidence;
+  // One term of the driver: LRM alone, with the caller's confidences (or 1).
   detail::LrmTerm<S, I> term;
   term.configure(options, T, K, edge_count(graph), grad_positions.data() != nullptr);
   term.omega = omega;
   if (!term.on()) return Accumulator<S>(0);
-  return detail::drive_views<S, I>(positions, QuaternionsView<const S>(), false, graph,
-                                   grad_positions, RotationGradientView<S>(), workspace, parallel,
-                                   conf, term)
+  return detail::drive_one_term<S, I>(positions, QuaternionsView<const S>(), confidence, graph,
+                                      grad_positions, RotationGradientView<S>(), workspace,
+                                      parallel, term)
       .lrm;
 }
 

@@ -127,11 +127,9 @@ RegularizerResult<S> regularizers(
   const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
   SMG_ASSERT(!(options.terms.carap || options.terms.arap) || (rotations.frames() == T && rotations.nodes() == N),
              "regularizers: rotations shape");
-  SMG_ASSERT(graph.nodes() == N && graph.weights.rows() == N && graph.weights.cols() == K,
-             "regularizers: graph shape");
+  SMG_ASSERT(detail::graph_operator_shapes(confidence, graph, grad_positions, T, N),
+             "regularizers: confidence, graph or grad_positions shape");
   SMG_ASSERT(detail::absent_or_shape(visibility, T, N), "regularizers: visibility shape");
-  SMG_ASSERT(detail::absent_or_shape(confidence, T, N), "regularizers: confidence shape");
-  SMG_ASSERT(detail::absent_or_shape(grad_positions, T, N), "regularizers: grad_positions shape");
   SMG_ASSERT(detail::absent_or_shape(grad_rotations, T, N), "regularizers: grad_rotations shape");
   if (T == 0 || N == 0) return {};
   const bool want_x = grad_positions.data() != nullptr, want_r = !grad_rotations.empty();

@@ -52,6 +52,22 @@ inline Index edge_count(const NeighborsView<S, I>& graph) {
   return n;
 }
 
+namespace detail {
+// Checks that indices and weights are both [nodes][K] (contents not read): the shape part of
+// validate_neighbors, shared with the CUDA launchers' host checks, which cannot read device
+// memory, so that every validator words a wrong graph shape the same way.
+template <class S, class I>
+Status check_neighbors_shape(const NeighborsView<S, I>& g, Index nodes, const std::string& name) {
+  if (g.indices.rows() == nodes && g.weights.rows() == nodes && g.indices.cols() == g.weights.cols())
+    return Status::ok();
+  std::ostringstream s;
+  s << name << ": expected indices and weights of shape [N=" << nodes << "][K], got ["
+    << g.indices.rows() << "][" << g.indices.cols() << "] and [" << g.weights.rows() << "]["
+    << g.weights.cols() << "]";
+  return Status::error(s.str());
+}
+}  // namespace detail
+
 // Checks a neighbour table against N nodes: shapes, indices in [0, N) or -1, no self edges,
 // padding only at the end of a row (with weight 0), weights finite and >= 0.
 template <class S, class I>
@@ -62,14 +78,7 @@ Status validate_neighbors(const NeighborsView<S, I>& g, Index nodes,
     s << name << ": entry [i=" << i << "][k=" << k << "] " << what;
     return Status::error(s.str());
   };
-  if (g.indices.rows() != nodes || g.weights.rows() != nodes ||
-      g.indices.cols() != g.weights.cols()) {
-    std::ostringstream s;
-    s << name << ": expected indices and weights of shape [N=" << nodes << "][K], got ["
-      << g.indices.rows() << "][" << g.indices.cols() << "] and [" << g.weights.rows() << "]["
-      << g.weights.cols() << "]";
-    return Status::error(s.str());
-  }
+  if (Status s = detail::check_neighbors_shape(g, nodes, name); !s) return s;
   if (nodes * g.k() > 0 && (g.indices.data() == nullptr || g.weights.data() == nullptr))
     return Status::error(name + ": null data pointer for a non-empty array");
   for (Index i = 0; i < nodes; ++i) {
