@@ -7,8 +7,9 @@ drives the docs' API table): one row per flag of RegularizerTerms, read from
   - that header's top comment: the equation labels (E..);
   - RegularizerOptions (include/smg/energy/options.hpp): the flag's options struct;
   - the energy headers: the separate C++ call (a function named for the flag, or node_<flag>s);
-  - smg_torch's REGULARIZER_DEFAULTS (examples/torch/smg_torch/__init__.py): the keyword of
-    smg_torch.regularizers;
+  - the term list smg::for_each_term (include/smg/energy/options.hpp), from which smg_torch's
+    options and smg_cli regularizers' flags are generated, and the keyword of
+    smg_torch.regularizers (examples/torch/smg_torch/__init__.py);
   - bench/bench_energy.cpp: its BM_<flag> row;
   - the CUDA driver (include/smg/cuda/driver.cuh): whether the term runs in the element pass
     (a member of ElementTerms) or a phase of its own, and
@@ -76,7 +77,10 @@ def rows():
     energy_src = "".join(open(p, encoding="utf-8").read()
                          for p in sorted(glob.glob(os.path.join(ROOT, "include/smg/energy/*.hpp"))))
     torch_init = read("examples/torch/smg_torch/__init__.py")
-    torch_keys = re.findall(r'"(\w+)": dict\(', block(torch_init, "REGULARIZER_DEFAULTS", "\n}"))
+    term_list = set(re.findall(r'f\("(\w+)", o\.terms\.\w+, o\.\w+\);',
+                               block(read("include/smg/energy/options.hpp"), "void for_each_term(", "\n}")))
+    signature = block(torch_init, "def regularizers(", ":\n")
+    torch_keys = [k for k in term_list if re.search(r"\b%s=" % k, signature)]
     bench = read("bench/bench_energy.cpp")
     driver = read("include/smg/cuda/driver.cuh")
     element = block(driver, "struct ElementTerms")
@@ -110,6 +114,7 @@ def rows():
             options="`%s`" % option_type[flag] if flag in option_type else "—",
             call="`%s`" % call if call != "—" else call,
             torch="`%s=`" % flag if flag in torch_keys else "—",
+            cli="`--terms %s`" % flag if flag in term_list else "—",
             bench="`BM_%s`" % flag if re.search(r"\bBM_%s\b" % flag, bench) else "—",
             cuda=cuda,
             tests="yes" if (flag in op_names or call.strip("`") in op_names
@@ -119,14 +124,14 @@ def rows():
 
 def table():
     lines = ["| `RegularizerTerms::` | term header (struct) | equations | options | separate call | "
-             "`smg_torch.regularizers` | bench row | CUDA driver | operator list |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "`smg_torch.regularizers` | `smg_cli regularizers` | bench row | CUDA driver | operator list |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for flag, r in rows():
         if r is None:
-            lines.append("| `%s` | (no term configures it) | | | | | | | |" % flag)
+            lines.append("| `%s` | (no term configures it) | | | | | | | | |" % flag)
             continue
-        lines.append("| `%s` | %s | %s | %s | %s | %s | %s | %s | %s |" % (
-            flag, r["header"], r["eqs"], r["options"], r["call"], r["torch"], r["bench"],
+        lines.append("| `%s` | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+            flag, r["header"], r["eqs"], r["options"], r["call"], r["torch"], r["cli"], r["bench"],
             r["cuda"], r["tests"]))
     return "\n".join(lines) + "\n"
 

@@ -311,9 +311,9 @@ void register_energy(py::module_& m) {
         "visibility"_a, "terms"_a, "options"_a, "grad_positions"_a, "grad_quats"_a, "validate"_a);
   // The fused step's term list (smg::for_each_term), which the Python wrapper is built from:
   // {term: on by default}, {term: {option: default}} and the energies' names in order.
-  m.def("regularizer_terms", &term_defaults);
-  m.def("regularizer_options", &option_defaults);
-  m.def("regularizer_energies", &energy_names);
+  m.def("_regularizer_terms", &term_defaults);
+  m.def("_regularizer_options", &option_defaults);
+  m.def("_regularizer_energies", &energy_names);
   m.def("_library_seconds", &library_seconds, "op"_a, "positions"_a, "quats"_a, "indices"_a, "weights"_a,
         "confidence"_a, "repeat"_a);
   m.def("lrm", &lrm_impl, "positions"_a, "indices"_a, "weights"_a, "confidence"_a, "alpha"_a,

@@ -316,6 +316,34 @@ def test_regularizers_equal_separate_operators(kw, mask):
         assert rel(qs_grad, qr_grad) < 1e-12 or float(qr_grad.norm()) == float(qs_grad.norm()) == 0.0
 
 
+def test_regularizers_follow_the_term_list():
+    """smg_torch.regularizers is built from the library's term list (smg::for_each_term): every
+    term has its keyword with the library's default on/off, its Regularizers field when it has an
+    energy, and its options dict with the C++ defaults; a term on the list without one of these
+    fails here."""
+    import inspect
+    params = inspect.signature(smg.regularizers).parameters
+    for term, on in smg.REGULARIZER_TERMS.items():
+        assert term in params and params[term].kind == inspect.Parameter.KEYWORD_ONLY, term
+        assert params[term].default is on, term
+        assert term in smg.REGULARIZER_DEFAULTS, term
+    assert set(smg.REGULARIZER_DEFAULTS) == set(smg.REGULARIZER_TERMS)
+    energies = smg._REGULARIZER_ENERGIES
+    assert set(smg.Regularizers._fields) == {"total", "confidence"} | set(energies)
+    # The C++ defaults, as the separate operators' wrappers have them.
+    assert smg.REGULARIZER_DEFAULTS["carap"] == dict(alpha=0.6, lambda_c=1.0, lambda_l=1.0, gaps=(1, 2, 4),
+                                                   gap_weights=None, normalize=False, weight=1.0)
+    assert smg.REGULARIZER_DEFAULTS["accel"]["form"] == "acceleration"
+    # Every option given explicitly at its default gives the defaults' result, bitwise.
+    x, q, idx, w, _ = random_scene(T=6)
+    every = {t: dict(d) for t, d in smg.REGULARIZER_DEFAULTS.items()}
+    r1 = smg.regularizers(x, q, (idx, w), **{t: True for t in every})
+    r2 = smg.regularizers(x, q, (idx, w), **every)
+    for name in energies:
+        assert torch.equal(getattr(r1, name), getattr(r2, name)), name
+        assert float(getattr(r1, name)) != 0.0, name  # every term on contributes
+
+
 def test_regularizers_gradcheck():
     x, q, idx, w, _ = random_scene()
     # The confidences are constants for the gradient (stop-gradient): gradcheck differentiates

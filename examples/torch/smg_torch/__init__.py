@@ -240,11 +240,11 @@ class Regularizers(NamedTuple):
 #: term and its gradient; a GapList is `gaps` + `gap_weights` (None = all 1), a Normalization
 #: the bool `normalize`; accel's `form` is "acceleration" or "velocity", its
 #: `confidence_weighted` uses c at the earliest frame of each term (1 otherwise).
-REGULARIZER_DEFAULTS = _C.regularizer_options()
+REGULARIZER_DEFAULTS = _C._regularizer_options()
 #: The terms of regularizers in the driver's order, each on (True) or off by default.
-REGULARIZER_TERMS = _C.regularizer_terms()
+REGULARIZER_TERMS = _C._regularizer_terms()
 #: The energies regularizers returns, in the order of its energies tensor.
-_REGULARIZER_ENERGIES = tuple(_C.regularizer_energies())
+_REGULARIZER_ENERGIES = tuple(_C._regularizer_energies())
 
 
 def _term_options(name, value):

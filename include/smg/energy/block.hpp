@@ -35,6 +35,7 @@
 #include "smg/core/status.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
+#include "smg/energy/common.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/graph/neighbors.hpp"
 
