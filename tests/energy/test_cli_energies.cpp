@@ -252,7 +252,10 @@ TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the l
                   "--arap-gap-weights 1,0.5 --lrm-huber-delta 0.02 --lrm-detach-omega --accel-form velocity "
                   "--accel-confidence-weighted --accel-normalize --confidence-kappa-m 1.5",
                   all});
-  for (const auto& [flags, opts] : runs) {
+  for (const auto& run : runs) {
+    // Not a structured binding: Clang's C++17 cannot capture one in INFO's lambda.
+    const std::string& flags = run.first;
+    const smg::RegularizerOptions& opts = run.second;
     INFO(flags);
     fs::remove_all(o);
     r = run_cli("regularizers " + c.string() + " " + o.string() + " " + flags);

@@ -171,37 +171,43 @@ void for_each_option(O& o, F&& f) {
   f("lambda_r", o.lambda_r);
   f("eps", o.eps);
 }
-template <class O, class F, detail::IfOptions<O, CarapOptions> = 0>
-void for_each_option(O& o, F&& f) {
-  f("alpha", o.alpha);
-  f("lambda_c", o.lambda_c);
-  f("lambda_l", o.lambda_l);
-  f("gaps", o.gaps);
+namespace detail {
+// The fields every energy term has: how its terms are combined and its overall factor.
+template <class O, class F>
+void for_each_scaling_option(O& o, F&& f) {
   f("normalization", o.normalization);
   f("weight", o.weight);
 }
-template <class O, class F, detail::IfOptions<O, ArapOptions> = 0>
-void for_each_option(O& o, F&& f) {
+// The fields C-ARAP and plain ARAP share (as check_rigidity_options checks them).
+template <class O, class F>
+void for_each_rigidity_option(O& o, F&& f) {
   f("lambda_c", o.lambda_c);
   f("lambda_l", o.lambda_l);
   f("gaps", o.gaps);
-  f("normalization", o.normalization);
-  f("weight", o.weight);
+  for_each_scaling_option(o, f);
+}
+}  // namespace detail
+template <class O, class F, detail::IfOptions<O, CarapOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("alpha", o.alpha);
+  detail::for_each_rigidity_option(o, f);
+}
+template <class O, class F, detail::IfOptions<O, ArapOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  detail::for_each_rigidity_option(o, f);
 }
 template <class O, class F, detail::IfOptions<O, LrmOptions> = 0>
 void for_each_option(O& o, F&& f) {
   f("alpha", o.alpha);
   f("huber_delta", o.huber_delta);
   f("detach_omega", o.detach_omega);
-  f("normalization", o.normalization);
-  f("weight", o.weight);
+  detail::for_each_scaling_option(o, f);
 }
 template <class O, class F, detail::IfOptions<O, AccelOptions> = 0>
 void for_each_option(O& o, F&& f) {
   f("form", o.form);
   f("confidence_weighted", o.confidence_weighted);
-  f("normalization", o.normalization);
-  f("weight", o.weight);
+  detail::for_each_scaling_option(o, f);
 }
 
 // The term list of the fused step: f(name, on, options) for every term of RegularizerOptions, in
