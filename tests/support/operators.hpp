@@ -5,19 +5,25 @@
 
 #include <cstdint>
 #include <tuple>
+#include <type_traits>
 
 #include "smg/energy.hpp"
 
 namespace smg::test {
 
 // What an operator may read: positions [T][N][3], rotations [T][N][4], visibility [T][N] (empty:
-// all visible), confidences [T][N] (empty: all 1) and the graph [N][K].
-template <class S, class I = std::int32_t>
+// all visible), confidences [T][N] (empty: all 1) and the graph [N][K]. Mutable: the caller's
+// mutable views, which every entry point takes as well as const ones, with no template argument
+// (tests/api/test_mutable_views.cpp runs the list with both): so `run` and `validate` below call
+// the operators without one.
+template <class S, class I = std::int32_t, bool Mutable = false>
 struct OperatorInputs {
-  PositionsView<const S> positions;
-  QuaternionsView<const S> rotations;
-  VisibilityView<const std::uint8_t> visibility;
-  FrameScalarsView<const S> confidence;
+  template <class T>
+  using In = std::conditional_t<Mutable, T, const T>;
+  PositionsView<In<S>> positions;
+  QuaternionsView<In<S>> rotations;
+  VisibilityView<In<std::uint8_t>> visibility;
+  FrameScalarsView<In<S>> confidence;
   NeighborsView<S, I> graph;
 };
 
@@ -51,33 +57,33 @@ constexpr unsigned kReadsGraph = 1, kReadsConfidence = 2, kReadsVisibility = 4, 
 struct Confidences {
   static constexpr const char* name = "confidences";
   static constexpr bool exact_gradient = false;  // no energy
-  template <class S, class I>
-  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    node_confidences<S>(in.positions, in.visibility, in.graph, ConfidenceOptions{}, out.confidence, {}, {}, workspace,
+    node_confidences(in.positions, in.visibility, in.graph, ConfidenceOptions{}, out.confidence, {}, {}, workspace,
                         parallel);
     return Accumulator<S>(0);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsVisibility;
-  template <class S, class I>
-  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
-    return validate_confidence<S>(in.positions, in.visibility, in.graph, ConfidenceOptions{}, out.confidence);
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
+    return validate_confidence(in.positions, in.visibility, in.graph, ConfidenceOptions{}, out.confidence);
   }
 };
 
 struct Carap {
   static constexpr const char* name = "carap";
   static constexpr bool exact_gradient = true;
-  template <class S, class I>
-  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    return carap<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions, out.rotations,
+    return carap(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions, out.rotations,
                     workspace, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsConfidence | kReadsRotations;
-  template <class S, class I>
-  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
-    return validate_carap<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
+    return validate_carap(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
                              out.rotations);
   }
 };
@@ -85,15 +91,15 @@ struct Carap {
 struct Arap {
   static constexpr const char* name = "arap";
   static constexpr bool exact_gradient = true;
-  template <class S, class I>
-  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    return arap<S>(in.positions, in.rotations, in.graph, ArapOptions{}, out.positions, out.rotations, workspace, parallel);
+    return arap(in.positions, in.rotations, in.graph, ArapOptions{}, out.positions, out.rotations, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsRotations;
-  template <class S, class I>
-  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
-    return validate_arap<S>(in.positions, in.rotations, in.graph, ArapOptions{}, out.positions, out.rotations);
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
+    return validate_arap(in.positions, in.rotations, in.graph, ArapOptions{}, out.positions, out.rotations);
   }
 };
 
@@ -101,15 +107,15 @@ struct Arap {
 struct CarapDirected {
   static constexpr const char* name = "carap_directed";
   static constexpr bool exact_gradient = false;  // updates, not a gradient (E20)
-  template <class S, class I>
-  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* = nullptr,
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* = nullptr,
                     ParallelOptions parallel = {}) {
-    return carap_directed<S>(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
+    return carap_directed(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
                              out.rotations, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsConfidence | kReadsRotations;
-  template <class S, class I>
-  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
     return Carap::validate(in, out);  // the same arguments and options as carap()
   }
 };
@@ -117,15 +123,15 @@ struct CarapDirected {
 struct Lrm {
   static constexpr const char* name = "lrm";
   static constexpr bool exact_gradient = true;
-  template <class S, class I>
-  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    return lrm<S>(in.positions, in.confidence, in.graph, LrmOptions{}, out.positions, workspace, parallel);
+    return lrm(in.positions, in.confidence, in.graph, LrmOptions{}, out.positions, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsConfidence;
-  template <class S, class I>
-  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
-    return validate_lrm<S>(in.positions, in.confidence, in.graph, LrmOptions{}, out.positions);
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
+    return validate_lrm(in.positions, in.confidence, in.graph, LrmOptions{}, out.positions);
   }
 };
 
@@ -133,19 +139,19 @@ struct Lrm {
 struct Accel {
   static constexpr const char* name = "accel";
   static constexpr bool exact_gradient = true;
-  template <class S, class I>
-  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
     AccelOptions o;
     o.confidence_weighted = true;
-    return accel<S>(in.positions, in.confidence, o, out.positions, workspace, parallel);
+    return accel(in.positions, in.confidence, o, out.positions, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsConfidence;
-  template <class S, class I>
-  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
     AccelOptions o;
     o.confidence_weighted = true;
-    return validate_accel<S>(in.positions, in.confidence, o, out.positions);
+    return validate_accel(in.positions, in.confidence, o, out.positions);
   }
 };
 
@@ -163,17 +169,17 @@ struct Regularizers {
   // Its gradient holds the confidences it computes constant (stop-gradient): central
   // differences would move them (test_regularizers.cpp checks it with the confidences off).
   static constexpr bool exact_gradient = false;
-  template <class S, class I>
-  static Accumulator<S> run(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    return regularizers<S>(in.positions, in.rotations, in.visibility, in.graph, options(), out.confidence,
+    return regularizers(in.positions, in.rotations, in.visibility, in.graph, options(), out.confidence,
                            out.positions, out.rotations, workspace, parallel)
         .total();
   }
   static constexpr unsigned reads = kReadsGraph | kReadsVisibility | kReadsRotations;
-  template <class S, class I>
-  static Status validate(const OperatorInputs<S, I>& in, const OperatorOutputs<S>& out) {
-    return validate_regularizers<S>(in.positions, in.rotations, in.visibility, in.graph, options(), out.confidence,
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
+    return validate_regularizers(in.positions, in.rotations, in.visibility, in.graph, options(), out.confidence,
                                     out.positions, out.rotations);
   }
 };
