@@ -9,7 +9,6 @@
 // float64, or float32 with --float. Confidences are computed once and used by C-ARAP and LRM.
 #include <chrono>
 #include <cmath>
-#include <limits>
 #include <cstdint>
 #include <sstream>
 #include <string>
@@ -78,24 +77,12 @@ Params read_params(const Args& a) {
   p.conf.lambda_m = a.get_double("lambda-m");
   p.conf.lambda_r = a.get_double("lambda-r");
   p.conf.eps = a.get_double("eps");
-  const auto gaps = a.get_ints("gaps");
-  const auto weights = a.get_doubles("gap-weights");
-  if (gaps.empty()) throw UsageError("--gaps: needs at least one gap");
-  if (weights.size() != gaps.size())
-    throw UsageError("--gap-weights: needs one weight per gap (" + std::to_string(gaps.size()) + "), got " +
-                     std::to_string(weights.size()));
-  std::vector<smg::Gap> g;
-  for (std::size_t k = 0; k < gaps.size(); ++k) {
-    // Narrowing to int is range-checked; the rule (delta >= 1, weight >= 0) is the library's.
-    const long long delta = Args::in_range("gaps", gaps[k], std::numeric_limits<int>::min(),
-                                           std::numeric_limits<int>::max());
-    g.push_back({static_cast<int>(delta), weights[k]});
-  }
+  const smg::GapList gaps = read_gap_list(a, "gaps", "gap-weights");
   const auto norm = a.get_switch("normalize") ? smg::Normalization::mean : smg::Normalization::sum;
   p.carap.alpha = a.get_double("alpha");
   p.carap.lambda_c = a.get_double("lambda-c");
   p.carap.lambda_l = a.get_double("lambda-l");
-  p.carap.gaps = smg::GapList(g.begin(), g.end());
+  p.carap.gaps = gaps;
   p.carap.normalization = norm;
   p.arap.lambda_c = p.carap.lambda_c;
   p.arap.lambda_l = p.carap.lambda_l;

@@ -15,7 +15,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
-#include <limits>
 #include <string>
 #include <vector>
 
@@ -78,18 +77,7 @@ void read_flag(const Args& a, const std::string& flag, smg::Normalization& v) {
                                                                     : smg::Normalization::sum;
 }
 void read_flag(const Args& a, const std::string& flag, smg::GapList& v) {
-  const std::string wflag = flag.substr(0, flag.rfind('-')) + "-gap-weights";
-  const auto gaps = a.get_ints(flag);
-  const auto weights = a.get_doubles(wflag);
-  if (gaps.empty()) throw UsageError("--" + flag + ": needs at least one gap");
-  if (weights.size() != gaps.size())
-    throw UsageError("--" + wflag + ": needs one weight per gap (" + std::to_string(gaps.size()) + "), got " +
-                     std::to_string(weights.size()));
-  v.clear();
-  for (std::size_t k = 0; k < gaps.size(); ++k)
-    v.push_back({static_cast<int>(Args::in_range(flag, gaps[k], std::numeric_limits<int>::min(),
-                                                 std::numeric_limits<int>::max())),
-                 weights[k]});
+  v = read_gap_list(a, flag, flag.substr(0, flag.rfind('-')) + "-gap-weights");
 }
 void read_flag(const Args& a, const std::string& flag, smg::AccelForm& v) {
   std::vector<std::string> names;

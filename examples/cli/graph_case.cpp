@@ -236,6 +236,22 @@ EnergyCase load_energy_case(const Invocation& inv, double bytes_per_frame_node) 
   return e;
 }
 
+smg::GapList read_gap_list(const Args& a, const std::string& gaps_flag, const std::string& weights_flag) {
+  const auto gaps = a.get_ints(gaps_flag);
+  const auto weights = a.get_doubles(weights_flag);
+  if (gaps.empty()) throw UsageError("--" + gaps_flag + ": needs at least one gap");
+  if (weights.size() != gaps.size())
+    throw UsageError("--" + weights_flag + ": needs one weight per gap (" + std::to_string(gaps.size()) + "), got " +
+                     std::to_string(weights.size()));
+  smg::GapList list;
+  for (std::size_t k = 0; k < gaps.size(); ++k) {
+    const long long delta = Args::in_range(gaps_flag, gaps[k], std::numeric_limits<int>::min(),
+                                           std::numeric_limits<int>::max());
+    list.push_back({static_cast<int>(delta), weights[k]});
+  }
+  return list;
+}
+
 void add_graph_summary(const CaseGraph& g, JsonLine& summary) {
   summary.add("K", g.k)
       .add("gated", g.gated)

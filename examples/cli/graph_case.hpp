@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "smg/energy/options.hpp"
 #include "subcommand.hpp"
 
 namespace cli {
@@ -55,6 +56,12 @@ struct EnergyCase {
   CaseGraph g;
 };
 EnergyCase load_energy_case(const Invocation& inv, double bytes_per_frame_node);
+
+// The gap list of the flags `gaps_flag` (deltas) and `weights_flag` (one weight per gap), as
+// `energies` and `regularizers` read them: at least one gap, as many weights as gaps, each delta
+// range-checked before narrowing to int. Their rules (delta >= 1, weight >= 0, at most
+// GapList::kCapacity) are the library's, checked by smg::validate_options.
+smg::GapList read_gap_list(const Args& a, const std::string& gaps_flag, const std::string& weights_flag);
 
 // Adds the build statistics of a built graph to a summary line ("gated", "edges", ...).
 void add_graph_summary(const CaseGraph& g, JsonLine& summary);

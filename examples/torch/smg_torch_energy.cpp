@@ -177,8 +177,9 @@ py::tuple regularizers_impl(const at::Tensor& positions, const OptTensor& quats,
                                   std::nullopt, visibility, validate);
   const at::Tensor gx = zeros_if(grad_x, in, 3), gq = zeros_if(grad_q && rigid, in, 4);
   const at::Tensor c = o.terms.confidence ? at::empty({in.T, in.N}, in.ref.options()) : at::Tensor();
-  at::Tensor energies =
-      at::zeros({static_cast<int64_t>(energy_names().size())}, in.ref.options().dtype(at::kDouble));
+  // The energies' count, from the list once (not a vector of names per training step).
+  static const int64_t kEnergies = static_cast<int64_t>(energy_names().size());
+  at::Tensor energies = at::zeros({kEnergies}, in.ref.options().dtype(at::kDouble));
   if (in.ref.cuda()) {
     cuda(cuda_ops().regularizers)(in, o, validate, energies, c, gx, gq);
     return py::make_tuple(energies.to(in.ref.options().dtype()), opt(c), opt(gx), opt(gq));
