@@ -1,5 +1,6 @@
 // Tests of smg/energy/regularizers.hpp, the fused regulariser step: equal to the separate
-// operators (node_confidences, carap, arap, lrm) for every subset of the terms, bit-identical
+// operators (node_confidences, carap, arap, lrm, accel: tests/support/operators.hpp, by the term
+// list) for every subset of the terms, bit-identical
 // for 1, 2 and 3 threads, float against double, the gradient against central differences, the
 // hard cases, the memory bound and the argument checks.
 //
@@ -19,6 +20,7 @@
 #include "energy/fused_options.hpp"
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
+#include "support/operators.hpp"
 #include "support/prelude.hpp"
 
 using smg::test::fused_options;
@@ -76,7 +78,10 @@ FusedOut<S> fused_run(const Scene<S>& s, const smg::RegularizerOptions& o, int t
   return r;
 }
 
-// The same with the four separate operators.
+// The same with the separate operators, by the term list: for every term that is on, in the
+// list's order (the confidences first, which the others then read), its operator from
+// tests/support/operators.hpp, its energy into the result's slot of the same name. A term on the
+// list without its separate operator, or with an energy the result does not list, fails here.
 template <class S>
 FusedOut<S> fused_separate(const Scene<S>& s, const smg::RegularizerOptions& o, int threads,
                            bool raw = false, bool vis = true) {
@@ -84,22 +89,36 @@ FusedOut<S> fused_separate(const Scene<S>& s, const smg::RegularizerOptions& o, 
   const smg::ParallelOptions par = threads_option(threads);
   const smg::RotationGradientView<S> gr = r.rotation_gradient(s, raw);
   const smg::PositionsView<S> gx(r.gx.data(), s.T, s.N);
-  smg::FrameScalarsView<const S> c;
-  if (o.terms.confidence) {
-    smg::node_confidences<S>(s.positions(),
-                             vis ? s.visibility() : smg::VisibilityView<const std::uint8_t>(),
-                             s.graph(), o.confidence,
-                             smg::FrameScalarsView<S>(r.conf.data(), s.T, s.N), {}, {}, nullptr,
-                             par);
-    c = smg::FrameScalarsView<const S>(r.conf.data(), s.T, s.N);
-  }
-  if (o.terms.carap)
-    r.e.carap = smg::carap<S>(s.positions(), s.rotations(), c, s.graph(), o.carap, gx, gr,
-                              nullptr, par);
-  if (o.terms.arap)
-    r.e.arap = smg::arap<S>(s.positions(), s.rotations(), s.graph(), o.arap, gx, gr, nullptr, par);
-  if (o.terms.lrm) r.e.lrm = smg::lrm<S>(s.positions(), c, s.graph(), o.lrm, gx, nullptr, par);
-  if (o.terms.accel) r.e.accel = smg::accel<S>(s.positions(), c, o.accel, gx, nullptr, par);
+  const smg::FrameScalarsView<S> conf(r.conf.data(), s.T, s.N);
+  const smg::test::OperatorInputs<S> in{
+      s.positions(), s.rotations(),
+      vis ? s.visibility() : smg::VisibilityView<const std::uint8_t>(),
+      o.terms.confidence ? smg::FrameScalarsView<const S>(r.conf.data(), s.T, s.N)
+                         : smg::FrameScalarsView<const S>(),
+      s.graph()};
+  smg::for_each_term(o, [&](const char* term, bool on, const auto&) {
+    if (!on) return;
+    CAPTURE(term);
+    int operators = 0, energies = 0;
+    smg::test::for_each_operator([&](auto op) {
+      using Op = decltype(op);
+      if constexpr (Op::term != nullptr) {
+        if (std::string(Op::term) != term) return;
+        ++operators;
+        const smg::Accumulator<S> e = Op::separate(in, o, gx, gr, conf, static_cast<smg::EnergyWorkspace<S>*>(nullptr), par);
+        smg::RegularizerResult<S>::each_energy(
+            [&](const char* name, smg::Accumulator<S>& slot) {
+              if (std::string(name) != term) return;
+              slot = e;
+              ++energies;
+            },
+            r.e);
+      }
+    });
+    CHECK(operators == 1);
+    // The confidences are the one term without an energy.
+    CHECK(energies == (std::string(term) == "confidence" ? 0 : 1));
+  });
   return r;
 }
 
@@ -108,10 +127,12 @@ FusedOut<S> fused_separate(const Scene<S>& s, const smg::RegularizerOptions& o, 
 // against the one-term operators and across thread counts.
 template <class S>
 void check_fused_bitwise(const FusedOut<S>& a, const FusedOut<S>& b) {
-  CHECK(a.e.carap == b.e.carap);
-  CHECK(a.e.arap == b.e.arap);
-  CHECK(a.e.lrm == b.e.lrm);
-  CHECK(a.e.accel == b.e.accel);
+  smg::RegularizerResult<S>::each_energy(
+      [](const char* name, const smg::Accumulator<S>& x, const smg::Accumulator<S>& y) {
+        CAPTURE(name);
+        CHECK(x == y);
+      },
+      a.e, b.e);
   CHECK(a.gx == b.gx);
   CHECK(a.gr == b.gr);
 }
@@ -142,10 +163,13 @@ bool fused_all_finite(const FusedOut<S>& r) {
   return fin(r.gx) && fin(r.gr) && std::isfinite(static_cast<double>(r.e.total()));
 }
 
-// Fused against separate on one scene, every subset of the four terms, tangent and raw.
+// Fused against separate on one scene, every subset of the terms on the list, tangent and raw.
 void fused_check_equal(const Scene<double>& s, const std::string& what) {
   CAPTURE(what);
-  for (unsigned mask = 0; mask < 32; ++mask)
+  using Result = smg::RegularizerResult<double>;
+  const unsigned n_terms = smg::test::fused_term_count();
+  auto bit = [](const char* term) { return 1u << smg::test::fused_term_index(term); };
+  for (unsigned mask = 0; mask < (1u << n_terms); ++mask)
     for (bool raw : {false, true}) {
       CAPTURE(mask);
       CAPTURE(raw);
@@ -155,38 +179,31 @@ void fused_check_equal(const Scene<double>& s, const std::string& what) {
       CHECK(fused_all_finite(f));
       if (o.terms.confidence) CHECK(f.conf == r.conf);  // bitwise: same functions, same order
       // One energy alone: the separate operator is the same driver with the same term, bitwise.
-      const unsigned energies = mask & 30u;
-      const bool bitwise = energies == 2u || energies == 4u || energies == 8u || energies == 16u;
-      if (bitwise) check_fused_bitwise(f, r);
-      CHECK(fused_rel(f.e.carap, r.e.carap) <= 1e-12);
-      CHECK(fused_rel(f.e.arap, r.e.arap) <= 1e-12);
-      CHECK(fused_rel(f.e.lrm, r.e.lrm) <= 1e-12);
-      CHECK(fused_rel(f.e.accel, r.e.accel) <= 1e-12);
-      CHECK(fused_rel_diff(f.gx, r.gx) <= 1e-12);
-      CHECK(fused_rel_diff(f.gr, r.gr) <= 1e-12);
+      const unsigned energies = mask & ~bit("confidence");
+      if (energies != 0 && (energies & (energies - 1)) == 0) check_fused_bitwise(f, r);
       // Energies only (no gradient buffers: no spill, a different frame overlap).
       const FusedOut<double> fe = fused_run(s, o, 2, raw, false);
-      CHECK(fused_rel(fe.e.carap, r.e.carap) <= 1e-12);
-      CHECK(fused_rel(fe.e.arap, r.e.arap) <= 1e-12);
-      CHECK(fused_rel(fe.e.lrm, r.e.lrm) <= 1e-12);
-      CHECK(fused_rel(fe.e.accel, r.e.accel) <= 1e-12);
+      Result::each_energy(
+          [&](const char* name, double fused, double separate, double energy_only) {
+            CAPTURE(name);
+            CHECK(fused_rel(fused, separate) <= 1e-12);
+            CHECK(fused_rel(energy_only, separate) <= 1e-12);
+            // Terms that are off are exactly 0; those that are on vanish only where the
+            // separate operator's does (LRM with one neighbour, one frame).
+            CHECK((fused != 0.0) == (separate != 0.0));
+            if ((mask & bit(name)) == 0) CHECK(fused == 0.0);
+          },
+          f.e, r.e, fe.e);
+      CHECK(fused_rel_diff(f.gx, r.gx) <= 1e-12);
+      CHECK(fused_rel_diff(f.gr, r.gr) <= 1e-12);
       CHECK(fused_max_abs(fe.gx) == 0.0);
-      // Terms that are off are exactly 0; those that are on vanish only where the separate
-      // operator's does (LRM with one neighbour, one frame).
-      CHECK((f.e.carap != 0.0) == (r.e.carap != 0.0));
-      CHECK((f.e.arap != 0.0) == (r.e.arap != 0.0));
-      CHECK((f.e.lrm != 0.0) == (r.e.lrm != 0.0));
-      if ((mask & 2u) == 0) CHECK(f.e.carap == 0.0);
-      if ((mask & 4u) == 0) CHECK(f.e.arap == 0.0);
-      if ((mask & 8u) == 0) CHECK(f.e.lrm == 0.0);
-      if ((mask & 16u) == 0) CHECK(f.e.accel == 0.0);
       if (s.T > 4 && s.K > 1) {
-        CHECK(((mask & 2u) == 0) == (f.e.carap == 0.0));
-        CHECK(((mask & 8u) == 0) == (f.e.lrm == 0.0));
+        CHECK(((mask & bit("carap")) == 0) == (f.e.carap == 0.0));
+        CHECK(((mask & bit("lrm")) == 0) == (f.e.lrm == 0.0));
         // Confidence-weighted smoothness vanishes exactly where every confidence is 0.
-        const bool some_c = (mask & 1u) == 0 ||
+        const bool some_c = (mask & bit("confidence")) == 0 ||
                             std::any_of(f.conf.begin(), f.conf.end(), [](double c) { return c > 0; });
-        if (some_c) CHECK(((mask & 16u) == 0) == (f.e.accel == 0.0));
+        if (some_c) CHECK(((mask & bit("accel")) == 0) == (f.e.accel == 0.0));
       }
     }
 }
@@ -204,7 +221,7 @@ TEST_CASE("fused regularizers are bit-identical for 1, 2 and 3 threads") {
   SMG_TEST_RNG(rng, 2402);
   const Scene<double> sd = smg::test::random_scene(41, 36, 7, rng);
   const Scene<float> sf = sd.cast<float>();
-  const smg::RegularizerOptions o = fused_options(31);
+  const smg::RegularizerOptions o = fused_options(smg::test::fused_all_terms());
   for (bool raw : {false, true}) {
     CAPTURE(raw);
     const FusedOut<double> d1 = fused_run(sd, o, 1, raw);
@@ -224,7 +241,7 @@ TEST_CASE("fused regularizers are bit-identical for 1, 2 and 3 threads") {
 TEST_CASE("fused regularizers in float agree with double") {
   const Scene<double> sd = smg::test::rigid_bodies_scene(20, 50, 6);
   const Scene<float> sf = sd.cast<float>();
-  const smg::RegularizerOptions o = fused_options(31);
+  const smg::RegularizerOptions o = fused_options(smg::test::fused_all_terms());
   const FusedOut<double> d = fused_run(sd, o, 2);
   const FusedOut<float> f = fused_run(sf, o, 2);
   CHECK(fused_all_finite(f));
@@ -246,7 +263,7 @@ TEST_CASE("fused regularizers' gradient matches central finite differences") {
   Scene<double> s = smg::test::random_scene(7, 9, 4, rng);
   // The confidences are constants for the gradient (stop-gradient), so the function that is
   // differentiated has them held: c ≡ 1 (terms.confidence off) and α < 1 still weights C-ARAP.
-  smg::RegularizerOptions o = fused_options(2 | 4 | 8 | 16);
+  smg::RegularizerOptions o = fused_options(smg::test::fused_all_terms() & ~1u);  // all but the confidences
   o.lrm.huber_delta = 0.05;
   const FusedOut<double> f = fused_run(s, o, 2);
   auto energy = [&] {
@@ -325,7 +342,7 @@ TEST_CASE("fused regularizers keep their extra memory under the inputs' size") {
   // what regularizers_extra_bytes says, and at most the bytes of positions, rotations,
   // visibility and graph; the separate operators' workspace holds several T·N·3 arrays.
   const Scene<double> s = smg::test::rigid_bodies_scene(96, 120, 8);
-  const smg::RegularizerOptions o = fused_options(31);
+  const smg::RegularizerOptions o = fused_options(smg::test::fused_all_terms());
   for (int threads : {1, 2, 3}) {
     CAPTURE(threads);
     smg::EnergyWorkspace<double> ws;

@@ -54,58 +54,86 @@ constexpr unsigned kReadsGraph = 1, kReadsConfidence = 2, kReadsVisibility = 4, 
 // options (run's precondition), whose one-line errors name the argument (test_terms.cpp checks
 // them by the list). `reads` says which of the optional inputs the operator reads (a bad one of
 // those must be refused).
+// The separate operators of the fused step's terms also have `term`, the term's name in
+// smg::for_each_term (nullptr for the others), and separate(in, o, grad_positions,
+// grad_rotations, confidence, workspace, parallel): the call with o's options for the term
+// (tests/energy/test_regularizers.cpp runs the fused step against them by the list); run() is
+// separate() with options(), the test defaults.
 struct Confidences {
   static constexpr const char* name = "confidences";
+  static constexpr const char* term = "confidence";
   static constexpr bool exact_gradient = false;  // no energy
+  static RegularizerOptions options() { return {}; }
+  template <class S, class I, bool M>
+  static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S>,
+                                 detail::NonDeducedT<RotationGradientView<S>>, FrameScalarsView<S> confidence,
+                                 EnergyWorkspace<S>* workspace, ParallelOptions parallel) {
+    node_confidences(in.positions, in.visibility, in.graph, o.confidence, confidence, {}, {}, workspace, parallel);
+    return Accumulator<S>(0);
+  }
   template <class S, class I, bool M>
   static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    node_confidences(in.positions, in.visibility, in.graph, ConfidenceOptions{}, out.confidence, {}, {}, workspace,
-                        parallel);
-    return Accumulator<S>(0);
+    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsVisibility;
   template <class S, class I, bool M>
   static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_confidence(in.positions, in.visibility, in.graph, ConfidenceOptions{}, out.confidence);
+    return validate_confidence(in.positions, in.visibility, in.graph, options().confidence, out.confidence);
   }
 };
 
 struct Carap {
   static constexpr const char* name = "carap";
+  static constexpr const char* term = "carap";
   static constexpr bool exact_gradient = true;
+  static RegularizerOptions options() { return {}; }
+  template <class S, class I, bool M>
+  static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S> gx,
+                                 detail::NonDeducedT<RotationGradientView<S>> gr, FrameScalarsView<S>, EnergyWorkspace<S>* workspace,
+                                 ParallelOptions parallel) {
+    return carap(in.positions, in.rotations, in.confidence, in.graph, o.carap, gx, gr, workspace, parallel);
+  }
   template <class S, class I, bool M>
   static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    return carap(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions, out.rotations,
-                    workspace, parallel);
+    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsConfidence | kReadsRotations;
   template <class S, class I, bool M>
   static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_carap(in.positions, in.rotations, in.confidence, in.graph, CarapOptions{}, out.positions,
+    return validate_carap(in.positions, in.rotations, in.confidence, in.graph, options().carap, out.positions,
                              out.rotations);
   }
 };
 
 struct Arap {
   static constexpr const char* name = "arap";
+  static constexpr const char* term = "arap";
   static constexpr bool exact_gradient = true;
+  static RegularizerOptions options() { return {}; }
+  template <class S, class I, bool M>
+  static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S> gx,
+                                 detail::NonDeducedT<RotationGradientView<S>> gr, FrameScalarsView<S>, EnergyWorkspace<S>* workspace,
+                                 ParallelOptions parallel) {
+    return arap(in.positions, in.rotations, in.graph, o.arap, gx, gr, workspace, parallel);
+  }
   template <class S, class I, bool M>
   static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    return arap(in.positions, in.rotations, in.graph, ArapOptions{}, out.positions, out.rotations, workspace, parallel);
+    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsRotations;
   template <class S, class I, bool M>
   static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_arap(in.positions, in.rotations, in.graph, ArapOptions{}, out.positions, out.rotations);
+    return validate_arap(in.positions, in.rotations, in.graph, options().arap, out.positions, out.rotations);
   }
 };
 
 // The directed reading of C-ARAP (its updates go to the gradient views); it takes no workspace.
 struct CarapDirected {
   static constexpr const char* name = "carap_directed";
+  static constexpr const char* term = nullptr;  // a reading of C-ARAP, not a term of the fused step
   static constexpr bool exact_gradient = false;  // updates, not a gradient (E20)
   template <class S, class I, bool M>
   static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* = nullptr,
@@ -122,36 +150,52 @@ struct CarapDirected {
 
 struct Lrm {
   static constexpr const char* name = "lrm";
+  static constexpr const char* term = "lrm";
   static constexpr bool exact_gradient = true;
+  static RegularizerOptions options() { return {}; }
+  template <class S, class I, bool M>
+  static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S> gx,
+                                 detail::NonDeducedT<RotationGradientView<S>>, FrameScalarsView<S>, EnergyWorkspace<S>* workspace,
+                                 ParallelOptions parallel) {
+    return lrm(in.positions, in.confidence, in.graph, o.lrm, gx, workspace, parallel);
+  }
   template <class S, class I, bool M>
   static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    return lrm(in.positions, in.confidence, in.graph, LrmOptions{}, out.positions, workspace, parallel);
+    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsConfidence;
   template <class S, class I, bool M>
   static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_lrm(in.positions, in.confidence, in.graph, LrmOptions{}, out.positions);
+    return validate_lrm(in.positions, in.confidence, in.graph, options().lrm, out.positions);
   }
 };
 
 // Trajectory smoothness (E21), acceleration form, weighted by the given confidences.
 struct Accel {
   static constexpr const char* name = "accel";
+  static constexpr const char* term = "accel";
   static constexpr bool exact_gradient = true;
+  static RegularizerOptions options() {
+    RegularizerOptions o;
+    o.accel.confidence_weighted = true;
+    return o;
+  }
+  template <class S, class I, bool M>
+  static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S> gx,
+                                 detail::NonDeducedT<RotationGradientView<S>>, FrameScalarsView<S>, EnergyWorkspace<S>* workspace,
+                                 ParallelOptions parallel) {
+    return accel(in.positions, in.confidence, o.accel, gx, workspace, parallel);
+  }
   template <class S, class I, bool M>
   static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    AccelOptions o;
-    o.confidence_weighted = true;
-    return accel(in.positions, in.confidence, o, out.positions, workspace, parallel);
+    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsConfidence;
   template <class S, class I, bool M>
   static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    AccelOptions o;
-    o.confidence_weighted = true;
-    return validate_accel(in.positions, in.confidence, o, out.positions);
+    return validate_accel(in.positions, in.confidence, options().accel, out.positions);
   }
 };
 
@@ -160,10 +204,11 @@ struct Accel {
 // sum.
 struct Regularizers {
   static constexpr const char* name = "regularizers";
+  static constexpr const char* term = nullptr;  // the fused step itself
+  // Every term of the list on, with its defaults.
   static RegularizerOptions options() {
     RegularizerOptions o;
-    o.terms.arap = true;
-    o.terms.accel = true;
+    for_each_term(o, [](const char*, bool& on, const auto&) { on = true; });
     return o;
   }
   // Its gradient holds the confidences it computes constant (stop-gradient): central
@@ -184,7 +229,8 @@ struct Regularizers {
   }
 };
 
-// The list. A new regulariser gets a struct like the ones above and an entry here.
+// The list. A new regulariser gets a struct like the ones above and an entry here; a term of the
+// fused step that has none fails test_regularizers.cpp's "every term on the list".
 using Operators = std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Accel, Regularizers>;
 
 // Calls f(Op{}) for each operator of the list, in its order.

@@ -1,7 +1,7 @@
 // smg/energy/block.hpp — what the regulariser driver (energy/driver.hpp), its terms
 // (energy/terms/*.hpp) and the CUDA fused step (cuda/regularizers.cuh) share: the partition of
 // the frames into blocks, the per-block view a term reads and writes, the sink of rotation
-// gradients, the result, the argument checks of the fused step and the bytes its scratch keeps
+// gradients, the argument checks of the fused step and the bytes its scratch keeps
 // under (docs/math/energy.md "The fused regulariser pass", "Determinism"). No loops over the graph
 // and no thread pool: a term header includes this, and CUDA translation units can include it
 // without the CPU's parallel.hpp.
@@ -40,37 +40,6 @@
 #include "smg/graph/neighbors.hpp"
 
 namespace smg {
-
-// The energies of one fused step, each as the separate operator returns it (0 for a term that
-// is off), in Accumulator<S> (double for float). Plain doubles in this order: the torch CUDA
-// glue reads it as a tensor of each_energy's length.
-template <class S>
-struct RegularizerResult {
-  Accumulator<S> carap = Accumulator<S>(0);
-  Accumulator<S> arap = Accumulator<S>(0);
-  Accumulator<S> lrm = Accumulator<S>(0);
-  Accumulator<S> accel = Accumulator<S>(0);
-
-  // f(name, r.<energy>...) for each energy, in the order above, of one or more results. The list
-  // of energies: total(), +=, the torch glue's energies tensor and smg_torch.Regularizers' names
-  // and smg_cli's summary follow it, so a term's energy is added here and nowhere else.
-  template <class F, class... R>
-  static void each_energy(F&& f, R&... r) {
-    f("carap", r.carap...);
-    f("arap", r.arap...);
-    f("lrm", r.lrm...);
-    f("accel", r.accel...);
-  }
-  Accumulator<S> total() const {
-    Accumulator<S> t(0);
-    each_energy([&](const char*, const Accumulator<S>& e) { t += e; }, *this);
-    return t;
-  }
-  RegularizerResult& operator+=(const RegularizerResult& o) {
-    each_energy([](const char*, Accumulator<S>& a, const Accumulator<S>& b) { a += b; }, *this, o);
-    return *this;
-  }
-};
 
 namespace detail {
 

@@ -1,7 +1,11 @@
-// smg/energy/options.hpp — parameters of the confidence, C-ARAP, LRM and plain ARAP equations
-// and of their fused step, RegularizerOptions (docs/design.md "Confidence", "C-ARAP", "LRM",
-// "Plain ARAP"; docs/math/energy.md), with their validation. Defaults are the paper's (section
-// 4.1) and docs/interop.md's flag defaults.
+// smg/energy/options.hpp — parameters of the confidence, C-ARAP, LRM, plain ARAP and smoothness
+// equations with their validation, and the term list of the fused step: which terms it has
+// (RegularizerTerms), their options (RegularizerOptions), for_each_term and the energies it returns
+// (RegularizerResult::each_energy) (docs/design.md "Confidence", "C-ARAP", "LRM", "Plain ARAP";
+// docs/math/energy.md). Defaults are the paper's (section 4.1) and docs/interop.md's flag
+// defaults. Why one file: a new term is declared here once (its options struct, for_each_option
+// and validate_options overloads, and one entry in each of the four lists), and the bindings,
+// smg_cli and the tests read it from the lists (docs/contributing.md).
 //
 // Parameters are plain doubles whatever the Scalar of the computation: they are converted once
 // per call. Every energy is a sum over terms "as in the paper"; Normalization::mean divides the
@@ -18,6 +22,7 @@
 #include <type_traits>
 
 #include "smg/core/status.hpp"
+#include "smg/energy/common.hpp"  // Accumulator<S>, the type of the energies
 
 namespace smg {
 
@@ -222,6 +227,37 @@ void for_each_term(RO& o, F&& f) {
   f("lrm", o.terms.lrm, o.lrm);
   f("accel", o.terms.accel, o.accel);
 }
+
+// The energies of one fused step, each as the separate operator returns it (0 for a term that
+// is off), in Accumulator<S> (double for float). Plain doubles in this order: the torch CUDA
+// glue reads it as a tensor of each_energy's length.
+template <class S>
+struct RegularizerResult {
+  Accumulator<S> carap = Accumulator<S>(0);
+  Accumulator<S> arap = Accumulator<S>(0);
+  Accumulator<S> lrm = Accumulator<S>(0);
+  Accumulator<S> accel = Accumulator<S>(0);
+
+  // f(name, r.<energy>...) for each energy, in the order above, of one or more results. The list
+  // of energies: total(), +=, the torch glue's energies tensor and smg_torch.Regularizers' names,
+  // smg_cli's summary and the tests follow it, so a term's energy is added here and nowhere else.
+  template <class F, class... R>
+  static void each_energy(F&& f, R&... r) {
+    f("carap", r.carap...);
+    f("arap", r.arap...);
+    f("lrm", r.lrm...);
+    f("accel", r.accel...);
+  }
+  Accumulator<S> total() const {
+    Accumulator<S> t(0);
+    each_energy([&](const char*, const Accumulator<S>& e) { t += e; }, *this);
+    return t;
+  }
+  RegularizerResult& operator+=(const RegularizerResult& o) {
+    each_energy([](const char*, Accumulator<S>& a, const Accumulator<S>& b) { a += b; }, *this, o);
+    return *this;
+  }
+};
 
 namespace detail {
 inline bool finite_in(double v, double lo, double hi) {

@@ -36,11 +36,16 @@
 #include "smg/core/views.hpp"
 #include "smg/energy/driver.hpp"
 #include "smg/energy/options.hpp"
-#include "smg/energy/terms/accel.hpp"
 #include "smg/energy/terms/confidence.hpp"
-#include "smg/energy/terms/lrm.hpp"
-#include "smg/energy/terms/rigid.hpp"
 #include "smg/energy/workspace.hpp"
+// Each term of the list with its separate operator (the one-term call, which includes the term's
+// header): including the fused step gives every regulariser, and a new term is included here,
+// where it joins RegularizerTermSet, and nowhere else.
+#include "smg/energy/accel.hpp"
+#include "smg/energy/arap.hpp"
+#include "smg/energy/carap.hpp"
+#include "smg/energy/confidence.hpp"
+#include "smg/energy/lrm.hpp"
 #include "smg/graph/neighbors.hpp"
 
 namespace smg {
@@ -52,7 +57,8 @@ inline namespace SMG_ISA_NAMESPACE {
 
 // The terms of the fused step, in the order the driver calls them per node (the confidences
 // first: they fill the records the others read). Adding a term: a header in energy/terms/, its
-// options in RegularizerOptions, one member and one configure line here (docs/contributing.md).
+// one-term call included above, its options and list entries in options.hpp, one member and one
+// configure line here (docs/contributing.md).
 template <class S, class I>
 struct RegularizerTermSet {
   ConfidenceTerm<S, I> confidence;
