@@ -238,6 +238,16 @@ TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the l
     smg::for_each_term(one, [&](const char* t, bool& on, const auto&) { on = std::string(t) == term; });
     runs.push_back({std::string("--terms ") + term, one});
   });
+  // Every term of the list, by name, as `--terms` and the "known" list of the error below.
+  std::string every_term, known_terms;
+  smg::for_each_term(defaults, [&](const char* term, bool, const auto&) {
+    if (!every_term.empty()) {
+      every_term += ',';
+      known_terms += ", ";
+    }
+    every_term += term;
+    known_terms += term;
+  });
   smg::RegularizerOptions all;
   smg::for_each_term(all, [](const char*, bool& on, const auto&) { on = true; });
   all.carap.alpha = 0.5;
@@ -248,7 +258,7 @@ TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the l
   all.accel.confidence_weighted = true;
   all.accel.normalization = smg::Normalization::mean;
   all.confidence.kappa_m = 1.5;
-  runs.push_back({"--terms confidence,carap,arap,lrm,accel --carap-alpha 0.5 --arap-gaps 1,3 "
+  runs.push_back({"--terms " + every_term + " --carap-alpha 0.5 --arap-gaps 1,3 "
                   "--arap-gap-weights 1,0.5 --lrm-huber-delta 0.02 --lrm-detach-omega --accel-form velocity "
                   "--accel-confidence-weighted --accel-normalize --confidence-kappa-m 1.5",
                   all});
@@ -285,7 +295,7 @@ TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the l
   fs::remove_all(o);
   r = run_cli("regularizers " + c.string() + " " + o.string() + " --terms carap,jerk");
   CHECK(r.code == 2);
-  CHECK(r.err == "smg_cli regularizers: error: --terms: unknown term 'jerk' (known: confidence, carap, arap, lrm, accel)\n");
+  CHECK(r.err == "smg_cli regularizers: error: --terms: unknown term 'jerk' (known: " + known_terms + ")\n");
   r = run_cli("regularizers " + c.string() + " " + o.string() + " --lrm-alpha 1.5");
   CHECK(r.err == "smg_cli regularizers: error: --lrm-alpha: alpha must be in [0, 1], got 1.5\n");
   r = run_cli("regularizers " + c.string() + " " + o.string() + " --terms accel --accel-form jerk");
