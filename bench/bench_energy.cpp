@@ -313,17 +313,42 @@ void BM_accel(benchmark::State& state) {
 
 // ---- Every operator of the cross-cutting tests' list (tests/support/operators.hpp), with the
 // list's options, energy and every output it writes: list/<name><S>. A term added to the list
-// gets its row here with no code of its own. ns_per_term is per (frame, node) ----
+// gets its row here with no code of its own. ns_per_term is per (frame, node); err_vs_double
+// (float rows) compares the outputs and energy with the double call on the same rounded inputs ----
+template <class Op, class S>
+double listed_run(const Scene<S>& s, smg::EnergyWorkspace<S>& ws, std::vector<S>& gx, std::vector<S>& gr,
+                  std::vector<S>& c, smg::ParallelOptions par) {
+  const smg::test::OperatorOutputs<S> out{grad_view(gx, s, true), tangent_view(gr, s, true),
+                                          {c.data(), s.T, s.N}};
+  return double(Op::run(smg::test::inputs_of(s, s.graph(), s.confidence()), out, &ws, par));
+}
+// A row's outputs and energy, as one vector of doubles (what err_vs_double compares).
+template <class S>
+std::vector<double> listed_outputs(const std::vector<S>& gx, const std::vector<S>& gr,
+                                   const std::vector<S>& c, double e) {
+  std::vector<double> all(gx.begin(), gx.end());
+  all.insert(all.end(), gr.begin(), gr.end());
+  all.insert(all.end(), c.begin(), c.end());
+  all.push_back(e);
+  return all;
+}
 template <class Op, class S>
 void BM_listed(benchmark::State& state) {
   const Scene<S>& s = scene_as<S>();
   std::vector<S> gx(s.x.size()), gr(s.x.size()), c(s.x.size() / 3);
   smg::EnergyWorkspace<S> ws;
+  double e = 0;
   time_energy(state, static_cast<double>(cfg.T) * static_cast<double>(cfg.N), [&] {
-    const smg::test::OperatorOutputs<S> out{grad_view(gx, s, true), tangent_view(gr, s, true),
-                                            {c.data(), s.T, s.N}};
-    return double(Op::run(smg::test::inputs_of(s, s.graph(), s.confidence()), out, &ws, threads(state)));
+    e = listed_run<Op>(s, ws, gx, gr, c, threads(state));
+    return e;
   });
+  if (is_double<S>()) return;
+  const Scene<double>& r = rounded_scene();
+  std::vector<double> rx(r.x.size()), rr(r.x.size()), rc(r.x.size() / 3);
+  smg::EnergyWorkspace<double> rws;
+  const double re = listed_run<Op>(r, rws, rx, rr, rc, {});
+  state.counters["err_vs_double"] =
+      relative_error(listed_outputs(gx, gr, c, e), listed_outputs(rx, rr, rc, re));
 }
 
 // ---- The target: C-ARAP + LRM, energy + exact gradient, into one gradient buffer ----

@@ -8,11 +8,14 @@ drives the docs' API table): one row per flag of RegularizerTerms, read from
   - RegularizerOptions (include/smg/energy/options.hpp): the flag's options struct;
   - the energy headers: the separate C++ call (a function named for the flag, or node_<flag>s);
   - the term list smg::for_each_term (include/smg/energy/options.hpp), from which smg_torch's
-    options and smg_cli regularizers' flags are generated, and the keyword of
-    smg_torch.regularizers (examples/torch/smg_torch/__init__.py);
-  - bench/bench_energy.cpp: its BM_<flag> row;
+    options and smg_cli regularizers' flags are generated, and so the keyword of
+    smg_torch.regularizers (examples/torch/smg_torch/__init__.py, which takes its keywords from
+    that list: `**terms` checked against REGULARIZER_TERMS);
+  - bench/bench_energy.cpp: its BM_<flag> row, or else the row list/<name> that BM_listed gives
+    every operator of the list;
   - the CUDA driver (include/smg/cuda/driver.cuh): whether the term runs in the element pass
-    (a member of ElementTerms) or a phase of its own, and
+    (C-ARAP and ARAP, members of ElementTerms, or a term whose struct names its Element, which
+    the driver takes from the list) or a phase of its own, and
   - tests/support/operators.hpp: whether the cross-cutting tests' operator list covers it.
 
   scripts/terms_table.py              print the table
@@ -79,16 +82,31 @@ def rows():
     torch_init = read("examples/torch/smg_torch/__init__.py")
     term_list = set(re.findall(r'f\("(\w+)", o\.terms\.\w+, o\.\w+\);',
                                block(read("include/smg/energy/options.hpp"), "void for_each_term(", "\n}")))
-    signature = block(torch_init, "def regularizers(", ":\n")
-    torch_keys = [k for k in term_list if re.search(r"\b%s=" % k, signature)]
+    # smg_torch.regularizers takes its term keywords from the list (`**terms`, checked against
+    # REGULARIZER_TERMS, which _C reads from smg::for_each_term): then every term on the list has
+    # its keyword. Otherwise (keywords written by hand) the ones its signature names.
+    function = block(torch_init, "def regularizers(", "\n\n\n")
+    signature = block(function, "def regularizers(", ":\n")
+    from_list = (re.search(r"\*\*terms\b", signature)
+                 and re.search(r"\bfor \w+(?:, \w+)? in REGULARIZER_TERMS\b", function))
+    torch_keys = [k for k in term_list if from_list or re.search(r"\b%s=" % k, signature)]
     bench = read("bench/bench_energy.cpp")
     driver = read("include/smg/cuda/driver.cuh")
     element = block(driver, "struct ElementTerms")
-    # ElementTerms' first line of members: "bool rigid = false, accel = false;"
-    element_members = re.findall(r"(\w+) = false", element.split("\n")[1] if "\n" in element else "")
+    # The element pass runs the terms ElementTerms names ("bool rigid = false;": C-ARAP and ARAP)
+    # and every term of the list whose struct names an Element (driver.cuh's ListElements).
+    element_members = re.findall(r"bool (\w+) = false", element)
+    if "ListElements" in element:
+        element_members += [m for s, m in members
+                            if "using Element = " in block(headers.get(s, ("", ""))[1], "struct %s " % s)]
     drive = block(driver, "Status drive(", "\n}\n")
     operators = read("tests/support/operators.hpp")
     op_names = set(re.findall(r'static constexpr const char\* name = "(\w+)"', operators))
+    # The operator list's term of each operator (bench/bench_energy.cpp's BM_listed gives each one
+    # a row list/<name><S>, with no code of its own).
+    op_terms = dict((t, n) for n, t in re.findall(
+        r'static constexpr const char\* name = "(\w+)";\s*static constexpr const char\* term = "(\w+)"',
+        operators))
 
     out = []
     for flag in flags:
@@ -115,7 +133,9 @@ def rows():
             call="`%s`" % call if call != "—" else call,
             torch="`%s=`" % flag if flag in torch_keys else "—",
             cli="`--terms %s`" % flag if flag in term_list else "—",
-            bench="`BM_%s`" % flag if re.search(r"\bBM_%s\b" % flag, bench) else "—",
+            bench=("`BM_%s`" % flag if re.search(r"\bBM_%s\b" % flag, bench)
+                   else "`list/%s`" % op_terms[flag] if flag in op_terms and "BM_listed" in bench
+                   else "—"),
             cuda=cuda,
             tests="yes" if (flag in op_names or call.strip("`") in op_names
                             or flag + "s" in op_names) else "—")))

@@ -328,14 +328,23 @@ def test_regularizers_follow_the_term_list():
         assert params[term].default is on, term
         assert term in smg.REGULARIZER_DEFAULTS, term
     assert set(smg.REGULARIZER_DEFAULTS) == set(smg.REGULARIZER_TERMS)
+    names = list(params)
+    assert names[:4] == ["positions", "quats", "g", "visibility"] and names[-1] == "validate"
+    assert names[4:-1] == list(smg.REGULARIZER_TERMS)  # the term keywords, in the list's order
     energies = smg._REGULARIZER_ENERGIES
     assert set(smg.Regularizers._fields) == {"total", "confidence"} | set(energies)
+    # The legacy five first (code unpacks them), then the other energies in the list's order.
+    legacy = ("total", "carap", "arap", "lrm", "confidence")
+    assert smg.Regularizers._fields == legacy + tuple(e for e in energies if e not in legacy)
     # The C++ defaults, as the separate operators' wrappers have them.
     assert smg.REGULARIZER_DEFAULTS["carap"] == dict(alpha=0.6, lambda_c=1.0, lambda_l=1.0, gaps=(1, 2, 4),
                                                    gap_weights=None, normalize=False, weight=1.0)
     assert smg.REGULARIZER_DEFAULTS["accel"]["form"] == "acceleration"
-    # Every option given explicitly at its default gives the defaults' result, bitwise.
     x, q, idx, w, _ = random_scene(T=6)
+    # A keyword that is not a term: TypeError, as Python's for an unknown keyword, naming it.
+    with pytest.raises(TypeError, match="unexpected keyword argument 'smoothness'"):
+        smg.regularizers(x, q, (idx, w), smoothness=True)
+    # Every option given explicitly at its default gives the defaults' result, bitwise.
     every = {t: dict(d) for t, d in smg.REGULARIZER_DEFAULTS.items()}
     r1 = smg.regularizers(x, q, (idx, w), **{t: True for t in every})
     r2 = smg.regularizers(x, q, (idx, w), **every)

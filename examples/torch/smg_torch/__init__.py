@@ -33,6 +33,8 @@ they are narrowed: a ValueError names the argument.
 """
 from __future__ import annotations
 
+import collections
+import inspect
 import os
 from typing import NamedTuple, Optional, Sequence, Tuple, Union
 
@@ -220,20 +222,6 @@ def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor
                               bool(detach_omega), bool(normalize), bool(validate))
 
 
-class Regularizers(NamedTuple):
-    """What smg_torch.regularizers returns: total = carap + arap + lrm + accel (0-dim,
-    differentiable w.r.t. positions and quats), the energies (0-dim, detached: for logging; a term
-    that is off is 0) and the confidences [T, N] (no gradient; None when off). `accel` comes last
-    so that code unpacking the first five fields keeps working."""
-
-    total: torch.Tensor
-    carap: torch.Tensor
-    arap: torch.Tensor
-    lrm: torch.Tensor
-    confidence: Optional[torch.Tensor]
-    accel: Optional[torch.Tensor] = None
-
-
 #: The options of each term of regularizers, with their defaults: read from the library's term
 #: list (smg::for_each_term / smg::for_each_option, smg/energy/options.hpp), so they are the C++
 #: defaults, which are node_confidences', carap's, arap's and lrm's. `weight` multiplies the
@@ -245,6 +233,26 @@ REGULARIZER_DEFAULTS = _C._regularizer_options()
 REGULARIZER_TERMS = _C._regularizer_terms()
 #: The energies regularizers returns, in the order of its energies tensor.
 _REGULARIZER_ENERGIES = tuple(_C._regularizer_energies())
+
+#: The fields of Regularizers that come first, in this order, so that code unpacking the first
+#: five keeps working; a legacy energy no longer on the list is left out.
+_REGULARIZERS_LEGACY = tuple(n for n in ("total", "carap", "arap", "lrm", "confidence")
+                             if n in ("total", "confidence") or n in _REGULARIZER_ENERGIES)
+
+# Built from the term list (smg::for_each_term): a term with an energy has its field, so a new
+# term needs no edit here. The energies after the legacy fields default to None.
+_fields = _REGULARIZERS_LEGACY + tuple(n for n in _REGULARIZER_ENERGIES
+                                       if n not in _REGULARIZERS_LEGACY)
+Regularizers = collections.namedtuple("Regularizers", _fields, module=__name__,
+                                      defaults=(None,) * (len(_fields) - len(_REGULARIZERS_LEGACY)))
+Regularizers.__annotations__ = {n: Optional[torch.Tensor] for n in _fields}
+del _fields
+Regularizers.__doc__ = """What smg_torch.regularizers returns: `total` = the sum of the term
+energies (0-dim, differentiable w.r.t. positions and quats), one field per energy of the term
+list (0-dim, detached: for logging; a term that is off is 0) and `confidence`, the confidences
+[T, N] (no gradient; None when off). The fields are total, carap, arap, lrm, confidence (in this
+order, so that code unpacking the first five keeps working), then the other energies (accel, ...)
+in the term list's order."""
 
 
 def _term_options(name, value):
@@ -291,32 +299,51 @@ class _RegularizersFunction(torch.autograd.Function):
 
 
 def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: GraphLike,
-                 visibility: Optional[torch.Tensor] = None, *, confidence=True, carap=True,
-                 arap=False, lrm=True, accel=False, validate: bool = False) -> Regularizers:
+                 visibility: Optional[torch.Tensor] = None, *, validate: bool = False,
+                 **terms) -> Regularizers:
     """The regulariser step fused (smg::regularizers, docs/math/energy.md "The fused regulariser
-    pass"): the confidences (E2-E6; visibility [T, N] or None = all visible), C-ARAP (E7-E10),
-    plain ARAP, LRM (E11-E16) and trajectory smoothness (accel, E21: squared accelerations or
-    velocities of the node trajectories, as MoSca and Shape-of-Motion regularise) in one pass
-    over the graph. Each term is False (off), True (the
-    defaults of node_confidences / carap / arap / lrm) or a dict of its options
-    (REGULARIZER_DEFAULTS; `weight` scales the term). With confidence off, C-ARAP and LRM use
-    c = 1. quats [T, N, 4] may be None without carap and arap. Returns Regularizers(total, carap,
-    arap, lrm, confidence, accel): `total` is differentiable w.r.t. positions and the raw quats (the
-    confidences are constants, as with the separate operators); the per-term energies are detached.
-    The same values as node_confidences + carap + arap + lrm to rounding (1e-12 relative in
-    float64, tests/torch/test_energy.py). On CUDA tensors smg::cuda::regularizers runs on the
-    current stream (tests/torch/test_cuda.py; not yet run on a GPU).
+    pass"): any subset of the library's terms in one pass over the graph. Each term of
+    REGULARIZER_TERMS is a keyword, False (off), True (its defaults) or a dict of its options
+    (REGULARIZER_DEFAULTS; `weight` scales the term); a term not given is on or off as
+    REGULARIZER_TERMS says. The terms today, for example: the confidences (confidence, E2-E6;
+    visibility [T, N] or None = all visible), C-ARAP (carap, E7-E10), plain ARAP (arap), LRM
+    (lrm, E11-E16) and trajectory smoothness (accel, E21: squared accelerations or velocities of
+    the node trajectories, as MoSca and Shape-of-Motion regularise). With confidence off, C-ARAP
+    and LRM use c = 1. quats [T, N, 4] may be None when no term on uses them. Returns
+    Regularizers(total, carap, arap, lrm, confidence, ...the other energies): `total` is
+    differentiable w.r.t. positions and the raw quats (the confidences are constants, as with
+    the separate operators); the per-term energies are detached. The same values as the separate
+    operators (node_confidences + carap + arap + lrm) to rounding (1e-12 relative in float64,
+    tests/torch/test_energy.py). On CUDA tensors smg::cuda::regularizers runs on the current
+    stream (tests/torch/test_cuda.py; not yet run on a GPU).
     Devices: CPU and CUDA tensors."""
+    for key in terms:
+        if key not in REGULARIZER_TERMS:
+            raise TypeError(f"regularizers() got an unexpected keyword argument {key!r} "
+                            f"(terms: {', '.join(REGULARIZER_TERMS)})")
     idx, w = _graph(g)
     _check(positions=positions, quats=quats, indices=idx, weights=w, visibility=visibility)
-    given = dict(confidence=confidence, carap=carap, arap=arap, lrm=lrm, accel=accel)
-    terms, opts = {}, {}
-    for name in REGULARIZER_TERMS:
-        terms[name], opts[name] = _term_options(name, given[name])
-    total, e, c = _RegularizersFunction.apply(positions, quats, idx, w, visibility, terms, opts,
+    on, opts = {}, {}
+    for name, default in REGULARIZER_TERMS.items():
+        on[name], opts[name] = _term_options(name, terms.get(name, default))
+    total, e, c = _RegularizersFunction.apply(positions, quats, idx, w, visibility, on, opts,
                                               bool(validate))
     energies = dict(zip(_REGULARIZER_ENERGIES, e))
-    return Regularizers(total=total, confidence=c if terms["confidence"] else None, **energies)
+    return Regularizers(total=total, confidence=c if on.get("confidence") else None, **energies)
+
+
+# The signature help() and inspect show: a keyword-only parameter per term of the list, with its
+# default on/off, between visibility and validate.
+_P = inspect.Parameter
+regularizers.__signature__ = inspect.Signature(
+    [_P("positions", _P.POSITIONAL_OR_KEYWORD, annotation=torch.Tensor),
+     _P("quats", _P.POSITIONAL_OR_KEYWORD, annotation=Optional[torch.Tensor]),
+     _P("g", _P.POSITIONAL_OR_KEYWORD, annotation=GraphLike),
+     _P("visibility", _P.POSITIONAL_OR_KEYWORD, default=None, annotation=Optional[torch.Tensor])]
+    + [_P(name, _P.KEYWORD_ONLY, default=on) for name, on in REGULARIZER_TERMS.items()]
+    + [_P("validate", _P.KEYWORD_ONLY, default=False, annotation=bool)],
+    return_annotation=Regularizers)
+del _P
 
 
 def _library_seconds(op: str, positions: torch.Tensor, quats: Optional[torch.Tensor], g: GraphLike,

@@ -5,11 +5,12 @@
 // regulariser pass"):
 //   1. confidences (when needed): per chunk of frames, the velocities (E1) and edge changes (E4)
 //      of the chunk's frames, then c_{t,i} (E6) into [T][N] (the caller's output, or scratch);
-//   2. the element terms in ONE pass, one thread per (frame t, node n): every term that is a
-//      step per (frame, node) without scratch (C-ARAP and ARAP: cuda/rigid.cuh; smoothness:
-//      AccelElement in energy/terms/accel.hpp, the header of the CPU term) adds what it owes to
-//      x_n^t's and R_n^t's gradient rows, which only that thread writes; energies per thread,
-//      then per block in a fixed tree, then over the blocks (deterministic_sum);
+//   2. the element terms in ONE pass, one thread per (frame t, node n): C-ARAP and ARAP
+//      (cuda/rigid.cuh) and every term of the CPU list RegularizerTermSet (energy/regularizers.hpp)
+//      that has an Element, a step per (frame, node) without scratch (smoothness: AccelElement in
+//      energy/terms/accel.hpp, the header of the CPU term), add what they owe to x_n^t's and
+//      R_n^t's gradient rows, which only that thread writes; energies per thread, then per block
+//      in a fixed tree, then over the blocks (deterministic_sum);
 //   3. LRM (when on): per chunk of frames, the separate lrm kernels' per-element steps
 //      (cuda/lrm.cuh: lrm_term_at, lrm_gather_at) and a velocity step that adds each chunk's
 //      velocity parts to the frames they reach (one frame either side).
@@ -22,12 +23,17 @@
 // plan, against the CPU smg::regularizers() on machines without a GPU. A Backend has
 //   Buffer<T>, allocate(Buffer<T>&, n)            scratch (device memory, or host memory)
 //   items(f, items, frames, what)                 f(l, i) for every frame l < frames, item i
-//   element_sums<S>(f, N, T, out)                 f(t, n, e[kElementEnergies]) for every (t, n);
+//   element_sums<S>(f, N, T, out)                 f(t, n, e[F::kEnergies]) for every (t, n);
 //                                                 *out[k] = Σ e[k] for each non-null out[k]
 //   sum(in, n, out, scale, accumulate, count, f)  deterministic_sum's contract
 //   clear(result)                                 *result = {}
-// Adding an element term: its host-device step (like AccelElement), one member and one line in
-// ElementTerms, its energy slot, and the flag in fused_plan.
+// Adding an element term needs no edit here: its CPU term (on the list RegularizerTermSet) names
+// its host-device step, `using Element = ...; Element element() const;`, and its energy,
+// `static Accumulator<S>& energy_of(RegularizerResult<S>&)` (AccelTerm is the example). The step
+// has `SMG_HOST_DEVICE void at(t, n, x, conf, grad_x, S& energy) const` and
+// `bool reads_confidence() const`. The list is read on the host: a term's Element is configured
+// there (RegularizerTermSet's constructor, with edges = N·K, so a step must not scale by the
+// graph's edge count, which only the device knows).
 #pragma once
 
 #include "smg/cuda/common.cuh"
@@ -46,18 +52,118 @@
 #include "smg/energy/block.hpp"
 #include "smg/energy/confidence_term.hpp"
 #include "smg/energy/options.hpp"
-#include "smg/energy/terms/accel.hpp"
+#include "smg/energy/regularizers.hpp"
 #include "smg/graph/neighbors.hpp"
 
 namespace smg::cuda {
 namespace detail {
 
-// Energies of the element pass, in this order: C-ARAP, ARAP, smoothness.
-constexpr int kElementEnergies = 3;
+// ---- The element terms of the CPU list: the members of RegularizerTermSet with an Element ----
+
+template <class T, class = void>
+struct HasElement : std::false_type {};
+template <class T>
+struct HasElement<T, std::void_t<typename T::Element>> : std::true_type {};
+
+// The steps of the element terms, in list order; at() runs those that are on, term k's energy
+// into e[k]. A recursive pack rather than std::tuple: device code calls it.
+template <class... Es>
+struct ElementPack {
+  static constexpr int size = 0;
+  template <class S>
+  SMG_HOST_DEVICE void at(Index, Index, PositionsView<const S>, const S*, S*, S*) const {}
+  bool any_on() const { return false; }
+  bool reads_confidence() const { return false; }
+};
+template <class E, class... Es>
+struct ElementPack<E, Es...> {
+  static constexpr int size = 1 + sizeof...(Es);
+  bool on = false;
+  E step;
+  ElementPack<Es...> rest;
+  template <class S>
+  SMG_HOST_DEVICE void at(Index t, Index n, PositionsView<const S> x, const S* conf, S* grad_x,
+                          S* e) const {
+    if (on) step.at(t, n, x, conf, grad_x, e[0]);
+    rest.at(t, n, x, conf, grad_x, e + 1);
+  }
+  bool any_on() const { return on || rest.any_on(); }
+  bool reads_confidence() const { return (on && step.reads_confidence()) || rest.reads_confidence(); }
+};
+
+// ElementPack of the Elements of Ts (in order), skipping the terms without one.
+template <class Pack, class... Ts>
+struct ElementsOf {
+  using type = Pack;
+};
+template <bool Has, class Pack, class T>
+struct AppendElement {
+  using type = Pack;
+};
+template <class... Es, class T>
+struct AppendElement<true, ElementPack<Es...>, T> {
+  using type = ElementPack<Es..., typename T::Element>;
+};
+template <class Pack, class T, class... Ts>
+struct ElementsOf<Pack, T, Ts...> {
+  using type = typename ElementsOf<typename AppendElement<HasElement<T>::value, Pack, T>::type,
+                                   Ts...>::type;
+};
+// The list's member types, as apply() passes them.
+struct TermTypes {
+  template <class... Ts>
+  ElementsOf<ElementPack<>, std::decay_t<Ts>...> operator()(Ts&...) const;
+};
+template <class S, class I>
+using ListElements = typename decltype(std::declval<smg::detail::RegularizerTermSet<S, I>&>().apply(
+    TermTypes{}))::type;
+
+// Fills the pack from the configured terms (host values).
+template <class Pack>
+void fill_elements(Pack&) {}
+template <class Pack, class T, class... Ts>
+void fill_elements(Pack& p, const T& t, const Ts&... ts) {
+  if constexpr (HasElement<T>::value) {
+    p.on = t.on();
+    p.step = t.element();
+    fill_elements(p.rest, ts...);
+  } else {
+    fill_elements(p, ts...);
+  }
+}
+
+// The energies of the list's element terms, in pack order (null for a term that is off).
+template <class S, class Pack>
+void element_energy_slots(Accumulator<S>**, RegularizerResult<S>*, const Pack&) {}
+template <class S, class Pack, class T, class... Ts>
+void element_energy_slots(Accumulator<S>** out, RegularizerResult<S>* r, const Pack& p, const T&,
+                          const Ts&... ts) {
+  if constexpr (HasElement<T>::value) {
+    *out = p.on ? &T::energy_of(*r) : nullptr;
+    element_energy_slots<S>(out + 1, r, p.rest, ts...);
+  } else {
+    element_energy_slots<S>(out, r, p, ts...);
+  }
+}
+
+// The element pack of `o` over T frames, N nodes (host values, as the CPU list configures them).
+template <class S, class I>
+ListElements<S, I> list_elements(const RegularizerOptions& o, Index T, Index N, Index K, bool want_x,
+                                 bool want_r) {
+  smg::detail::RegularizerTermSet<S, I> set(T, N, K, N * K, o, want_x, want_r);
+  ListElements<S, I> pack;
+  set.apply([&](const auto&... t) { fill_elements(pack, t...); });
+  return pack;
+}
+
+// Energies of the element pass, in this order: C-ARAP, ARAP, then the list's element terms.
+template <class S, class I>
+constexpr int kElementEnergies = 2 + ListElements<S, I>::size;
 
 // The plan of one call (host): which phases run, the chunk lengths, the scratch.
 struct FusedPlan {
-  bool confidence = false, rigid = false, lrm = false, accel = false;
+  bool confidence = false, rigid = false, lrm = false;
+  bool elements = false;  // a term of the list's element pass is on
   bool want_x = false, want_r = false;
   bool conf_scratch = false;  // c [T][N] in scratch (no caller output)
   Index conf_chunk = 1, lrm_chunk = 1;
@@ -76,10 +182,10 @@ FusedPlan fused_plan(Index T, Index N, Index K, const RegularizerOptions& o, boo
       for (const Gap& g : *list) any_gap = any_gap || (g.delta >= 1 && g.delta < T && g.weight != 0.0);
   p.rigid = any_gap && K > 0;
   p.lrm = on.lrm && K > 0;
-  p.accel = on.accel && accel_active(o.accel, T, N);
-  p.confidence = on.confidence &&
-                 (conf_out || p.rigid || p.lrm || (p.accel && o.accel.confidence_weighted));
-  p.want_x = want_x && (p.rigid || p.lrm || p.accel);
+  const ListElements<S, I> elements = list_elements<S, I>(o, T, N, K, want_x, want_r);
+  p.elements = elements.any_on();
+  p.confidence = on.confidence && (conf_out || p.rigid || p.lrm || elements.reads_confidence());
+  p.want_x = want_x && (p.rigid || p.lrm || p.elements);
   p.want_r = want_r && p.rigid;
   p.conf_scratch = p.confidence && !conf_out;
   if (T == 0 || N == 0) return p;
@@ -90,7 +196,7 @@ FusedPlan fused_plan(Index T, Index N, Index K, const RegularizerOptions& o, boo
   // Energy partials: the element pass's blocks, and deterministic_sum's.
   const std::size_t blocks =
       static_cast<std::size_t>(grid_for(N)) * std::min<Index>(T, 65535);
-  if (p.rigid || p.accel) fixed += kElementEnergies * blocks * sizeof(Acc);
+  if (p.rigid || p.elements) fixed += kElementEnergies<S, I> * blocks * sizeof(Acc);
   fixed += kSumBlocks * sizeof(Acc);
   const std::size_t left = bound > fixed ? bound - fixed : 0;
   auto frames_within = [&](std::size_t per_frame) {
@@ -164,13 +270,14 @@ struct ConfidenceStep {
   }
 };
 
-// Phase 2's element (t, n): every element term that is on. e[kElementEnergies] receives the
-// energies of the terms this element owns.
+// Phase 2's element (t, n): every element term that is on. e[kEnergies] receives the energies
+// of the terms this element owns (C-ARAP, ARAP, then the list's element terms).
 template <class S, class I>
 struct ElementTerms {
-  bool rigid = false, accel = false;
+  static constexpr int kEnergies = kElementEnergies<S, I>;
+  bool rigid = false;
   FusedRigidConstants<S> rigid_constants;
-  AccelElement<S> accel_element;
+  ListElements<S, I> elements;
   PositionsView<const S> x;
   QuaternionsView<const S> q;
   const S* conf = nullptr;  // c [T][N], or null (c ≡ 1)
@@ -183,7 +290,7 @@ struct ElementTerms {
     if (rigid)
       fused_rigid_node_at(t, n, rigid_constants, x, q, conf, graph, rev_offsets, rev_entries,
                           grad_x, grad_tangent, grad_raw, e);
-    if (accel) accel_element.at(t, n, x, conf, grad_x, e[2]);
+    elements.at(t, n, x, conf, grad_x, e + 2);
   }
 };
 
@@ -236,24 +343,24 @@ __global__ void items_kernel(F f, Index items, Index frames) {
   SMG_CUDA_FOR_FRAMES(l, frames) f(l, Index(i));
 }
 
-// One thread per node, frames along y; per-block energy partials [kElementEnergies][blocks],
-// each the block's fixed tree sum of its threads' sums.
+// One thread per node, frames along y; per-block energy partials [F::kEnergies][blocks], each the
+// block's fixed tree sum of its threads' sums.
 template <class S, class F>
 __global__ void element_sums_kernel(F f, Index N, Index T, Accumulator<S>* partials) {
   using Acc = Accumulator<S>;
   __shared__ Acc shared[kThreads];
   const int n = frame_item(N);
-  Acc sum[kElementEnergies];
+  Acc sum[F::kEnergies];
   for (Acc& v : sum) v = Acc(0);
   SMG_CUDA_FOR_FRAMES(t, T) {
     if (n < 0) continue;
-    S e[kElementEnergies];
+    S e[F::kEnergies];
     for (S& v : e) v = S(0);
     f(t, Index(n), e);
-    for (int k = 0; k < kElementEnergies; ++k) sum[k] += Acc(e[k]);
+    for (int k = 0; k < F::kEnergies; ++k) sum[k] += Acc(e[k]);
   }
   const unsigned blocks = gridDim.x * gridDim.y, block = blockIdx.y * gridDim.x + blockIdx.x;
-  for (int k = 0; k < kElementEnergies; ++k) {
+  for (int k = 0; k < F::kEnergies; ++k) {
     const Acc s = block_tree_sum(sum[k], shared);
     if (threadIdx.x == 0) partials[k * blocks + block] = s;
     __syncthreads();  // every thread has read shared[0] before the next sum overwrites it
@@ -283,11 +390,11 @@ struct DeviceBackend {
     const dim3 grid = frame_grid(N, T);
     const Index blocks = static_cast<Index>(grid.x) * grid.y;
     DeviceBuffer<Acc> partials;
-    if (Status s = partials.allocate(static_cast<std::size_t>(kElementEnergies * blocks), stream); !s)
+    if (Status s = partials.allocate(static_cast<std::size_t>(F::kEnergies * blocks), stream); !s)
       return s;
     element_sums_kernel<S, F><<<grid, kThreads, 0, stream>>>(f, N, T, partials.get());
     SMG_CUDA_TRY(cudaGetLastError(), "smg::cuda::regularizers: element kernel launch");
-    for (int k = 0; k < kElementEnergies; ++k)
+    for (int k = 0; k < F::kEnergies; ++k)
       if (out[k] != nullptr)
         if (Status s = deterministic_sum(partials.get() + k * blocks, blocks, out[k], stream); !s)
           return s;
@@ -332,16 +439,16 @@ struct HostBackend {
   template <class S, class F>
   Status element_sums(const F& f, Index N, Index T, Accumulator<S>* const* out) const {
     using Acc = Accumulator<S>;
-    Acc sum[kElementEnergies];
+    Acc sum[F::kEnergies];
     for (Acc& v : sum) v = Acc(0);
     for (Index t = 0; t < T; ++t)
       for (Index n = 0; n < N; ++n) {
-        S e[kElementEnergies];
+        S e[F::kEnergies];
         for (S& v : e) v = S(0);
         f(t, n, e);
-        for (int k = 0; k < kElementEnergies; ++k) sum[k] += Acc(e[k]);
+        for (int k = 0; k < F::kEnergies; ++k) sum[k] += Acc(e[k]);
       }
-    for (int k = 0; k < kElementEnergies; ++k)
+    for (int k = 0; k < F::kEnergies; ++k)
       if (out[k] != nullptr) *out[k] = sum[k];
     return Status::ok();
   }
@@ -382,7 +489,7 @@ Status drive(const Backend& be, const FusedPlan& p, const RegularizerOptions& o,
   using Acc = Accumulator<S>;
   const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
   if (Status s = be.clear(result); !s) return s;
-  if (T == 0 || N == 0 || !(p.confidence || p.rigid || p.lrm || p.accel)) return Status::ok();
+  if (T == 0 || N == 0 || !(p.confidence || p.rigid || p.lrm || p.elements)) return Status::ok();
   if (Status s = check_frame_items(N, "positions"); !s) return s;
 
   // Phase 1: confidences into the caller's output or [T][N] scratch.
@@ -412,13 +519,19 @@ Status drive(const Backend& be, const FusedPlan& p, const RegularizerOptions& o,
   const S* conf_in = p.confidence ? conf : nullptr;
   S* const gx = p.want_x ? grad_positions.data() : nullptr;
 
-  // Phase 2: the element terms (C-ARAP, ARAP, smoothness) in one pass, no per-edge scratch.
-  if (p.rigid || p.accel) {
-    ElementTerms<S, I> f;
+  // Phase 2: the element terms (C-ARAP, ARAP, the list's element terms) in one pass, no
+  // per-edge scratch.
+  if (p.rigid || p.elements) {
+    using F = ElementTerms<S, I>;
+    F f;
     f.rigid = p.rigid;
-    f.accel = p.accel;
     if (p.rigid) f.rigid_constants = fused_rigid_constants<S>(o, T, edge_count);
-    if (p.accel) f.accel_element = make_accel_element<S>(o.accel, T, N);
+    smg::detail::RegularizerTermSet<S, I> set(T, N, K, N * K, o, p.want_x, p.want_r);
+    Acc* out[F::kEnergies] = {p.rigid ? &result->carap : nullptr, p.rigid ? &result->arap : nullptr};
+    set.apply([&](const auto&... t) {
+      fill_elements(f.elements, t...);
+      element_energy_slots<S>(out + 2, result, f.elements, t...);
+    });
     f.x = positions;
     f.q = rotations;
     f.conf = conf_in;
@@ -430,9 +543,6 @@ Status drive(const Backend& be, const FusedPlan& p, const RegularizerOptions& o,
       f.grad_tangent = grad_rotations.is_raw() ? nullptr : grad_rotations.tangent().data();
       f.grad_raw = grad_rotations.is_raw() ? grad_rotations.raw().data() : nullptr;
     }
-    Acc* const out[kElementEnergies] = {p.rigid ? &result->carap : nullptr,
-                                        p.rigid ? &result->arap : nullptr,
-                                        p.accel ? &result->accel : nullptr};
     if (Status s = be.template element_sums<S>(f, N, T, out); !s) return s;
   }
 

@@ -60,7 +60,7 @@ inline double accel_scale(const AccelOptions& o, Index frames, Index nodes) {
 // scratch that a kernel thread or a host loop runs: the energy of the term whose earliest frame
 // is t into `energy`, and the gradient of x_i^t from every term containing frame t (earliest
 // frames t − order … t, in that order) added to grad_x [T][N][3] when not null. x [T][N][3]; conf
-// [T][N] or null (c ≡ 1; read only when weighted). Host values: make_accel_element.
+// [T][N] or null (c ≡ 1; read only when weighted). Host values: AccelTerm::element().
 template <class S>
 struct AccelElement {
   Literal<S> k = Literal<S>(0);  // the weight, / the number of terms with Normalization::mean
@@ -74,6 +74,8 @@ struct AccelElement {
     const S* r2 = order == 2 ? x.ptr(u + 2, i) : r1;
     for (int d = 0; d < 3; ++d) a[d] = accel_difference<S, Literal<S>>(order, r0[d], r1[d], r2[d]);
   }
+
+  bool reads_confidence() const { return weighted; }
 
   SMG_HOST_DEVICE void at(Index t, Index i, PositionsView<const S> x, const S* conf, S* grad_x,
                           S& energy) const {
@@ -95,17 +97,6 @@ struct AccelElement {
       for (int d = 0; d < 3; ++d) grad_x[(t * N + i) * 3 + d] += g[d];
   }
 };
-
-// The element step of `o` over T frames and N nodes (the scale formed on the host, in double, as
-// the CPU term forms it).
-template <class S>
-AccelElement<S> make_accel_element(const AccelOptions& o, Index frames, Index nodes) {
-  AccelElement<S> e;
-  e.k = Literal<S>(accel_scale(o, frames, nodes));
-  e.weighted = o.confidence_weighted;
-  e.order = o.form == AccelForm::acceleration ? 2 : 1;
-  return e;
-}
 
 namespace detail {
 
@@ -129,6 +120,18 @@ struct AccelTerm : TermDefaults {
 
   bool on() const { return enabled; }
   Index reach() const { return order; }
+
+  // The CUDA driver's element pass (cuda/driver.cuh) runs this term as its per-(frame, node)
+  // step, configured as above (the scale formed on the host, in double, as node() forms it).
+  using Element = AccelElement<S>;
+  Element element() const {
+    Element e;
+    e.k = L(scale_d);
+    e.weighted = weighted;
+    e.order = static_cast<int>(order);
+    return e;
+  }
+  static Acc& energy_of(RegularizerResult<S>& r) { return r.accel; }
   Index slot_scalars(const BlockPlan&) const { return 0; }
   void bind(const BlockPlan&, S*, const NeighborsView<S, I>&) {}
   struct Block {};
