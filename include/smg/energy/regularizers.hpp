@@ -58,7 +58,8 @@ inline namespace SMG_ISA_NAMESPACE {
 // The terms of the fused step, in the order the driver calls them per node (the confidences
 // first: they fill the records the others read). Adding a term: a header in energy/terms/, its
 // one-term call included above, its options and list entries in options.hpp, one member and one
-// configure line here (docs/contributing.md).
+// configure line here (docs/contributing.md §3). The CUDA driver reads this list too: a member
+// whose struct names an Element runs in its element pass (cuda/driver.cuh, ListElements).
 template <class S, class I>
 struct RegularizerTermSet {
   ConfidenceTerm<S, I> confidence;
