@@ -33,6 +33,13 @@ std::string dashed(std::string s) {
   return s;
 }
 
+// The flag "<term>-<name>" beside `flag` = "<term>-<option>" (a Normalization is read through the
+// switch <term>-normalize, a GapList's weights through <term>-gap-weights; both options' names
+// are one word, so the term is what precedes the last '-').
+std::string sibling_flag(const std::string& flag, const char* name) {
+  return flag.substr(0, flag.rfind('-')) + "-" + name;
+}
+
 // The flag(s) of one option, by the field's type; `flag` is "<term>-<option>".
 void add_flags(std::vector<FlagSpec>& f, const std::string& flag, double v) {
   f.push_back({flag, format_number(v), "a number"});  // help completed by regularizer_flags
@@ -46,7 +53,7 @@ void add_flags(std::vector<FlagSpec>& f, const std::string& flag, bool v) {
 void add_flags(std::vector<FlagSpec>& f, const std::string& flag, smg::Normalization) {
   // The library's field is `normalization`; its flag, like torch's key, is the switch
   // "normalize" (Normalization::mean), so the option's name is not used.
-  f.push_back({flag.substr(0, flag.rfind('-')) + "-normalize", "",
+  f.push_back({sibling_flag(flag, "normalize"), "",
                "divide the energy (and gradient) by its number of terms", true});
 }
 void add_flags(std::vector<FlagSpec>& f, const std::string& flag, const smg::GapList& v) {
@@ -56,7 +63,7 @@ void add_flags(std::vector<FlagSpec>& f, const std::string& flag, const smg::Gap
     weights += (weights.empty() ? "" : ",") + format_number(g.weight);
   }
   f.push_back({flag, deltas, "temporal gaps (frames), comma separated"});
-  f.push_back({flag.substr(0, flag.rfind('-')) + "-gap-weights", weights, "one weight per gap"});
+  f.push_back({sibling_flag(flag, "gap-weights"), weights, "one weight per gap"});
 }
 void add_flags(std::vector<FlagSpec>& f, const std::string& flag, smg::AccelForm v) {
   std::string forms;
@@ -73,11 +80,11 @@ void read_flag(const Args& a, const std::string& flag, bool& v) {
   v = s == "1";
 }
 void read_flag(const Args& a, const std::string& flag, smg::Normalization& v) {
-  v = a.get_switch(flag.substr(0, flag.rfind('-')) + "-normalize") ? smg::Normalization::mean
+  v = a.get_switch(sibling_flag(flag, "normalize")) ? smg::Normalization::mean
                                                                     : smg::Normalization::sum;
 }
 void read_flag(const Args& a, const std::string& flag, smg::GapList& v) {
-  v = read_gap_list(a, flag, flag.substr(0, flag.rfind('-')) + "-gap-weights");
+  v = read_gap_list(a, flag, sibling_flag(flag, "gap-weights"));
 }
 void read_flag(const Args& a, const std::string& flag, smg::AccelForm& v) {
   std::vector<std::string> names;
