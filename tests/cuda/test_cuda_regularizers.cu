@@ -309,6 +309,11 @@ TEST_SUITE("cuda-host") {
     auto msg = [](const smg::Status& st) { return std::string(st.message()); };
     CHECK(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
         s.positions(), s.rotations(), s.visibility(), s.graph(), o, rev));
+    // Every term of the list has a CUDA pass (a phase of drive() or an Element), so the launcher
+    // accepts all of them on: a term added to the list without one fails here.
+    const smg::Status all = smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+        s.positions(), s.rotations(), s.visibility(), s.graph(), options(smg::test::fused_all_terms()), rev);
+    CHECK_MESSAGE(all, all.message());
     CHECK(msg(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
                   s.positions(), smg::QuaternionsView<const float>(), s.visibility(), s.graph(), o,
                   rev))

@@ -41,6 +41,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <limits>
+#include <string>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -154,6 +155,43 @@ ListElements<S, I> list_elements(const RegularizerOptions& o, Index T, Index N, 
   ListElements<S, I> pack;
   set.apply([&](const auto&... t) { fill_elements(pack, t...); });
   return pack;
+}
+
+// The terms drive() runs in a phase of their own (confidences, LRM) or by hand in the element
+// pass (C-ARAP and ARAP); every other term of the list runs only through its Element.
+template <class T>
+struct OwnPhase : std::false_type {};
+template <class S, class I>
+struct OwnPhase<smg::detail::ConfidenceTerm<S, I>> : std::true_type {};
+template <class S, class I>
+struct OwnPhase<smg::detail::RigidTerm<S, I>> : std::true_type {};
+template <class S, class I>
+struct OwnPhase<smg::detail::LrmTerm<S, I>> : std::true_type {};
+template <class T>
+constexpr bool kRunsOnCuda = OwnPhase<T>::value || HasElement<T>::value;
+
+// Whether drive() runs every term of `o` that is on: a CPU term with neither a phase here nor an
+// Element would be left out of the GPU's energies and gradients, silently. Each term is
+// configured alone (on shapes where every term with an effect is on); one line naming the first
+// term without a CUDA pass.
+template <class S, class I>
+Status check_cuda_terms(const RegularizerOptions& o) {
+  Status st = Status::ok();
+  for_each_term(o, [&](const char* name, bool on, const auto&) {
+    if (!on || !st) return;
+    RegularizerOptions alone = o;
+    for_each_term(alone, [&](const char* n, bool& f, const auto&) { f = std::string(n) == name; });
+    smg::detail::RegularizerTermSet<S, I> set(64, 8, 4, 32, alone, true, true);
+    bool missing = false;
+    set.apply([&](const auto&... t) {
+      ((missing = missing || (t.on() && !kRunsOnCuda<std::decay_t<decltype(t)>>)), ...);
+    });
+    if (missing)
+      st = Status::error(std::string("options.terms.") + name +
+                         ": smg::cuda::regularizers has no pass for this term (its term struct "
+                         "names no Element, cuda/driver.cuh)");
+  });
+  return st;
 }
 
 // Energies of the element pass, in this order: C-ARAP, ARAP, then the list's element terms.

@@ -45,7 +45,8 @@ std::size_t regularizers_extra_bytes(Index frames, Index nodes, Index k,
 // Checks the shapes and options of smg::cuda::regularizers on the host (the views are over
 // device memory: contents are not read; run validate_regularizers below on untrusted data
 // first). Same messages as the CPU validate_regularizers for what it checks; in addition
-// K <= kLrmMaxK with LRM on and a ReverseGraph built for this graph.
+// K <= kLrmMaxK with LRM on, a CUDA pass for every term that is on (check_cuda_terms) and a
+// ReverseGraph built for this graph.
 template <class S, class I>
 Status validate_regularizers_shapes(smg::detail::NonDeducedT<PositionsView<const S>> positions,
                                     smg::detail::NonDeducedT<QuaternionsView<const S>> rotations,
@@ -75,6 +76,7 @@ Status validate_regularizers_shapes(smg::detail::NonDeducedT<PositionsView<const
   if (on.lrm)
     if (Status s = detail::check_lrm_max_k(K); !s) return s;
   if (Status s = validate_options(options); !s) return s;
+  if (Status s = detail::check_cuda_terms<S, I>(options); !s) return s;
   if (confidence.data() != nullptr) {
     if (!on.confidence)
       return Status::error("confidence: an output was given but options.terms.confidence is off");
