@@ -430,6 +430,9 @@ def targets():
 
 
 TARGETS = targets()
+# ctest's test names: add_test(NAME x) and the quick-start programs' tests (tests/CMakeLists.txt).
+TEST_NAMES = set(re.findall(r"add_test\(\s*NAME\s+(\w+)(?=[\s)])", "\n".join(cmake_texts().values()))) | \
+    {"quickstart_" + os.path.basename(f)[:-4] for f in FILES if re.match(r"examples/quickstart/\w+\.cpp$", f)}
 SMG_OPTIONS = set(re.findall(r"\b(SMG_\w+)\b", "\n".join(cmake_texts().values())))
 
 
@@ -704,6 +707,9 @@ def check_command(f, n, toks, state):
                     if args[j] not in TARGETS:
                         problem(f, n, "cmake --target %s: no such target in the CMakeLists" % args[j])
                     j += 1
+                if "--build" in args:
+                    built = os.path.normpath(os.path.join(state["cwd"], args[args.index("--build") + 1]))
+                    state.setdefault("built", {}).setdefault(built, set()).update(args[i + 1:j])
                 i = j
                 continue
             m = re.match(r"^-D(SMG_\w+)", a)
@@ -718,6 +724,17 @@ def check_command(f, n, toks, state):
     if prog == "ctest":
         if "--test-dir" in args:
             checked_paths.append(args[args.index("--test-dir") + 1])
+            # A page that builds only some targets into a folder it configures, then runs ctest
+            # there: every test that -R selects and whose program is a target must be built
+            # (tests/run_expect.cmake fails a test whose program is missing).
+            tdir = os.path.normpath(os.path.join(state["cwd"], args[args.index("--test-dir") + 1]))
+            built = state.get("built", {}).get(tdir)
+            if built is not None and "-R" in args and args.index("-R") + 1 < len(args):
+                pat = args[args.index("-R") + 1].strip("'\"")
+                missing = sorted(t for t in TEST_NAMES & TARGETS if re.search(pat, t) and t not in built)
+                if missing:
+                    problem(f, n, "ctest -R %s runs %s, which this page's cmake --build %s --target "
+                                  "does not build" % (pat, ", ".join(missing), tdir))
         args = []
     elif looks_like_path(prog):
         why = path_problem(prog, state["cwd"], state["made"])
