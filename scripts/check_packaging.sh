@@ -73,7 +73,8 @@ if [ "${SMG_REUSE_BUILD:-0}" = 1 ]; then where=$root; else where=$work/fresh/smg
 t0=$(date +%s)
 (cd "$where" && HOME="$work/home" bash -euo pipefail -c "$block") >"$work/intree.log" 2>&1 ||
   { cat "$work/intree.log"; echo "packaging: docs/quickstart.md in-tree block failed (in $where)" >&2; exit 1; }
-grep -qx "quickstart energies: ok" "$work/intree.log"
+grep -qx "quickstart energies: ok" "$work/intree.log" ||
+  { cat "$work/intree.log"; echo "packaging: docs/quickstart.md in-tree block: quickstart_energies did not print its ok line" >&2; exit 1; }
 grep -q "100% tests passed, 0 tests failed out of 4" "$work/intree.log" ||
   { cat "$work/intree.log"; echo "packaging: docs/quickstart.md in-tree block: ctest did not run the 4 quick-start tests" >&2; exit 1; }
 echo "packaging: docs/quickstart.md in-tree block (in $where): ok in $(( $(date +%s) - t0 ))s"
