@@ -22,6 +22,9 @@ Usage: scripts/check_docs.py [REPO_ROOT]   (standard library only; exit 1 on any
     file there is shown once, and the command blocks that scripts/check_packaging.sh runs
     ("<!-- run: ... -->" in docs/quickstart.md and README.md) exist.
     `scripts/check_docs.py --sync-quickstart` rewrites the page's blocks from the files.
+    Excerpts: in README.md and docs/, a line "<!-- excerpt: PATH -->" is followed by a fenced
+    block whose lines are PATH's own, in order; a line "// ..." or "# ..." marks lines left
+    out, and each run between them is consecutive lines of PATH.
 
 (f) every command shown in README.md, docs/*.md and bench/README.md (lines of ```sh/```bash
     blocks, command-like lines of plain ``` blocks, and inline `code` that starts with scripts/,
@@ -375,6 +378,64 @@ for page, marks in RUN_MARKS.items():
         if mark not in text.split("\n"):
             problem(page, 1, "missing the command block '%s' that scripts/check_packaging.sh runs"
                     % mark)
+
+# Excerpts: "<!-- excerpt: PATH -->" in README.md or a page of docs/ is followed by a fenced
+# block whose lines are PATH's, in order. A line "// ..." or "# ..." (any indentation) stands for
+# lines left out; each run of lines between them is consecutive lines of PATH, and the runs come
+# in the file's order without overlapping.
+EXCERPT_MARK = re.compile(r"^<!-- excerpt: (\S+) -->$")
+ELISION = re.compile(r"^\s*(//|#) \.\.\.\s*$")
+
+
+def excerpt_problem(block, source):
+    """None if BLOCK (a list of lines) is an excerpt of SOURCE's lines, else (index, message)."""
+    src = source.split("\n")
+    runs, run, start = [], [], 0
+    for k, line in enumerate(block + ["// ..."]):
+        if ELISION.match(line):
+            if run:
+                runs.append((start, run))
+            run, start = [], k + 1
+        else:
+            run.append(line)
+    at = 0
+    for start, run in runs:
+        hit = next((i for i in range(at, len(src) - len(run) + 1) if src[i:i + len(run)] == run), None)
+        if hit is None:
+            # Name the first line that does not continue the run's longest match from `at` on.
+            best = 0
+            for i in range(at, len(src)):
+                j = 0
+                while j < len(run) and i + j < len(src) and src[i + j] == run[j]:
+                    j += 1
+                best = max(best, j)
+            return start + best, "not the file's next line here"
+        at = hit + len(run)
+    return None
+
+
+for f in doc_md:
+    lines = TEXT[f].split("\n")
+    for n, line in enumerate(lines):
+        m = EXCERPT_MARK.match(line)
+        if not m:
+            continue
+        if n + 1 >= len(lines) or not lines[n + 1].startswith("```"):
+            problem(f, n + 1, "%s: the excerpt marker must be followed by a ``` block" % m.group(1))
+            continue
+        end = n + 2
+        while end < len(lines) and lines[end] != "```":
+            end += 1
+        source = read_text(m.group(1))
+        if end >= len(lines):
+            problem(f, n + 1, "%s: the excerpt's block is not closed" % m.group(1))
+        elif source is None:
+            problem(f, n + 1, "%s: no such file" % m.group(1))
+        else:
+            bad = excerpt_problem(lines[n + 2:end], source)
+            if bad:
+                problem(f, n + 3 + bad[0], "excerpt of %s: %s (the block's lines must be the file's, "
+                        "in order; '// ...' marks lines left out)" % (m.group(1), bad[1]))
 
 # ---------------------------------------------------------------------------------------------
 # (f) commands in the docs name scripts, flags, targets and paths that exist
