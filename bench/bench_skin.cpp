@@ -218,10 +218,9 @@ void BM_blend(benchmark::State& state) {
   o.quaternions = {quat.data(), 1, kP};
   smg::SkinOptions opt;
   opt.method = M;
-  opt.parallel.threads = int(state.range(0));
   const smg_bench::Stopwatch clock;
   for (auto _ : state) {
-    smg::skin_blend(v.nodes(), v.pts(), v.query(), o, opt);
+    smg::skin_blend(v.nodes(), v.pts(), v.query(), o, opt, smg::ParallelOptions{int(state.range(0)), 0});
     benchmark::ClobberMemory();
   }
   rates(state, clock, kP, s.edges);
@@ -246,10 +245,9 @@ void BM_blend_jacobians(benchmark::State& state) {
   o.J_point = {Jp.data(), 1, kPJac, 36};
   smg::SkinOptions opt;
   opt.method = M;
-  opt.parallel.threads = int(state.range(0));
   const smg_bench::Stopwatch clock;
   for (auto _ : state) {
-    smg::skin_blend(v.nodes(), v.pts(kPJac), v.query(), o, opt);
+    smg::skin_blend(v.nodes(), v.pts(kPJac), v.query(), o, opt, smg::ParallelOptions{int(state.range(0)), 0});
     benchmark::ClobberMemory();
   }
   rates(state, clock, kPJac, s.edges_jac);
@@ -298,8 +296,7 @@ struct BackwardRun {
     gr.point_rotations = {pr.data(), kP};
     smg::SkinOptions opt;
     opt.method = m;
-    opt.parallel.threads = threads;
-    smg::skin_blend_backward(v.nodes(), v.pts(), v.query(), go, gr, ws, opt);
+    smg::skin_blend_backward(v.nodes(), v.pts(), v.query(), go, gr, ws, opt, smg::ParallelOptions{threads, 0});
   }
 };
 
@@ -371,8 +368,7 @@ void BM_twist(benchmark::State& state) {
     o.positions = {out.data(), 1, P};
     smg::SkinOptions opt;
     opt.method = m;
-    opt.parallel.threads = 1;
-    smg::skin_blend(nodes, sp, {tq.data(), 1}, o, opt);
+    smg::skin_blend(nodes, sp, {tq.data(), 1}, o, opt, smg::ParallelOptions{1, 0});
     return out;
   };
   auto volume = [&](const std::vector<double>& x) {

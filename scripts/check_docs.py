@@ -1059,19 +1059,20 @@ for f in CMD_PAGES:
 # (m) every regulariser term has its pieces (docs/contributing.md section 3): a header in
 # include/smg/energy/terms/ is reached from the fused step's header (regularizers.hpp includes
 # it, or the one-term operator that includes it; the umbrella energy.hpp includes
-# regularizers.hpp), its term struct is a member of the fused step's RegularizerTermSet, its
+# regularizers.hpp), its term struct is a member of the fused step's RegularizerTermSet (term_list.hpp), its
 # header is named in docs/math/energy.md or on its own page docs/math/terms/<name>.md, and (for an energy, not the confidences) its one-term
 # operator has an entry in the operator list of the cross-cutting tests.
 TERMS_DIR = "include/smg/energy/terms"
 umbrella = read_text("include/smg/energy.hpp") or ""
 regs = read_text("include/smg/energy/regularizers.hpp") or ""
+term_list_hpp = read_text("include/smg/energy/term_list.hpp") or ""
 INCLUDE_RE = re.compile(r'^#include "(smg/[\w/]+\.hpp)"', re.M)
 reached = set(INCLUDE_RE.findall(regs))
 for inc in list(reached):
     reached |= set(INCLUDE_RE.findall(read_text("include/" + inc) or ""))
 if '#include "smg/energy/regularizers.hpp"' not in umbrella:
     problem("include/smg/energy.hpp", 1, "does not include smg/energy/regularizers.hpp (the term list)")
-term_set = regs[regs.find("struct RegularizerTermSet"):]
+term_set = term_list_hpp[term_list_hpp.find("struct RegularizerTermSet"):]
 term_set = term_set[:term_set.find("\n};")]
 operators = read_text("tests/support/operators.hpp") or ""
 op_list = re.search(r"using Operators = std::tuple<([^>]*)>", operators)
@@ -1088,7 +1089,7 @@ for rel in sorted(f for f in tracked_files() if f.startswith(TERMS_DIR + "/") an
         problem(rel, 1, "no term struct (struct FooTerm : TermDefaults, energy/block.hpp's concept)")
     for st in structs:
         if not re.search(r"\b%s<S, I> \w+;" % st, term_set):
-            problem("include/smg/energy/regularizers.hpp", 1,
+            problem("include/smg/energy/term_list.hpp", 1,
                     "%s (%s) is not a member of RegularizerTermSet" % (st, rel))
     own_page = "docs/math/terms/%s.md" % name
     if "terms/%s.hpp" % name not in energy_md and "terms/%s.hpp" % name not in TEXT.get(own_page, ""):
@@ -1116,7 +1117,7 @@ try:
         problem("docs/api.md", 1, "the terms' table is out of date: run scripts/terms_table.py --write docs/api.md")
     for flag, r in terms_table.rows():
         if r is None:
-            problem("include/smg/energy/regularizers.hpp", 1, "no term of RegularizerTermSet configures RegularizerTerms::%s" % flag)
+            problem("include/smg/energy/term_list.hpp", 1, "no term of RegularizerTermSet configures RegularizerTerms::%s" % flag)
             continue
         for col in ("options", "call", "torch", "bench", "cuda", "tests"):
             if r[col] == "—":

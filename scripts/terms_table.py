@@ -2,7 +2,7 @@
 """The regulariser terms' table of docs/api.md, generated from the code (issue 35: the term list
 drives the docs' API table): one row per flag of RegularizerTerms, read from
 
-  - the fused step's list, RegularizerTermSet (include/smg/energy/regularizers.hpp): the term
+  - the fused step's list, RegularizerTermSet (include/smg/energy/term_list.hpp): the term
     struct that each flag configures, and so its header in include/smg/energy/terms/;
   - that header's top comment: the equation labels (E..);
   - RegularizerOptions (include/smg/energy/options.hpp): the flag's options struct;
@@ -64,7 +64,7 @@ def labels(comment):
 
 
 def rows():
-    regs = read("include/smg/energy/regularizers.hpp")
+    regs = read("include/smg/energy/term_list.hpp")
     term_set = block(regs, "struct RegularizerTermSet")
     members = re.findall(r"(\w+Term)<S, I> (\w+);", term_set)
     ctor = block(term_set, "RegularizerTermSet(", "\n  }")

@@ -91,8 +91,7 @@ void blend(const Invocation& inv, const DqbCase& c, smg::SkinMethod method, Outp
   ok(smg::validate_skin_blend(nodes, pts, {c.t_query.data(), Q}, o));
   smg::SkinOptions opt;
   opt.method = method;
-  opt.parallel = par;
-  smg::skin_blend(nodes, pts, {c.t_query.data(), Q}, o, opt);
+  smg::skin_blend(nodes, pts, {c.t_query.data(), Q}, o, opt, par);
   // Finite inputs must give finite results (docs/interop.md "Overflow").
   const std::string cause = inv.case_dir.file("positions.npy") + ": coordinates too large: the blend overflows (non-finite ";
   require_finite(weights, cause + "skinning weight)");

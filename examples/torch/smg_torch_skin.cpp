@@ -170,8 +170,7 @@ py::tuple dqb_forward(const at::Tensor& node_positions, const at::Tensor& node_q
     o.quaternions = {mptr<S>(out_q), in.Q, in.P};
     const smg::SkinIndexView tq(cptr<std::int32_t>(in.t_query), in.Q);
     py::gil_scoped_release release;
-    opt.parallel = parallel_options();
-    smg::skin_blend(nodes, pts, tq, o, opt);
+    smg::skin_blend(nodes, pts, tq, o, opt, parallel_options());
     return 0;
   });
   return py::make_tuple(out_x, out_q, drivers, weights);
@@ -231,10 +230,9 @@ py::tuple dqb_backward(const at::Tensor& node_positions, const at::Tensor& node_
       auto gr = blend_gradients<S>(in, gx, gq, gp, gpq);
       py::gil_scoped_release release;
       smg::SkinWorkspace<S> ws;
-      opt.parallel = parallel_options();
       smg::skin_blend_backward(nodes_of<S>(in), points_of<S>(in, drv, wts),
                                smg::SkinIndexView(cptr<std::int32_t>(in.t_query), in.Q), go, gr, ws,
-                               opt);
+                               opt, parallel_options());
       return 0;
     });
   }

@@ -136,9 +136,7 @@ std::vector<float> carry_queries(const TrackQueries& q, const Dataset& d, const 
   out.positions = smg::SequenceView<float, 3>(pos.data(), T, M);
   out.quaternions = smg::SequenceView<float, 4>(rot.data(), T, M);
   check(smg::validate_skin_blend(ns.skin_nodes(), pts, t_query, out), "skin_blend");
-  smg::SkinOptions so;
-  so.parallel = parallel;
-  smg::skin_blend(ns.skin_nodes(), pts, t_query, out, so);
+  smg::skin_blend(ns.skin_nodes(), pts, t_query, out, smg::SkinOptions{}, parallel);
   std::vector<float> result(sz(M) * T * 3);  // [M][T][3], the layout of tracks3d.npy
   for (int f = 0; f < T; ++f)
     for (int i = 0; i < M; ++i)

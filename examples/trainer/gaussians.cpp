@@ -225,9 +225,7 @@ void pose_model(const GaussianModel<S>& m, const NodeState<S>& n, int t, std::ve
   out.positions = smg::SequenceView<S, 3>(means->data() + sz(F) * 3, 1, P);
   out.quaternions = smg::SequenceView<S, 4>(quats->data() + sz(F) * 4, 1, P);
   check(smg::validate_skin_blend(n.skin_nodes(), pts, t_query, out), "skin_blend");
-  smg::SkinOptions so;
-  so.parallel = parallel;
-  smg::skin_blend(n.skin_nodes(), pts, t_query, out, so);
+  smg::skin_blend(n.skin_nodes(), pts, t_query, out, smg::SkinOptions{}, parallel);
 }
 
 template <class S>
@@ -295,9 +293,7 @@ void ModelRenderer<S>::backward(const GaussianModel<S>& m, const NodeState<S>& n
   gs.points = smg::TableView<S, 3>(o.means.data() + sz(F) * 3, P);
   gs.point_quaternions = smg::TableView<S, 4>(o.quats.data() + sz(F) * 4, P);
   check(smg::validate_skin_blend_backward(n.skin_nodes(), pts, t_query, go, gs), "skin_blend_backward");
-  smg::SkinOptions so;
-  so.parallel = parallel;
-  smg::skin_blend_backward(n.skin_nodes(), pts, t_query, go, gs, skin_ws_, so);
+  smg::skin_blend_backward(n.skin_nodes(), pts, t_query, go, gs, skin_ws_, smg::SkinOptions{}, parallel);
   times_.skin_backward += seconds_since(t1);
 }
 

@@ -398,12 +398,23 @@ Out<S> gpu(const Case<S, I>& s, const smg::RegularizerOptions& o, const Flags& f
   return r;
 }
 
+// The masks the GPU runs, from the term list (no term named): every term, each term alone, each
+// term with the confidences, and all terms but one.
+inline std::vector<unsigned> list_masks() {
+  const unsigned all = smg::test::fused_all_terms(), n = smg::test::fused_term_count();
+  std::vector<unsigned> m{all};
+  for (unsigned k = 0; k < n; ++k)
+    for (const unsigned v : {1u << k, 1u | (1u << k), all & ~(1u << k)})
+      if (v != 0 && std::find(m.begin(), m.end(), v) == m.end()) m.push_back(v);
+  return m;
+}
+
 template <class S, class I>
 void gpu_case(std::uint64_t seed, Index T, Index N, Index K) {
   CAPTURE(seed);
   CAPTURE(sizeof(S));
   const Case<S, I> s(scene(T, N, K, seed));
-  for (const unsigned mask : {31u, 15u, 11u, 5u, 8u, 3u, 16u, 17u}) {
+  for (const unsigned mask : list_masks()) {
     CAPTURE(mask);
     const smg::RegularizerOptions o = options(mask);
     for (const bool raw : {false, true}) {

@@ -109,8 +109,7 @@ Blended run_blend(const Setup& u, SkinMethod m, int threads, bool jacobians) {
   REQUIRE(smg::validate_skin_blend(u.nodes(), u.points(), u.query(), out).is_ok());
   smg::SkinOptions opt;
   opt.method = m;
-  opt.parallel.threads = threads;
-  smg::skin_blend(u.nodes(), u.points(), u.query(), out, opt);
+  smg::skin_blend(u.nodes(), u.points(), u.query(), out, opt, smg::ParallelOptions{threads, 0});
   return b;
 }
 // Every output bit-identical.
@@ -167,8 +166,7 @@ void run_backward(const Setup& u, SkinMethod m, int threads, Grads& g,
   REQUIRE(smg::validate_skin_blend_backward(u.nodes(), u.points(), u.query(), go, gr).is_ok());
   smg::SkinOptions opt;
   opt.method = m;
-  opt.parallel.threads = threads;
-  smg::skin_blend_backward(u.nodes(), u.points(), u.query(), go, gr, ws, opt);
+  smg::skin_blend_backward(u.nodes(), u.points(), u.query(), go, gr, ws, opt, smg::ParallelOptions{threads, 0});
 }
 
 }  // namespace

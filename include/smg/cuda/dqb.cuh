@@ -25,7 +25,7 @@
 #include <string>
 
 #include "smg/core/rotation_gradient.hpp"
-#include "smg/skin/blend.hpp"
+#include "smg/skin/blend_element.hpp"
 #include "smg/skin/blend_point.hpp"
 #include "smg/skin/skin_views.hpp"
 

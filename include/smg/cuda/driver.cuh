@@ -6,7 +6,7 @@
 //   1. confidences (when needed): per chunk of frames, the velocities (E1) and edge changes (E4)
 //      of the chunk's frames, then c_{t,i} (E6) into [T][N] (the caller's output, or scratch);
 //   2. the element terms in ONE pass, one thread per (frame t, node n): C-ARAP and ARAP
-//      (cuda/rigid.cuh) and every term of the CPU list RegularizerTermSet (energy/regularizers.hpp)
+//      (cuda/rigid.cuh) and every term of the CPU list RegularizerTermSet (energy/term_list.hpp)
 //      that has an Element, a step per (frame, node) without scratch (smoothness: AccelElement in
 //      energy/terms/accel.hpp, the header of the CPU term), add what they owe to x_n^t's and
 //      R_n^t's gradient rows, which only that thread writes; energies per thread, then per block
@@ -53,18 +53,13 @@
 #include "smg/energy/block.hpp"
 #include "smg/energy/confidence_term.hpp"
 #include "smg/energy/options.hpp"
-#include "smg/energy/regularizers.hpp"
+#include "smg/energy/term_list.hpp"
 #include "smg/graph/neighbors.hpp"
 
 namespace smg::cuda {
 namespace detail {
 
 // ---- The element terms of the CPU list: the members of RegularizerTermSet with an Element ----
-
-template <class T, class = void>
-struct HasElement : std::false_type {};
-template <class T>
-struct HasElement<T, std::void_t<typename T::Element>> : std::true_type {};
 
 // The steps of the element terms, in list order; at() runs those that are on, term k's energy
 // into e[k]. A recursive pack rather than std::tuple: device code calls it.
@@ -107,7 +102,7 @@ struct AppendElement<true, ElementPack<Es...>, T> {
 };
 template <class Pack, class T, class... Ts>
 struct ElementsOf<Pack, T, Ts...> {
-  using type = typename ElementsOf<typename AppendElement<HasElement<T>::value, Pack, T>::type,
+  using type = typename ElementsOf<typename AppendElement<smg::detail::has_element_v<T>, Pack, T>::type,
                                    Ts...>::type;
 };
 // The list's member types, as apply() passes them.
@@ -124,7 +119,7 @@ template <class Pack>
 void fill_elements(Pack&) {}
 template <class Pack, class T, class... Ts>
 void fill_elements(Pack& p, const T& t, const Ts&... ts) {
-  if constexpr (HasElement<T>::value) {
+  if constexpr (smg::detail::has_element_v<T>) {
     p.on = t.on();
     p.step = t.element();
     fill_elements(p.rest, ts...);
@@ -139,7 +134,7 @@ void element_energy_slots(Accumulator<S>**, RegularizerResult<S>*, const Pack&) 
 template <class S, class Pack, class T, class... Ts>
 void element_energy_slots(Accumulator<S>** out, RegularizerResult<S>* r, const Pack& p, const T&,
                           const Ts&... ts) {
-  if constexpr (HasElement<T>::value) {
+  if constexpr (smg::detail::has_element_v<T>) {
     *out = p.on ? &T::energy_of(*r) : nullptr;
     element_energy_slots<S>(out + 1, r, p.rest, ts...);
   } else {
@@ -168,7 +163,7 @@ struct OwnPhase<smg::detail::RigidTerm<S, I>> : std::true_type {};
 template <class S, class I>
 struct OwnPhase<smg::detail::LrmTerm<S, I>> : std::true_type {};
 template <class T>
-constexpr bool kRunsOnCuda = OwnPhase<T>::value || HasElement<T>::value;
+constexpr bool kRunsOnCuda = OwnPhase<T>::value || smg::detail::has_element_v<T>;
 
 // Whether drive() runs every term of `o` that is on: a CPU term with neither a phase here nor an
 // Element would be left out of the GPU's energies and gradients, silently. Each term is

@@ -15,9 +15,8 @@
 #include "smg/core/validate.hpp"
 #include "smg/cuda/dqb.cuh"
 #include "smg/graph/neighbors.hpp"
-#include "smg/skin/drivers.hpp"
 #include "smg/skin/skin_views.hpp"
-#include "smg/skin/weights.hpp"
+#include "smg/skin/weights_element.hpp"
 
 namespace smg::cuda {
 

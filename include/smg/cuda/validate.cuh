@@ -11,10 +11,7 @@
 #include <vector>
 
 #include "smg/cuda/common.cuh"
-#include "smg/energy/arap.hpp"
-#include "smg/energy/carap.hpp"
-#include "smg/energy/confidence.hpp"
-#include "smg/energy/lrm.hpp"
+#include "smg/energy/validate.hpp"  // the CPU checks, free of the CPU thread pool
 
 namespace smg::cuda {
 

@@ -15,23 +15,11 @@
 #include "smg/energy/common.hpp"
 #include "smg/energy/driver.hpp"
 #include "smg/energy/options.hpp"
+#include "smg/energy/validate.hpp"
 #include "smg/energy/terms/accel.hpp"
 #include "smg/energy/workspace.hpp"
 
 namespace smg {
-
-// Checks the arguments of accel(): `confidence` [T][N] may be empty (all 1; read only with
-// options.confidence_weighted), the gradient may be empty (not computed).
-template <class S>
-Status validate_accel(detail::NonDeducedT<PositionsView<const S>> positions,
-                      detail::NonDeducedT<FrameScalarsView<const S>> confidence,
-                      const AccelOptions& options, PositionsView<S> grad_positions = {}) {
-  const Index T = positions.frames(), N = positions.nodes();
-  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  return validate_optional_output(grad_positions, T, N, "grad_positions");
-}
 
 inline namespace SMG_ISA_NAMESPACE {
 

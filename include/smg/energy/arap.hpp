@@ -6,20 +6,9 @@
 #include "smg/core/config.hpp"
 
 #include "smg/energy/carap.hpp"
+#include "smg/energy/validate.hpp"
 
 namespace smg {
-
-// Checks the inputs and outputs of arap().
-template <class S, class I>
-Status validate_arap(detail::NonDeducedT<PositionsView<const S>> positions,
-                     detail::NonDeducedT<QuaternionsView<const S>> rotations,
-                     const NeighborsView<S, I>& graph, const ArapOptions& options,
-                     PositionsView<S> grad_positions = {},
-                     detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
-  if (Status s = validate_options(options); !s) return s;
-  return validate_carap<S>(positions, rotations, {}, graph, carap_options_for_arap(options),
-                           grad_positions, grad_rotations);
-}
 
 // Plain ARAP energy; gradients (positions; rotations in the right tangent [T][N][3] or raw
 // quaternion coordinates [T][N][4]) are added to the given buffers like carap(). Precondition: validate_arap.

@@ -1,26 +1,34 @@
 // smg/energy/block.hpp — what the regulariser driver (energy/driver.hpp), its terms
 // (energy/terms/*.hpp) and the CUDA fused step (cuda/regularizers.cuh) share: the partition of
 // the frames into blocks, the per-block view a term reads and writes, the sink of rotation
-// gradients, the argument checks of the fused step and the bytes its scratch keeps
-// under (docs/math/energy.md "The fused regulariser pass", "Determinism"). No loops over the graph
-// and no thread pool: a term header includes this, and CUDA translation units can include it
-// without the CPU's parallel.hpp.
+// gradients, the bytes its scratch keeps under (docs/math/energy.md "The fused regulariser
+// pass", "Determinism") and the term concept, checked. No loops over the graph and no thread
+// pool: a term header includes this, and CUDA translation units can include it without the
+// CPU's parallel.hpp.
 //
-// The term concept (each energy/terms/<name>.hpp is one; the driver calls these, in this order):
+// The term concept (each energy/terms/<name>.hpp is one; the driver calls these, in this order;
+// TermDefaults below gives the ones marked *). detail::check_term<Term, S, I>() states it for the
+// compiler: the drivers call it first, so a term that lacks a member, or has it with another
+// signature, stops the build at one static_assert naming the member ("smg term concept: ...").
 //   bool on() const                         computes anything at all (an off term costs nothing)
 //   Index reach() const                     frames past a block's end it reads or writes (max δ)
-//   Index lanes() const                     block lengths must be a multiple of this (SIMD lanes)
-//   Index preferred_block() const           frames per block it runs best with (0: no preference;
+//   Index lanes() const *                   block lengths must be a multiple of this (SIMD lanes)
+//   Index preferred_block() const *         frames per block it runs best with (0: no preference;
 //                                           used only when every energy term that is on has one)
-//   Index stored(Index nr, Index nown) const  frames a block of nr (nown owned) must store
-//   bool reads_rotations() const, bool position_gradient() const, bool rotation_gradient() const
+//   Index stored(Index nr, Index nown) const *  frames a block of nr (nown owned) must store
+//   bool reads_rotations() const *, bool position_gradient() const *, bool rotation_gradient() const *
 //   Index slot_scalars(const BlockPlan&) const   scratch of one slot (a block in flight)
-//   Index fixed_scalars(const BlockPlan&) const  scratch shared by all blocks
-//   void bind(const BlockPlan&, S* fixed)        before the blocks; fixed has fixed_scalars()
+//   Index fixed_scalars(const BlockPlan&) const *  scratch shared by all blocks
+//   void bind(const BlockPlan&, S* fixed, const NeighborsView<S, I>&)   before the blocks; fixed
+//                                           has fixed_scalars() scalars (null when 0)
+//   struct Block (default-constructible)    the per-block state
 //   Block begin(BlockView&, S* slot) const       per block, before its nodes (may fill c)
-//   void node(const BlockView&, Block&, Index i, Energies&) const   per (block, node)
-//   void finish_frame(Index s, S* grad_row) const  after the spills, per frame (may be a no-op)
-//   void finish(Energies&) const                 the block sums' overall scale
+//   void node(const BlockView&, Block&, Index i, RegularizerResult<S>&) const   per (block, node)
+//   void finish_frame(Index s, S* grad_row) const *  after the spills, per frame (may be a no-op)
+//   void finish(RegularizerResult<S>&) const *   the block sums' overall scale
+// A term the CUDA element pass runs (cuda/driver.cuh) also has `using Element = ...`, `Element
+// element() const` and `static Accumulator<S>& energy_of(RegularizerResult<S>&)`, and the
+// Element `bool reads_confidence() const` (checked by check_term too, when Element is named).
 // Every term is bit-identical for any thread count because a block owns the rows of its frames
 // and writes its overlap only into the spill (driver.hpp).
 #pragma once
@@ -29,6 +37,8 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <type_traits>
+#include <utility>
 
 #include "smg/core/rotation_gradient.hpp"
 #include "smg/core/scalar.hpp"
@@ -192,36 +202,133 @@ struct TermDefaults {
   void finish(E&) const {}
 };
 
-}  // namespace detail
-
-// Checks the arguments of regularizers(); one line naming the bad argument. `rotations` may be
-// empty when neither C-ARAP nor ARAP is on; `visibility` [T][N] (0/1) may be empty (all
-// visible); `confidence` (output [T][N]) may be given only with terms.confidence; the
-// gradients may be empty (not computed).
-template <class S, class I>
-Status validate_regularizers(detail::NonDeducedT<PositionsView<const S>> positions,
-                             detail::NonDeducedT<QuaternionsView<const S>> rotations,
-                             VisibilityView<const std::uint8_t> visibility,
-                             const NeighborsView<S, I>& graph, const RegularizerOptions& options,
-                             FrameScalarsView<S> confidence = {},
-                             PositionsView<S> grad_positions = {},
-                             detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
-  const Index T = positions.frames(), N = positions.nodes();
-  const RegularizerTerms& on = options.terms;
-  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (on.carap || on.arap || rotations.data() != nullptr)
-    if (Status s = validate_quaternions<S>(rotations, T, N, QuaternionNorm::normalize_on_entry,
-                                           "rotations");
-        !s)
-      return s;
-  if (visibility.data() != nullptr)
-    if (Status s = validate_visibility<std::uint8_t>(visibility, T, N, "visibility"); !s) return s;
-  if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  if (confidence.data() != nullptr && !on.confidence)
-    return Status::error("confidence: an output was given but options.terms.confidence is off");
-  if (Status s = validate_optional_output(confidence, T, N, "confidence"); !s) return s;
-  return detail::validate_gradient_outputs<S>(grad_positions, grad_rotations, T, N);
+// ---- The term concept, checked (see the top of this file) ----
+// Detection idiom (C++17): Op<Args...> is well-formed.
+template <class, template <class...> class Op, class... Args>
+struct Detected : std::false_type {};
+template <template <class...> class Op, class... Args>
+struct Detected<std::void_t<Op<Args...>>, Op, Args...> : std::true_type {};
+template <template <class...> class Op, class... Args>
+constexpr bool detected_v = Detected<void, Op, Args...>::value;
+// Op<Args...> is well-formed and its type converts to R.
+template <class R, template <class...> class Op, class... Args>
+constexpr bool detected_as() {
+  if constexpr (detected_v<Op, Args...>)
+    return std::is_convertible<Op<Args...>, R>::value;
+  else
+    return false;
 }
+
+namespace term_members {
+template <class T> using on = decltype(std::declval<const T&>().on());
+template <class T> using reach = decltype(std::declval<const T&>().reach());
+template <class T> using lanes = decltype(std::declval<const T&>().lanes());
+template <class T> using preferred_block = decltype(std::declval<const T&>().preferred_block());
+template <class T> using stored = decltype(std::declval<const T&>().stored(Index(), Index()));
+template <class T> using reads_rotations = decltype(std::declval<const T&>().reads_rotations());
+template <class T> using position_gradient = decltype(std::declval<const T&>().position_gradient());
+template <class T> using rotation_gradient = decltype(std::declval<const T&>().rotation_gradient());
+template <class T>
+using slot_scalars = decltype(std::declval<const T&>().slot_scalars(std::declval<const BlockPlan&>()));
+template <class T>
+using fixed_scalars = decltype(std::declval<const T&>().fixed_scalars(std::declval<const BlockPlan&>()));
+template <class T, class S, class I>
+using bind = decltype(std::declval<T&>().bind(std::declval<const BlockPlan&>(), std::declval<S*>(),
+                                              std::declval<const NeighborsView<S, I>&>()));
+template <class T> using block = typename T::Block;
+template <class T, class S, class I>
+using begin = decltype(std::declval<const T&>().begin(std::declval<BlockView<S, I>&>(), std::declval<S*>()));
+template <class T, class S, class I>
+using node = decltype(std::declval<const T&>().node(std::declval<const BlockView<S, I>&>(),
+                                                    std::declval<typename T::Block&>(), Index(),
+                                                    std::declval<RegularizerResult<S>&>()));
+template <class T, class S>
+using finish_frame = decltype(std::declval<const T&>().finish_frame(Index(), std::declval<S*>()));
+template <class T, class S>
+using finish = decltype(std::declval<const T&>().finish(std::declval<RegularizerResult<S>&>()));
+template <class T> using element_type = typename T::Element;
+template <class T> using element = decltype(std::declval<const T&>().element());
+template <class T, class S>
+using energy_of = decltype(T::energy_of(std::declval<RegularizerResult<S>&>()));
+template <class E> using reads_confidence = decltype(std::declval<const E&>().reads_confidence());
+}  // namespace term_members
+
+// Whether Term names an Element (the CUDA element pass runs it).
+template <class Term>
+constexpr bool has_element_v = detected_v<term_members::element_type, Term>;
+
+// The term concept for the compiler: one static_assert per member, each naming it, so that a term
+// that misses one stops at a line that says which. Returns whether Term models the concept, so
+// that the drivers compile nothing more for a term that does not (no template errors deep inside
+// drive() after the static_asserts). Why not one trait: a single "is a term" false would not say
+// what is missing.
+template <class Term, class S, class I>
+constexpr bool check_block_members() {
+  namespace m = term_members;
+  if constexpr (!detected_v<m::block, Term>) {
+    return false;
+  } else {
+    constexpr bool def = std::is_default_constructible<typename Term::Block>::value;
+    static_assert(def, "smg term concept: Block must be default-constructible (an off term gets Block{})");
+    constexpr bool beg = detected_as<typename Term::Block, m::begin, Term, S, I>();
+    static_assert(beg, "smg term concept: Block begin(BlockView<S, I>&, S* slot) const is missing");
+    constexpr bool nod = detected_v<m::node, Term, S, I>;
+    static_assert(nod, "smg term concept: void node(const BlockView<S, I>&, Block&, Index, RegularizerResult<S>&) const is missing");
+    return def && beg && nod;
+  }
+}
+template <class Term, class S>
+constexpr bool check_element_members() {
+  namespace m = term_members;
+  if constexpr (!has_element_v<Term>) {
+    return true;  // the CUDA element pass does not run it: nothing more to have
+  } else {
+    constexpr bool el = detected_as<typename Term::Element, m::element, Term>();
+    static_assert(el, "smg term concept: a term naming an Element needs Element element() const");
+    constexpr bool en = detected_as<Accumulator<S>&, m::energy_of, Term, S>();
+    static_assert(en, "smg term concept: a term naming an Element needs static Accumulator<S>& energy_of(RegularizerResult<S>&)");
+    constexpr bool rc = detected_as<bool, m::reads_confidence, typename Term::Element>();
+    static_assert(rc, "smg term concept: an Element needs bool reads_confidence() const");
+    return el && en && rc;
+  }
+}
+template <class Term, class S, class I>
+constexpr bool check_term() {
+  namespace m = term_members;
+  constexpr bool on = detected_as<bool, m::on, Term>();
+  static_assert(on, "smg term concept: bool on() const is missing");
+  constexpr bool reach = detected_as<Index, m::reach, Term>();
+  static_assert(reach, "smg term concept: Index reach() const is missing");
+  constexpr bool lanes = detected_as<Index, m::lanes, Term>();
+  static_assert(lanes, "smg term concept: Index lanes() const is missing (derive from detail::TermDefaults)");
+  constexpr bool pref = detected_as<Index, m::preferred_block, Term>();
+  static_assert(pref, "smg term concept: Index preferred_block() const is missing (derive from detail::TermDefaults)");
+  constexpr bool stored = detected_as<Index, m::stored, Term>();
+  static_assert(stored, "smg term concept: Index stored(Index nr, Index nown) const is missing (derive from detail::TermDefaults)");
+  constexpr bool rrot = detected_as<bool, m::reads_rotations, Term>();
+  static_assert(rrot, "smg term concept: bool reads_rotations() const is missing (derive from detail::TermDefaults)");
+  constexpr bool gx = detected_as<bool, m::position_gradient, Term>();
+  static_assert(gx, "smg term concept: bool position_gradient() const is missing (derive from detail::TermDefaults)");
+  constexpr bool gr = detected_as<bool, m::rotation_gradient, Term>();
+  static_assert(gr, "smg term concept: bool rotation_gradient() const is missing (derive from detail::TermDefaults)");
+  constexpr bool slot = detected_as<Index, m::slot_scalars, Term>();
+  static_assert(slot, "smg term concept: Index slot_scalars(const BlockPlan&) const is missing");
+  constexpr bool fixed = detected_as<Index, m::fixed_scalars, Term>();
+  static_assert(fixed, "smg term concept: Index fixed_scalars(const BlockPlan&) const is missing (derive from detail::TermDefaults)");
+  constexpr bool bind = detected_v<m::bind, Term, S, I>;
+  static_assert(bind, "smg term concept: void bind(const BlockPlan&, S* fixed, const NeighborsView<S, I>&) is missing");
+  constexpr bool block = detected_v<m::block, Term>;
+  static_assert(block, "smg term concept: the per-block state `struct Block` is missing");
+  constexpr bool frame = detected_v<m::finish_frame, Term, S>;
+  static_assert(frame, "smg term concept: void finish_frame(Index, S* grad_row) const is missing (derive from detail::TermDefaults)");
+  constexpr bool fin = detected_v<m::finish, Term, S>;
+  static_assert(fin, "smg term concept: void finish(RegularizerResult<S>&) const is missing (derive from detail::TermDefaults)");
+  constexpr bool blk = check_block_members<Term, S, I>();
+  constexpr bool elem = check_element_members<Term, S>();
+  return on && reach && lanes && pref && stored && rrot && gx && gr && slot && fixed && bind && block &&
+         frame && fin && blk && elem;
+}
+
+}  // namespace detail
 
 }  // namespace smg

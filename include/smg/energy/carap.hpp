@@ -32,32 +32,12 @@
 #include "smg/energy/common.hpp"
 #include "smg/energy/driver.hpp"
 #include "smg/energy/options.hpp"
+#include "smg/energy/validate.hpp"
 #include "smg/energy/terms/rigid.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"
 
 namespace smg {
-
-// Checks the inputs and outputs of carap(). `confidence` [T][N] may be empty (all 1), and each
-// gradient may be empty (not computed). Confidences must lie in [0, 1].
-template <class S, class I>
-Status validate_carap(detail::NonDeducedT<PositionsView<const S>> positions,
-                      detail::NonDeducedT<QuaternionsView<const S>> rotations,
-                      detail::NonDeducedT<FrameScalarsView<const S>> confidence,
-                      const NeighborsView<S, I>& graph,
-                      const CarapOptions& options, PositionsView<S> grad_positions = {},
-                      detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
-  const Index T = positions.frames(), N = positions.nodes();
-  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (Status s = validate_quaternions<S>(rotations, T, N, QuaternionNorm::normalize_on_entry,
-                                         "rotations");
-      !s)
-    return s;
-  if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
-  if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  return detail::validate_gradient_outputs<S>(grad_positions, grad_rotations, T, N);
-}
 
 // Number of terms of (E9): Σ_δ max(0, T − δ) · Σ_i |N(i)| (every listed gap counts, also one
 // with weight 0). Normalization::mean divides by this; 0 terms give energy 0.

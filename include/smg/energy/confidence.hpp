@@ -29,32 +29,13 @@
 #include "smg/core/views.hpp"
 #include "smg/energy/confidence_term.hpp"
 #include "smg/energy/options.hpp"
+#include "smg/energy/validate.hpp"
 #include "smg/energy/velocities.hpp"
 #include "smg/energy/velocity.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"
 
 namespace smg {
-
-// Checks the inputs and outputs of node_confidences. `visibility` and every output may be empty
-// views (visibility: all visible; outputs: not computed).
-template <class S, class I>
-Status validate_confidence(detail::NonDeducedT<PositionsView<const S>> positions,
-                           VisibilityView<const std::uint8_t> visibility,
-                           const NeighborsView<S, I>& graph, const ConfidenceOptions& options,
-                           FrameScalarsView<S> confidence, FrameScalarsView<S> motion = {},
-                           FrameScalarsView<S> rigidity = {}) {
-  const Index T = positions.frames(), N = positions.nodes();
-  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (visibility.data() != nullptr)
-    if (Status s = validate_visibility<std::uint8_t>(visibility, T, N, "visibility"); !s) return s;
-  if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  if (Status s = validate_optional_output(confidence, T, N, "confidence"); !s) return s;
-  if (Status s = validate_optional_output(motion, T, N, "motion"); !s) return s;
-  if (Status s = validate_optional_output(rigidity, T, N, "rigidity"); !s) return s;
-  return Status::ok();
-}
 
 // Writes c_{t,i} (E6) into `confidence` [T][N] and, when given, the factors c^m (E3) into
 // `motion` and c^r (E5) into `rigidity` (each [T][N], in [0, 1]; exponents λ not applied).

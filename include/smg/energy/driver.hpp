@@ -132,11 +132,28 @@ std::tuple<typename Terms::Block...> begin_blocks(BlockView<S, I>& v, S* const* 
   return {(terms.on() ? terms.begin(v, slots[Is]) : typename Terms::Block{})...};
 }
 
+template <class E, class S, class I, class... Terms>
+E drive_checked(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>* workspace,
+                ParallelOptions parallel, Terms&... terms);
+
 // Runs every term that is on over all blocks; returns the energies E (each term adds to its own
 // fields; finish() scales them). Terms are bound (bind) here, so a term object serves one call.
+// The concept first (energy/block.hpp check_term): a term that misses a member stops the build at
+// the static_assert naming it, and nothing more of the driver is compiled for it.
 template <class E, class S, class I, class... Terms>
 E drive(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>* workspace,
         ParallelOptions parallel, Terms&... terms) {
+  constexpr bool models = (check_term<Terms, S, I>() && ...);
+  if constexpr (models)
+    return drive_checked<E>(io, p, workspace, parallel, terms...);
+  else
+    return E();
+}
+
+// drive(), its terms checked.
+template <class E, class S, class I, class... Terms>
+E drive_checked(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>* workspace,
+                ParallelOptions parallel, Terms&... terms) {
   E result;
   const Index T = p.T, N = p.N, K = p.K;
   if (T == 0 || N == 0) return result;
@@ -318,20 +335,26 @@ RegularizerResult<S> drive_views(PositionsView<const S> positions, QuaternionsVi
                                  PositionsView<S> grad_positions, RotationGradientView<S> grad_rotations,
                                  EnergyWorkspace<S>* workspace, ParallelOptions parallel,
                                  Terms&... terms) {
-  const BlockPlan p = fitted_plan<S, I>(positions.frames(), positions.nodes(), graph.k(),
-                                        grad_positions.data() != nullptr, !grad_rotations.empty(),
-                                        parallel, rotations.data() != nullptr, visibility_given,
-                                        terms...);
-  DriverIO<S, I> io;
-  io.x = positions;
-  io.q = rotations;
-  io.graph = graph;
-  if (p.want_x) io.gx = grad_positions;
-  if (p.want_r) {
-    io.gr = grad_rotations.tangent();
-    io.grq = grad_rotations.raw();
+  // The concept before the plan reads the terms (see drive()).
+  constexpr bool models = (check_term<Terms, S, I>() && ...);
+  if constexpr (!models) {
+    return RegularizerResult<S>();
+  } else {
+    const BlockPlan p = fitted_plan<S, I>(positions.frames(), positions.nodes(), graph.k(),
+                                          grad_positions.data() != nullptr, !grad_rotations.empty(),
+                                          parallel, rotations.data() != nullptr, visibility_given,
+                                          terms...);
+    DriverIO<S, I> io;
+    io.x = positions;
+    io.q = rotations;
+    io.graph = graph;
+    if (p.want_x) io.gx = grad_positions;
+    if (p.want_r) {
+      io.gr = grad_rotations.tangent();
+      io.grq = grad_rotations.raw();
+    }
+    return drive_checked<RegularizerResult<S>>(io, p, workspace, parallel, terms...);
   }
-  return drive<RegularizerResult<S>>(io, p, workspace, parallel, terms...);
 }
 
 // A one-term operator's pass (carap(), lrm(), accel()): its term with the caller's confidences

@@ -31,28 +31,12 @@
 #include "smg/energy/common.hpp"
 #include "smg/energy/driver.hpp"
 #include "smg/energy/options.hpp"
+#include "smg/energy/validate.hpp"
 #include "smg/energy/terms/lrm.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"
 
 namespace smg {
-
-// Checks the inputs and outputs of lrm(). `confidence` may be empty (all 1); the gradient and
-// omega outputs may be empty (not computed).
-template <class S, class I>
-Status validate_lrm(detail::NonDeducedT<PositionsView<const S>> positions,
-                    detail::NonDeducedT<FrameScalarsView<const S>> confidence,
-                    const NeighborsView<S, I>& graph, const LrmOptions& options,
-                    PositionsView<S> grad_positions = {}, TangentsView<S> omega = {}) {
-  const Index T = positions.frames(), N = positions.nodes();
-  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
-  if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  if (Status s = validate_optional_output(grad_positions, T, N, "grad_positions"); !s) return s;
-  if (Status s = validate_optional_output(omega, T, N, "omega"); !s) return s;
-  return Status::ok();
-}
 
 // Number of terms of (E14): T · Σ_i |N(i)|. Normalization::mean divides by this.
 template <class S, class I>

@@ -36,7 +36,8 @@
 #include "smg/core/views.hpp"
 #include "smg/energy/driver.hpp"
 #include "smg/energy/options.hpp"
-#include "smg/energy/terms/confidence.hpp"
+#include "smg/energy/validate.hpp"
+#include "smg/energy/term_list.hpp"
 #include "smg/energy/workspace.hpp"
 // Each term of the list with its separate operator (the one-term call, which includes the term's
 // header): including the fused step gives every regulariser, and a new term is included here,
@@ -49,45 +50,6 @@
 #include "smg/graph/neighbors.hpp"
 
 namespace smg {
-
-
-namespace detail {
-
-inline namespace SMG_ISA_NAMESPACE {
-
-// The terms of the fused step, in the order the driver calls them per node (the confidences
-// first: they fill the records the others read). Adding a term: a header in energy/terms/, its
-// one-term call included above, its options and list entries in options.hpp, one member and one
-// configure line here (docs/contributing.md §3). The CUDA driver reads this list too: a member
-// whose struct names an Element runs in its element pass (cuda/driver.cuh, ListElements).
-template <class S, class I>
-struct RegularizerTermSet {
-  ConfidenceTerm<S, I> confidence;
-  RigidTerm<S, I> rigid;  // C-ARAP and ARAP, sharing d (E8)
-  LrmTerm<S, I> lrm;
-  AccelTerm<S, I> accel;
-
-  RegularizerTermSet(Index T, Index N, Index K, Index edges, const RegularizerOptions& o,
-                     bool want_x, bool want_r) {
-    const RegularizerTerms& on = o.terms;
-    confidence.computed = on.confidence;
-    confidence.constants = ConfidenceConstants<S>(o.confidence);
-    if (K > 0)
-      rigid.configure(on.carap ? &o.carap : nullptr, on.arap ? &o.arap : nullptr, T, edges);
-    rigid.want_rotations = want_r;
-    if (on.lrm) lrm.configure(o.lrm, T, K, edges, want_x);
-    if (on.accel) accel.configure(o.accel, T, N);
-  }
-  bool any_energy() const { return rigid.on() || lrm.on() || accel.on(); }
-  // f(terms...) over the list.
-  template <class F>
-  decltype(auto) apply(F&& f) {
-    return f(confidence, rigid, lrm, accel);
-  }
-};
-
-}  // inline namespace SMG_ISA_NAMESPACE
-}  // namespace detail
 
 inline namespace SMG_ISA_NAMESPACE {
 

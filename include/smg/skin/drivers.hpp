@@ -6,8 +6,10 @@
 
 #include <cstdint>
 
+#include "smg/core/parallel.hpp"
 #include "smg/graph/neighbors.hpp"
 #include "smg/skin/skin_views.hpp"
+#include "smg/skin/weights_element.hpp"  // skin_drivers_row
 
 namespace smg {
 
@@ -28,23 +30,6 @@ Status validate_skin_drivers(const NeighborsView<S, I>& graph, SkinIndexView anc
   return detail::check_output_table<std::int32_t, Eigen::Dynamic>(out, anchor.rows(),
                                                                    skin_driver_width(graph),
                                                                    "drivers");
-}
-
-// The driver row of one point with anchor node a: row[0..K] = (a, the valid neighbours of a in
-// graph order, −1 padding). Host-device: skin_drivers and the CUDA kernel
-// (smg/cuda/skin_weights.cuh) both build each row with it.  (S1)
-template <class S, class I>
-SMG_HOST_DEVICE inline void skin_drivers_row(const NeighborsView<S, I>& graph, std::int32_t a,
-                                             std::int32_t* row) {
-  const Index K = graph.k();
-  row[0] = a;
-  Index c = 1;
-  for (Index k = 0; k < K; ++k) {
-    const Index j = graph.indices(a, k);
-    if (j < 0) break;
-    row[c++] = static_cast<std::int32_t>(j);
-  }
-  for (; c <= K; ++c) row[c] = -1;
 }
 
 // out[p] = (anchor[p], the valid neighbours of anchor[p] in graph order, −1 padding):

@@ -22,7 +22,6 @@
 #include <string>
 #include <vector>
 
-#include "smg/core/parallel.hpp"
 #include "smg/core/status.hpp"
 #include "smg/core/views.hpp"
 #include "smg/skin/blend_point.hpp"
@@ -53,9 +52,11 @@ struct SkinPoints {
   SMG_HOST_DEVICE Index width() const { return drivers.cols(); }
 };
 
+// What the blend computes, on the CPU and the GPU alike. The CPU loops take their threads as a
+// separate ParallelOptions argument (skin_blend, skin_blend_backward), as the energy operators
+// do, so that device code never sees the CPU thread pool's options.
 struct SkinOptions {
   SkinMethod method = SkinMethod::dqb;
-  ParallelOptions parallel;
 };
 
 namespace detail {

@@ -20,6 +20,7 @@
 #include "smg/core/parallel.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/skin/skin_views.hpp"
+#include "smg/skin/weights_element.hpp"
 #include "smg/skin/weights_point.hpp"
 
 namespace smg {
@@ -49,40 +50,6 @@ inline Status check_weight_inputs(PositionsView<const S> positions, SkinDriversV
   return check_sigma<S>(sigma, N);
 }
 
-// Gathers one point's driver positions (at t_ref) and sigmas; returns the driver count.
-template <class S>
-SMG_HOST_DEVICE inline Index skin_load_weight_inputs(PositionsView<const S> positions, SkinDriversView drivers,
-                                     SkinIndexView t_ref, TableView<const S, 1> sigma, Index p,
-                                     Vector3<S>* x, S* sg) {
-  const Index tr = t_ref(p, 0);
-  Index D = 0;
-  for (Index k = 0; k < drivers.cols(); ++k) {
-    const std::int32_t n = drivers(p, k);
-    if (n < 0) break;
-    x[D] = positions(tr, n);
-    sg[D] = sigma(n, 0);
-    ++D;
-  }
-  return D;
-}
-
-// The weights row of point p: weights_out[p][k] = w_pk (S2)-(S4), 0 on padding; x and sg are
-// scratch of drivers.cols() entries. Returns true when the fallback (S4) was used.
-// Host-device: skinning_weights and the CUDA kernel (smg/cuda/skin_weights.cuh) both compute
-// each point with it.
-template <class S>
-SMG_HOST_DEVICE inline bool skinning_weights_row(PositionsView<const S> positions,
-                                                 SkinDriversView drivers, SkinIndexView t_ref,
-                                                 TableView<const S, 3> points,
-                                                 TableView<const S, 1> sigma,
-                                                 TableView<S, Eigen::Dynamic> weights_out, Index p,
-                                                 Vector3<S>* x, S* sg) {
-  const Index D = skin_load_weight_inputs(positions, drivers, t_ref, sigma, p, x, sg);
-  S* w = weights_out.ptr(p);
-  const bool fallback = skinning_weights_point<S>(Vector3<S>(points.row(p)), D, x, sg, w);
-  for (Index k = D; k < drivers.cols(); ++k) w[k] = S(0);
-  return fallback;
-}
 }  // namespace detail
 
 // sigma [N]: finite and > 0 (length units).
