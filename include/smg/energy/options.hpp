@@ -137,6 +137,17 @@ struct AccelOptions {
   double weight = 1.0;                               // overall factor (units: 1 / length²)
 };
 
+// Rotation-angle velocity or acceleration of node rotations (E22, docs/math/terms/angle.md), as
+// MoSca regularises its motion bases' rotations: θ_i^t, the angle of R_i^{t+1} R_i^{tT}, summed
+// (velocity) or |θ_i^{t+1} − θ_i^t| summed (acceleration), unsquared, weighted by c_{t,i} at the
+// earliest frame or by 1. The forms are AccelForm's.
+struct AngleOptions {
+  AccelForm form = AccelForm::acceleration;
+  bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
+  Normalization normalization = Normalization::sum;  // mean: over (T − 2) · N terms (or T − 1)
+  double weight = 1.0;                               // overall factor (units: 1 / radian)
+};
+
 // The fused step (regularizers.hpp): which terms it computes. Confidences off: C-ARAP and LRM
 // use c ≡ 1 (as carap() and lrm() do with an empty confidence view).
 struct RegularizerTerms {
@@ -145,7 +156,11 @@ struct RegularizerTerms {
   bool arap = false;       // (E9) with c ≡ 1, α = 1 (ablations)
   bool lrm = true;         // (E14), weights (E7) with the confidences
   bool accel = false;      // (E21), trajectory smoothness
+  bool angle = false;      // (E22), rotation-angle velocity / acceleration
 };
+
+// Whether a term that is on reads the rotations (so the caller must give them).
+inline bool reads_rotations(const RegularizerTerms& t) { return t.carap || t.arap || t.angle; }
 
 // The options of the fused step: the terms, and each term's own options (plain values).
 struct RegularizerOptions {
@@ -155,6 +170,7 @@ struct RegularizerOptions {
   ArapOptions arap;
   LrmOptions lrm;
   AccelOptions accel;
+  AngleOptions angle;
 };
 
 namespace detail {
@@ -214,6 +230,12 @@ void for_each_option(O& o, F&& f) {
   f("confidence_weighted", o.confidence_weighted);
   detail::for_each_scaling_option(o, f);
 }
+template <class O, class F, detail::IfOptions<O, AngleOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("form", o.form);
+  f("confidence_weighted", o.confidence_weighted);
+  detail::for_each_scaling_option(o, f);
+}
 
 // The term list of the fused step: f(name, on, options) for every term of RegularizerOptions, in
 // the driver's order, with on = o.terms.<name> (bool& or const bool&). validate_options below,
@@ -226,6 +248,7 @@ void for_each_term(RO& o, F&& f) {
   f("arap", o.terms.arap, o.arap);
   f("lrm", o.terms.lrm, o.lrm);
   f("accel", o.terms.accel, o.accel);
+  f("angle", o.terms.angle, o.angle);
 }
 
 // The energies of one fused step, each as the separate operator returns it (0 for a term that
@@ -237,6 +260,7 @@ struct RegularizerResult {
   Accumulator<S> arap = Accumulator<S>(0);
   Accumulator<S> lrm = Accumulator<S>(0);
   Accumulator<S> accel = Accumulator<S>(0);
+  Accumulator<S> angle = Accumulator<S>(0);
 
   // f(name, r.<energy>...) for each energy, in the order above, of one or more results. The list
   // of energies: total(), +=, the torch glue's energies tensor and smg_torch.Regularizers' names,
@@ -247,6 +271,7 @@ struct RegularizerResult {
     f("arap", r.arap...);
     f("lrm", r.lrm...);
     f("accel", r.accel...);
+    f("angle", r.angle...);
   }
   Accumulator<S> total() const {
     Accumulator<S> t(0);
@@ -344,6 +369,12 @@ inline Status validate_options(const AccelOptions& o) {
   if (o.form != AccelForm::acceleration && o.form != AccelForm::velocity)
     return Status::error("AccelOptions.form must be acceleration or velocity");
   return detail::check_nonneg("AccelOptions", "weight", o.weight);
+}
+
+inline Status validate_options(const AngleOptions& o) {
+  if (o.form != AccelForm::acceleration && o.form != AccelForm::velocity)
+    return Status::error("AngleOptions.form must be acceleration or velocity");
+  return detail::check_nonneg("AngleOptions", "weight", o.weight);
 }
 
 // Plain ARAP is C-ARAP with α = 1 and no confidences (the caller passes none).
