@@ -10,15 +10,32 @@ from __future__ import annotations
 
 import torch
 
-from . import has_cuda, regularizers
+from . import REGULARIZER_DEFAULTS, _C, _scale, has_cuda, regularizers
 
 __all__ = ["som_accel"]
 
-# The fused step with smoothness alone (no graph term reads the empty graph below): (E21) with
-# the unsquared norm (E22) and Normalization::mean, i.e. the mean of ‖a‖ over the (T − 2)·N terms.
-_SOM_ACCEL = dict(form="acceleration", penalty="norm", confidence_weighted=False, normalize=True,
-                  weight=1.0)
+# smg's smoothness (E21) with the unsquared norm (E22) and Normalization::mean, i.e. the mean of
+# ‖a‖ over the (T − 2)·N terms: the accel term's options.
+_SOM_ACCEL = dict(REGULARIZER_DEFAULTS["accel"], form="acceleration", penalty="norm",
+                  confidence_weighted=False, normalize=True, weight=1.0)
+# On CUDA tensors: the fused step with smoothness alone (no term reads the empty graph).
 _OFF = dict(confidence=False, carap=False, arap=False, lrm=False)
+
+
+class _AccelFunction(torch.autograd.Function):
+    """smg::accel (the one-term operator) on CPU tensors x [T, N, 3]: the energy, and its gradient
+    computed in the same pass when x requires grad (scaled by grad_output in backward)."""
+
+    @staticmethod
+    def forward(ctx, x, options):
+        e, g = _C._accel(x.detach(), options, bool(ctx.needs_input_grad[0]))
+        ctx.grad = g
+        return e
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad_output):
+        return _scale(grad_output, ctx.grad), None
 
 
 def som_accel(transls: torch.Tensor) -> torch.Tensor:
@@ -36,12 +53,17 @@ def som_accel(transls: torch.Tensor) -> torch.Tensor:
     gives. Shape of Motion's rotation bases ([K, T, 6]) are not covered: smg's smoothness is on
     3-vectors, and splitting a 6-vector in two is exact only for the squared form.
 
+    On CPU tensors it calls smg::accel, the one-term operator; on CUDA tensors the fused step
+    with smoothness alone (smg::cuda::regularizers, the same element).
+
     Memory, honestly: smg reads trajectories as [T][N][3], frame-major, and transls is
     trajectory-major, so one copy of transls in that layout is made (transls.movedim(1, 0) then
     a reshape to [T, N, 3], N = the product of the other dims; no copy when dim 0 has size 1),
     plus the gradient [T, N, 3] that smg writes in the same pass (returned to autograd as a view
     in transls' shape). No [..., T − 2, 3] intermediates: the differences, norms and their
-    gradients are formed per element inside smg's loop."""
+    gradients are formed per element inside smg's loop. On CPU, smg's scratch is kept between
+    calls (one workspace per thread and dtype, as a trainer keeps one; it only grows): at T = 3
+    it is about 7 times the input (76 MiB for G·B = 320 000 float32 trajectories)."""
     if not isinstance(transls, torch.Tensor):
         raise ValueError(f"transls: expected a torch.Tensor, got {type(transls).__name__}")
     if transls.dim() < 3:
@@ -64,8 +86,10 @@ def som_accel(transls: torch.Tensor) -> torch.Tensor:
         raise ValueError(f"transls: has an empty dim, shape {list(transls.shape)} (Shape of Motion's "
                          "mean over no terms is NaN)")
     x = transls.movedim(1, 0).reshape(T, -1, 3)  # [T, N, 3]: a copy unless dim 0 has size 1
+    if not x.is_cuda:
+        return _AccelFunction.apply(x, _SOM_ACCEL)
+    # CUDA: smg::cuda::regularizers runs the same element (AccelElement); an empty [N, 0] graph.
     n = x.shape[1]
-    # No graph term is on: an empty [N, 0] graph, no memory.
     idx = torch.empty((n, 0), dtype=torch.int32, device=transls.device)
     w = torch.empty((n, 0), dtype=transls.dtype, device=transls.device)
     return regularizers(x, None, (idx, w), accel=_SOM_ACCEL, **_OFF).total
