@@ -14,16 +14,18 @@ numbers. bench/results/torch.json (bench/torch/bench_torch.py) also gives the en
 its PyTorch autograd baseline rows. Standard library only.
 
        bench/report.py --highlights RESULTS_DIR [RESULTS_MD]
-       bench/report.py --highlights-all RESULTS_DIR [RESULTS_MD]   (with the core, graph and skin tables)
+       bench/report.py --highlights-all RESULTS_DIR [RESULTS_MD]   (the long form, every table)
        bench/report.py --readme README.md [RESULTS_DIR [RESULTS_MD]]
 
-The README's result highlights: two short lines and two tables generated from the same JSON
-(RESULTS_DIR, default bench/results, with gpu/torch_cuda_h100.json when present) and from the
-ablation-ladder tables of RESULTS_MD (default docs/results.md). --highlights prints the block;
---readme rewrites the lines between "<!-- smg:highlights begin -->" and
-"<!-- smg:highlights end -->" of README.md in place. scripts/check_docs.py checks that the
-README's block equals what this generates (scripts/bench.sh --publish and scripts/ladder.sh
-rewrite it).
+The README's result highlights: a few headline lines with links (the energy and splat CPU
+runs, smg_torch's GPU energies row, the ablation ladder's query EPE), generated from the same
+JSON (RESULTS_DIR, default bench/results, with gpu/torch_cuda_h100.json when present) and from
+the ablation-ladder tables of RESULTS_MD (default docs/results.md). --highlights prints the
+block; --highlights-all the long form (every module's line or table, the whole smg_torch table
+and the ladder's tables); --readme rewrites the lines between "<!-- smg:highlights begin -->"
+and "<!-- smg:highlights end -->" of README.md in place with the short form.
+scripts/check_docs.py checks that the README's block equals what this generates
+(scripts/bench.sh --publish and scripts/ladder.sh rewrite it).
 """
 import json
 import math
@@ -716,9 +718,13 @@ def md_table(text, first_cell):
     return None, []
 
 
-def hl_ladder(results_md):
+def ladder_tables(results_md):
+    """The ablation ladder of RESULTS_MD: (scenes, means, paired, seeds, EPE column), or None.
+
+    means[scene][variant] and paired[scene]["A − B"] are the rows of the scene's tables as
+    {column: cell}; seeds[scene] is how many seeds its per-seed table has."""
     if not os.path.exists(results_md):
-        return []
+        return None
     with open(results_md, encoding="utf-8") as f:
         text = f.read()
     scenes, means, paired, seeds = [], {}, {}, {}
@@ -736,7 +742,7 @@ def hl_ladder(results_md):
         shead = [h for h in (md_table(sec.split("Per seed", 1)[-1], "variant")[0] or []) if h.startswith("seed ")]
         seeds[scene] = len(shead)
     if not scenes:
-        return []
+        return None
     # The query EPE (surface query tracks, what Dycheck and Shape-of-Motion report) where the ladder
     # has it; ladders generated before issue 33 have node EPE only, titled "3D EPE (m)".
     # The same column for every scene: the query EPE only where every scene's ladder has it.
@@ -747,6 +753,14 @@ def hl_ladder(results_md):
                 row.setdefault("node EPE (m)", row["3D EPE (m)"])
     firsts = [next(iter(means[s].values())) for s in scenes]
     epe = "query EPE (m)" if all("query EPE (m)" in f for f in firsts) else "node EPE (m)"
+    return scenes, means, paired, seeds, epe
+
+
+def hl_ladder(results_md):
+    tables = ladder_tables(results_md)
+    if tables is None:
+        return []
+    scenes, means, paired, seeds, epe = tables
     title = epe
     cols = (epe, "masked PSNR (dB)")
     variants = list(means[scenes[0]])
@@ -776,6 +790,92 @@ def hl_ladder(results_md):
     return out
 
 
+# ---- the README's short form: one headline line per subject, each with its links -----------------
+def short_energy(res):
+    t = max_threads_row(res, r"^BM_carap_plus_lrm<float>")
+    if not t:
+        return None
+    line = (f"- **Regularisers on the CPU** (`bench/results/energy.json`; N = {param(res, 'n')} nodes, "
+            f"T = {param(res, 't')} frames, K = {param(res, 'k')}): C-ARAP + LRM energy and exact "
+            f"gradient, float, {threads_of(t)} threads: **{fmt_ms(ms(t))}** wall ({fmt_ms(cpu_ms(t))} "
+            f"process CPU")
+    if "target_ms" in t:
+        verdict = "met" if ms(t) <= t["target_ms"] else "missed"
+        line += f"; the {fmt_ms(t['target_ms'])} target is {verdict} on this run"
+    line += ")"
+    ads = []
+    for name, title in (("carap", "C-ARAP"), ("lrm", "LRM")):
+        ad = res.one(rf"^BM_autodiff_{name}")
+        if ad and "ad_ratio" in ad:
+            ads.append(f"{fmt(ad['ad_ratio'])}× ({title})")
+    if ads:
+        line += "; the analytic gradients are " + " and ".join(ads) + " faster than Eigen's AutoDiffScalar"
+    return line + "."
+
+
+def short_splat(res):
+    fb2 = res.one(r"^forward_backward/W:320/H:240/G:100000/threads:2$")
+    if not fb2:
+        return None
+    verdict = "met" if ms(fb2) <= SPLAT_TARGET_MS else "missed"
+    return (f"- **Reference splatter on the CPU** (`bench/results/splat.json`; float, 100k Gaussians, "
+            f"320×240): forward + backward on 2 threads **{fmt_ms(ms(fb2))}** wall ({fmt_ms(cpu_ms(fb2))} "
+            f"process CPU; the {fmt_ms(SPLAT_TARGET_MS)} target is {verdict} on this run); in double it is "
+            f"checked against an independent PyTorch autograd statement of gsplat's maths (`tests/reference/`).")
+
+
+def short_torch(d):
+    """smg_torch's energies row: the GPU run's where there is one (the CPU run's speed-ups may carry
+    a caveat, which its rows keep in docs/performance.md), else the CPU run's at the most threads."""
+    cpu = load_result(d, "torch")
+    note = " (with the run's caveat)" if cpu and cpu.context.get("note") else ""
+    gpu_path = os.path.join(d, "gpu", "torch_cuda_h100.json")
+    if os.path.exists(gpu_path):
+        with open(gpu_path) as f:
+            gpu = json.load(f)
+        rows = [b for b in gpu.get("benchmarks", [])
+                if isinstance(b.get("speedup"), (int, float)) and math.isfinite(b["speedup"])]
+        b = next((r for r in rows if r["name"].startswith("energies")), rows[0] if rows else None)
+        if b:
+            device = b.get("device", gpu.get("context", {}).get("device", "GPU"))
+            return (f"- **smg_torch on a GPU** ({device}, `bench/results/gpu/torch_cuda_h100.json`): {b['name']}, "
+                    f"**{fmt_ms(b['real_time'])}** against {fmt_ms(b['pytorch_ms'])} for pure-PyTorch autograd "
+                    f"of the same equations ({fmt(b['speedup'])}×); every operator: [docs/cuda.md](docs/cuda.md); "
+                    f"the CPU rows{note}: [docs/performance.md](docs/performance.md).")
+    if cpu:
+        rows = [b for b in cpu.rows if isinstance(b.get("speedup"), (int, float)) and math.isfinite(b["speedup"])]
+        b = next((r for r in reversed(rows) if r["name"].startswith("energies")), rows[0] if rows else None)
+        if b:
+            return (f"- **smg_torch on the CPU** (`bench/results/torch.json`): {b['name']}, "
+                    f"**{fmt_ms(b['real_time'])}** against {fmt_ms(b['pytorch_ms'])} for pure-PyTorch autograd "
+                    f"of the same equations ({fmt(b['speedup'])}×); every row{note}: "
+                    f"[docs/performance.md](docs/performance.md).")
+    return None
+
+
+def short_ladder(results_md):
+    tables = ladder_tables(results_md)
+    if tables is None:
+        return None
+    scenes, means, paired, seeds, epe = tables
+    first, last = "base", "full"
+
+    def mean(scene, variant):
+        return means[scene].get(variant, {}).get(epe, "—").split(" ±")[0]
+
+    line = (f"- **Ablation ladder** (`docs/results.md`; "
+            f"{' and '.join(f'{seeds[s]} seeds on the {s} scene' for s in scenes)}): mean {epe[:-4]} in m "
+            f"from `{first}` to `{last}`: "
+            + "; ".join(f"{s} {mean(s, first)} → {mean(s, last)}" for s in scenes))
+    key = "smg-only − base"
+    row = {s: paired[s].get(key) for s in scenes if paired[s].get(key)}
+    if row:
+        what = next(iter(row.values())).get("isolates", key)
+        line += (f". Paired, {what} (`{key}`): " + "; ".join(f"{s} {r.get(epe, '—')}" for s, r in row.items())
+                 + " (mean ± 95 % interval; in brackets, on how many seeds A is better)")
+    return line + ". Every variant and paired difference: [docs/results.md](docs/results.md)."
+
+
 def highlights(d, results_md=None, full=False):
     """The README's result highlights (the lines between the markers, without them)."""
     results_md = results_md or os.path.join(REPO, "docs", "results.md")
@@ -791,17 +891,19 @@ def highlights(d, results_md=None, full=False):
                 + (f", other processes keeping {fmt(min(others))}–{fmt(max(others))} of them busy, so wall "
                    f"times are indicative and process CPU times are given beside them" if others else "")
                 + "); every row, its load and its noise protocol: [docs/performance.md](docs/performance.md).", ""]
-    # Kept short (the README's size budget, scripts/check_docs.py): the energy and splat lines, the
-    # torch table and the ladder; core, graph and skin have their tables in docs/performance.md
-    # (hl_core, hl_graph and hl_skin print them with --highlights-all).
     by = {m: load_result(d, m) for m in ("core", "graph", "energy", "skin", "splat")}
-    short = (("energy", hl_energy), ("splat", hl_splat))
+    if not full:
+        # The README's form (its size budget, scripts/check_docs.py): one headline line per
+        # subject, each with its links; every table is on the pages they link.
+        lines = [short_energy(by["energy"]) if by["energy"] else None,
+                 short_splat(by["splat"]) if by["splat"] else None,
+                 short_torch(d), short_ladder(results_md)]
+        out += [line for line in lines if line]
+        return "\n".join(out).rstrip("\n") + "\n"
     every = (("core", hl_core), ("graph", hl_graph), ("energy", hl_energy), ("skin", hl_skin), ("splat", hl_splat))
-    for m, fn in (every if full else short):
+    for m, fn in every:
         if by[m]:
             out += fn(by[m])
-    if not full and any(by[m] for m in ("core", "graph", "skin")):
-        out += ["**core, graph, skin**: [docs/performance.md](docs/performance.md).", ""]
     out += hl_torch(d)
     out += hl_ladder(results_md)
     while out and out[-1] == "":

@@ -22,6 +22,9 @@ Usage: scripts/check_docs.py [REPO_ROOT]   (standard library only; exit 1 on any
     file there is shown once, and the command blocks that scripts/check_packaging.sh runs
     ("<!-- run: ... -->" in docs/quickstart.md and README.md) exist.
     `scripts/check_docs.py --sync-quickstart` rewrites the page's blocks from the files.
+    Excerpts: in README.md and docs/, a line "<!-- excerpt: PATH -->" is followed by a fenced
+    block whose lines are PATH's own, in order; a line "// ..." or "# ..." marks lines left
+    out, and each run between them is consecutive lines of PATH.
 
 (f) every command shown in README.md, docs/*.md and bench/README.md (lines of ```sh/```bash
     blocks, command-like lines of plain ``` blocks, and inline `code` that starts with scripts/,
@@ -56,6 +59,13 @@ Usage: scripts/check_docs.py [REPO_ROOT]   (standard library only; exit 1 on any
     and the pages, equals the sources' set; no CUDA operator is marked "(CPU)".
 (l) no command says `python` (bookworm has only python3), and `pip install` always carries
     --no-build-isolation (smg_torch builds against the torch already installed).
+(m) every regulariser term has its pieces (docs/contributing.md section 3).
+(n) in docs/ and bench/notes/, a markdown table with a number in a cell lies between a
+    generator's markers ("<!-- ladder:X -->" ... "<!-- /ladder:X -->", "<!-- terms:begin -->" ...
+    "<!-- terms:end -->"), or the nearest non-blank line above it is "<!-- not generated: WHY -->".
+    docs/performance.md is generated as a whole ((g)); its hand tables are its notes'.
+(f) also: a page that builds some targets into a folder it configures and then runs
+    `ctest --test-dir` there with -R must build every program whose test -R selects.
 
 Prints one line per problem, "path:line: message", and exits 1 if there are any.
 """
@@ -65,6 +75,9 @@ import re
 import subprocess
 import sys
 
+if "-h" in sys.argv[1:] or "--help" in sys.argv[1:]:
+    print(__doc__.strip())
+    sys.exit(0)
 SYNC = "--sync-quickstart" in sys.argv[1:]
 ARGS = [a for a in sys.argv[1:] if a != "--sync-quickstart"]
 ROOT = os.path.abspath(ARGS[0] if ARGS else
@@ -366,6 +379,64 @@ for page, marks in RUN_MARKS.items():
             problem(page, 1, "missing the command block '%s' that scripts/check_packaging.sh runs"
                     % mark)
 
+# Excerpts: "<!-- excerpt: PATH -->" in README.md or a page of docs/ is followed by a fenced
+# block whose lines are PATH's, in order. A line "// ..." or "# ..." (any indentation) stands for
+# lines left out; each run of lines between them is consecutive lines of PATH, and the runs come
+# in the file's order without overlapping.
+EXCERPT_MARK = re.compile(r"^<!-- excerpt: (\S+) -->$")
+ELISION = re.compile(r"^\s*(//|#) \.\.\.\s*$")
+
+
+def excerpt_problem(block, source):
+    """None if BLOCK (a list of lines) is an excerpt of SOURCE's lines, else (index, message)."""
+    src = source.split("\n")
+    runs, run, start = [], [], 0
+    for k, line in enumerate(block + ["// ..."]):
+        if ELISION.match(line):
+            if run:
+                runs.append((start, run))
+            run, start = [], k + 1
+        else:
+            run.append(line)
+    at = 0
+    for start, run in runs:
+        hit = next((i for i in range(at, len(src) - len(run) + 1) if src[i:i + len(run)] == run), None)
+        if hit is None:
+            # Name the first line that does not continue the run's longest match from `at` on.
+            best = 0
+            for i in range(at, len(src)):
+                j = 0
+                while j < len(run) and i + j < len(src) and src[i + j] == run[j]:
+                    j += 1
+                best = max(best, j)
+            return start + best, "not the file's next line here"
+        at = hit + len(run)
+    return None
+
+
+for f in doc_md:
+    lines = TEXT[f].split("\n")
+    for n, line in enumerate(lines):
+        m = EXCERPT_MARK.match(line)
+        if not m:
+            continue
+        if n + 1 >= len(lines) or not lines[n + 1].startswith("```"):
+            problem(f, n + 1, "%s: the excerpt marker must be followed by a ``` block" % m.group(1))
+            continue
+        end = n + 2
+        while end < len(lines) and lines[end] != "```":
+            end += 1
+        source = read_text(m.group(1))
+        if end >= len(lines):
+            problem(f, n + 1, "%s: the excerpt's block is not closed" % m.group(1))
+        elif source is None:
+            problem(f, n + 1, "%s: no such file" % m.group(1))
+        else:
+            bad = excerpt_problem(lines[n + 2:end], source)
+            if bad:
+                problem(f, n + 3 + bad[0], "excerpt of %s: %s (the block's lines must be the file's, "
+                        "in order; '// ...' marks lines left out)" % (m.group(1), bad[1]))
+
 # ---------------------------------------------------------------------------------------------
 # (f) commands in the docs name scripts, flags, targets and paths that exist
 import shlex  # noqa: E402
@@ -430,6 +501,9 @@ def targets():
 
 
 TARGETS = targets()
+# ctest's test names: add_test(NAME x) and the quick-start programs' tests (tests/CMakeLists.txt).
+TEST_NAMES = set(re.findall(r"add_test\(\s*NAME\s+(\w+)(?=[\s)])", "\n".join(cmake_texts().values()))) | \
+    {"quickstart_" + os.path.basename(f)[:-4] for f in FILES if re.match(r"examples/quickstart/\w+\.cpp$", f)}
 SMG_OPTIONS = set(re.findall(r"\b(SMG_\w+)\b", "\n".join(cmake_texts().values())))
 
 
@@ -704,6 +778,9 @@ def check_command(f, n, toks, state):
                     if args[j] not in TARGETS:
                         problem(f, n, "cmake --target %s: no such target in the CMakeLists" % args[j])
                     j += 1
+                if "--build" in args:
+                    built = os.path.normpath(os.path.join(state["cwd"], args[args.index("--build") + 1]))
+                    state.setdefault("built", {}).setdefault(built, set()).update(args[i + 1:j])
                 i = j
                 continue
             m = re.match(r"^-D(SMG_\w+)", a)
@@ -718,6 +795,17 @@ def check_command(f, n, toks, state):
     if prog == "ctest":
         if "--test-dir" in args:
             checked_paths.append(args[args.index("--test-dir") + 1])
+            # A page that builds only some targets into a folder it configures, then runs ctest
+            # there: every test that -R selects and whose program is a target must be built
+            # (tests/run_expect.cmake fails a test whose program is missing).
+            tdir = os.path.normpath(os.path.join(state["cwd"], args[args.index("--test-dir") + 1]))
+            built = state.get("built", {}).get(tdir)
+            if built is not None and "-R" in args and args.index("-R") + 1 < len(args):
+                pat = args[args.index("-R") + 1].strip("'\"")
+                missing = sorted(t for t in TEST_NAMES & TARGETS if re.search(pat, t) and t not in built)
+                if missing:
+                    problem(f, n, "ctest -R %s runs %s, which this page's cmake --build %s --target "
+                                  "does not build" % (pat, ", ".join(missing), tdir))
         args = []
     elif looks_like_path(prog):
         why = path_problem(prog, state["cwd"], state["made"])
@@ -987,7 +1075,8 @@ if '#include "smg/energy/regularizers.hpp"' not in umbrella:
 term_set = term_list_hpp[term_list_hpp.find("struct RegularizerTermSet"):]
 term_set = term_set[:term_set.find("\n};")]
 operators = read_text("tests/support/operators.hpp") or ""
-op_list = re.search(r"using Operators = std::tuple<([^>]*)>", operators)
+# The list: a std::tuple of operators, or one joined with generated variants (std::tuple_cat).
+op_list = re.search(r"using Operators = (?:decltype\(std::tuple_cat\()?std::tuple<([^>]*)>", operators)
 op_names = set(re.findall(r'static constexpr const char\* name = "(\w+)"', operators))
 energy_md = TEXT.get("docs/math/energy.md", "")
 for rel in sorted(f for f in tracked_files() if f.startswith(TERMS_DIR + "/") and f.endswith(".hpp")):
@@ -1076,6 +1165,63 @@ if report is not None:
     if perf is not None and perf != buf.getvalue().replace(os.path.join(ROOT, ""), ""):
         problem("docs/performance.md", 1, "differs from what bench/report.py generates from bench/results "
                 "(run: python3 bench/report.py bench/results > docs/performance.md)")
+
+# ---------------------------------------------------------------------------------------------
+# (n) hand-written tables of figures say so: in docs/ and bench/notes/, a markdown table with a
+# number in a cell lies between a generator's markers (scripts/ladder.sh's and failure_study.py's
+# "<!-- ladder:X -->" ... "<!-- /ladder:X -->", scripts/terms_table.py's "<!-- terms:begin -->" ...
+# "<!-- terms:end -->"), or the nearest non-blank line above it is "<!-- not generated: WHY -->".
+# docs/performance.md is generated as a whole (section (g)); its hand tables are its notes'.
+GENERATED_BLOCKS = [(re.compile(r"^\s*<!-- ladder:([\w-]+) -->\s*$"), "<!-- /ladder:%s -->"),
+                    (re.compile(r"^\s*<!-- terms:begin -->\s*$"), "<!-- terms:end -->"),
+                    (re.compile(r"^\s*<!-- smg:highlights begin -->\s*$"), "<!-- smg:highlights end -->")]
+TABLE_SEP = re.compile(r"^\s*\|(\s*:?-{3,}:?\s*\|)+\s*$")
+NUMBER_CELL = re.compile(r"^[*_`(~≈<>≤≥]*[−+-]?\d")
+NOT_GENERATED = re.compile(r"^\s*<!-- not generated: \S.*-->\s*$")
+
+
+def unmarked_tables(text):
+    """Line numbers (1-based) of tables with a number in a cell, outside generated blocks and
+    without a "<!-- not generated: WHY -->" line above."""
+    lines = text.split("\n")
+    found, fenced, end, n = [], False, None, 0
+    while n < len(lines):
+        line = lines[n]
+        if FENCE.match(line):
+            fenced = not fenced
+        elif not fenced and end is not None:
+            if line.strip() == end:
+                end = None
+        elif not fenced:
+            for start, stop in GENERATED_BLOCKS:
+                m = start.match(line)
+                if m:
+                    end = stop % m.group(1) if "%s" in stop else stop
+            if end is None and line.lstrip().startswith("|") and n + 1 < len(lines) \
+                    and TABLE_SEP.match(lines[n + 1]):
+                k = n + 2
+                while k < len(lines) and lines[k].lstrip().startswith("|"):
+                    k += 1
+                cells = [c.strip() for row in lines[n + 2:k]
+                         for c in re.split(r"(?<!\\)\|", row.strip().strip("|"))]
+                if any(NUMBER_CELL.match(c) for c in cells):
+                    above = n - 1
+                    while above >= 0 and not lines[above].strip():
+                        above -= 1
+                    if above < 0 or not NOT_GENERATED.match(lines[above]):
+                        found.append(n + 1)
+                n = k
+                continue
+        n += 1
+    return found
+
+
+for f in sorted(TEXT):
+    if f.endswith(".md") and (f.startswith("docs/") or f.startswith("bench/notes/")) \
+            and f != "docs/performance.md":
+        for n in unmarked_tables(TEXT[f]):
+            problem(f, n, "a table of figures outside a generated block without "
+                          "'<!-- not generated: WHY -->' on the line above it")
 
 if HELP_MISSING:
     print("check_docs: note: not built, so their flag values were not checked: %s (build/release/examples)"

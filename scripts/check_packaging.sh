@@ -2,8 +2,9 @@
 # scripts/check_packaging.sh — prove the three ways of consuming smg:
 #   1. cmake --install, then find_package(smg) from an out-of-tree project (tests/consumer), and
 #      docs/quickstart.md's find_package command block run as written (examples/quickstart);
+#      also the page's in-tree block (build/release, the four programs, ctest -R quickstart);
 #   2. add_subdirectory(smg) from that project;
-#   3. copying include/ next to Eigen: README's "Copy the headers" command block run as written
+#   3. copying include/ next to Eigen: README's "By copying the headers" command block run as written
 #      on a quick-start program, and a plain compiler call on tests/consumer;
 #   4. the pip route to smg_torch (docs/torch.md's "pip" block: a venv that sees Debian's torch,
 #      pip install --no-build-isolation ./examples/torch, import), then tests/torch/test_energy.py
@@ -60,6 +61,23 @@ for p in views energies dqb render; do
   "$work/fresh/smg/build/quickstart/quickstart_$p" | tail -n 1 | grep -qx "quickstart $p: ok"
 done
 echo "packaging: docs/quickstart.md find_package route (examples/quickstart, 4 programs): ok"
+
+# docs/quickstart.md's in-tree block, as written. By default in the fresh copy, where build/release
+# is a new folder (the whole project configured, the four programs built). SMG_REUSE_BUILD=1 runs
+# it in the repository root instead, on the build/release an earlier step made (CI: stage 1's), so
+# it costs a reconfigure, four up-to-date targets and four short tests. That the block builds
+# every program its `ctest -R` selects, which only a fresh folder would show, check_docs checks.
+block=$(run_block docs/quickstart.md in-tree)
+[ -n "$block" ] || { echo "packaging: docs/quickstart.md has no in-tree block" >&2; exit 1; }
+if [ "${SMG_REUSE_BUILD:-0}" = 1 ]; then where=$root; else where=$work/fresh/smg; fi
+t0=$(date +%s)
+(cd "$where" && HOME="$work/home" bash -euo pipefail -c "$block") >"$work/intree.log" 2>&1 ||
+  { cat "$work/intree.log"; echo "packaging: docs/quickstart.md in-tree block failed (in $where)" >&2; exit 1; }
+grep -qx "quickstart energies: ok" "$work/intree.log" ||
+  { cat "$work/intree.log"; echo "packaging: docs/quickstart.md in-tree block: quickstart_energies did not print its ok line" >&2; exit 1; }
+grep -q "100% tests passed, 0 tests failed out of 4" "$work/intree.log" ||
+  { cat "$work/intree.log"; echo "packaging: docs/quickstart.md in-tree block: ctest did not run the 4 quick-start tests" >&2; exit 1; }
+echo "packaging: docs/quickstart.md in-tree block (in $where): ok in $(( $(date +%s) - t0 ))s"
 
 block=$(run_block README.md "copied headers")
 [ -n "$block" ] || { echo "packaging: README.md has no copied-headers block" >&2; exit 1; }

@@ -13,12 +13,19 @@ loss has the C++ stage 1's terms and normalisation (examples/trainer/nodes.hpp):
     w_data / (T N)           * sum over visible (t, i) of Huber(|x_i^t - y_i^t|, data_huber)   (PyTorch)
   + w_rigidity / (N sum_d gamma_d (T - d)) * C-ARAP(x, q; c)   (smg_torch.carap; arap / none per variant)
   + w_lrm / (T N)          * LRM(x; c)                          (smg_torch.lrm, if the variant has it)
+  + w_accel / (T N)        * sum_{t,i} |x_i^{t+2} - 2 x_i^{t+1} + x_i^t|^2   (E21; smg_torch.regularizers'
+                                                                 accel term, if w_accel > 0)
 
 with the confidences c = smg_torch.node_confidences(x, graph, visibility) recomputed every
 `confidence_every` iterations (constants in between). Prints node EPE (mean distance to
 gt_positions.npy, metres) before and after and the time per iteration. Differences from the C++
 stage 1: Adam steps the raw quaternions (renormalised after each step) instead of right-tangent
 rotation steps.
+
+A case it cannot fit as the trainer would is refused, with one line on stderr naming the key and
+exit code 2, before any work: a stage-1 term weight (a `w_*` key of case.json) other than w_data,
+w_rigidity, w_lrm and w_accel unless its value is 0 (that term is then off, as in the trainer), a
+negative or non-numeric weight, or a `rigidity` other than carap, arap and none.
 """
 import argparse
 import json
@@ -44,18 +51,48 @@ import smg_torch as smg  # noqa: E402
 CASE_FILES = ("lifted.npy", "visibility.npy", "gt_positions.npy", "quats.npy", "graph_indices.npy",
               "graph_weights.npy")
 
+#: The stage-1 terms' weights in case.json that Stage1Loss fits (the trainer's NodeLossOptions).
+TERM_WEIGHTS = ("w_data", "w_rigidity", "w_lrm", "w_accel")
+RIGIDITIES = ("carap", "arap", "none")
+
+
+class CaseError(ValueError):
+    """A case this script cannot fit as the trainer's stage 1 would; main prints it as one line."""
+
+
+def check_terms(config, where="case.json"):
+    """Refuses (CaseError naming the key) a case.json with a stage-1 term this script does not
+    fit: a weight key `w_*` other than TERM_WEIGHTS with a value other than 0, a term weight that is
+    negative or not a number, or an unknown rigidity."""
+    for key, value in config.items():
+        if not key.startswith("w_"):
+            continue
+        numeric = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        if key not in TERM_WEIGHTS:
+            if not (numeric and value == 0):
+                raise CaseError(f"{where}: stage-1 term {key!r} = {value!r} is not implemented by fit_nodes.py "
+                                f"(it fits {', '.join(TERM_WEIGHTS)}); refusing the case")
+        elif not numeric or value < 0:
+            raise CaseError(f"{where}: {key!r} = {value!r} is not a weight >= 0; refusing the case")
+    rigidity = config.get("rigidity", "carap")
+    if rigidity not in RIGIDITIES:
+        raise CaseError(f"{where}: 'rigidity' = {rigidity!r} is not implemented by fit_nodes.py "
+                        f"(it fits {', '.join(RIGIDITIES)}); refusing the case")
+
 
 def load_case(case_dir):
     """The exported stage-1 problem: a dict of tensors (float64, visibility uint8, indices
-    int64) plus 'config' (case.json)."""
+    int64) plus 'config' (case.json). CaseError for a case this script cannot fit (check_terms)
+    or whose files' shapes disagree."""
     with open(os.path.join(case_dir, "case.json"), encoding="utf-8") as f:
         config = json.load(f)
+    check_terms(config, os.path.join(case_dir, "case.json"))
     arrays = {name[:-4]: torch.from_numpy(np.load(os.path.join(case_dir, name))) for name in CASE_FILES}
     T, N = arrays["lifted"].shape[:2]
     if arrays["visibility"].shape != (T, N) or arrays["gt_positions"].shape != (T, N, 3) or \
             arrays["quats"].shape != (T, N, 4) or arrays["graph_indices"].shape[0] != N or \
             arrays["graph_weights"].shape != arrays["graph_indices"].shape:
-        raise ValueError(f"{case_dir}: inconsistent shapes in the case files")
+        raise CaseError(f"{case_dir}: inconsistent shapes in the case files")
     arrays["lifted"] = arrays["lifted"].double()
     arrays["gt_positions"] = arrays["gt_positions"].double()
     arrays["quats"] = arrays["quats"].double()
@@ -82,6 +119,7 @@ class Stage1Loss:
 
     def __init__(self, case):
         c = case["config"]
+        check_terms(c)
         self.c = c
         self.observed = case["lifted"].clone()
         self.visible = case["visibility"].to(torch.float64)
@@ -97,6 +135,13 @@ class Stage1Loss:
         frames_gaps = sum(w * max(0, T - d) for d, w in zip(gaps, gap_w))
         self.w_rig = c["w_rigidity"] / (N * frames_gaps) if frames_gaps > 0 else 0.0
         self.w_lrm = c["w_lrm"] * per_node_frame
+        # Smoothness (E21) as the trainer's NodeObjective adds it: weight w_accel / (T N) on the sum
+        # (not the mean) of the unweighted squared accelerations, only when w_accel > 0. Through
+        # smg_torch.regularizers with every other term off (smg::accel's term; no quaternions).
+        self.w_accel = float(c.get("w_accel", 0.0)) * per_node_frame
+        self.accel_terms = {t: False for t in smg.REGULARIZER_TERMS if t != "accel"}
+        self.accel_terms["accel"] = {"form": "acceleration", "confidence_weighted": False,
+                                     "normalize": False, "weight": self.w_accel}
         self.rigidity = c.get("rigidity", "carap")
         self.lrm_on = bool(c.get("lrm", True))
         self.confidence = None
@@ -125,6 +170,8 @@ class Stage1Loss:
         if self.lrm_on:
             terms["lrm"] = self.w_lrm * smg.lrm(x, self.graph, self.confidence, alpha=c["alpha"],
                                                 huber_delta=c["lrm_huber"])
+        if self.w_accel > 0:
+            terms["accel"] = smg.regularizers(x, None, self.graph, None, **self.accel_terms).total
         return sum(terms.values()), terms
 
 
@@ -182,7 +229,8 @@ def fit(case, iters=None, threads=None, log=print, log_every=50):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description="PyTorch stage 1 (smg_torch C-ARAP + LRM) on an exported case")
+    ap = argparse.ArgumentParser(description="PyTorch stage 1 (smg_torch C-ARAP + LRM + smoothness) on an "
+                                             "exported case")
     ap.add_argument("case_dir", help="folder written by smg_trainer --export-case")
     ap.add_argument("--iters", type=int, default=None, help="iterations (default: case.json's)")
     ap.add_argument("--threads", type=int, default=None, help="torch.set_num_threads (default: torch's)")
@@ -192,7 +240,11 @@ def main(argv=None):
         ap.error("--iters must be >= 0")
     if a.threads is not None and a.threads < 1:
         ap.error("--threads must be >= 1")
-    case = load_case(a.case_dir)
+    try:
+        case = load_case(a.case_dir)
+    except CaseError as e:
+        print(f"fit_nodes.py: {e}", file=sys.stderr)
+        raise SystemExit(2)
     c = case["config"]
     log = None if a.quiet else (lambda s: print(s, file=sys.stderr))
     r = fit(case, a.iters, a.threads, log=log)

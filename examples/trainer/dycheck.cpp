@@ -99,11 +99,12 @@ class SceneReader {
     const std::vector<unsigned char> b = bytes(rel);
     return labelled([&] { return files::decode_png(b, rel, limits); });
   }
-  // A photograph: JPEG where the name says so (MoSca's images/*.jpg), else PNG.
-  files::Pixels8 photo(const std::string& rel, const files::ImageLimits& limits) const {
+  // A photograph: JPEG where the name says so (MoSca's images/*.jpg), else PNG; `notes` as
+  // files::decode_jpeg's.
+  files::Pixels8 photo(const std::string& rel, const files::ImageLimits& limits, std::FILE* notes = stderr) const {
     if (!files::is_jpeg_name(rel)) return png(rel, limits);
     const std::vector<unsigned char> b = bytes(rel);
-    return labelled([&] { return files::decode_jpeg(b, rel, limits); });
+    return labelled([&] { return files::decode_jpeg(b, rel, limits, notes); });
   }
 
  private:
@@ -505,8 +506,8 @@ npy::Array read_npy(const std::string& root, const std::string& rel) { return Sc
 files::Pixels8 read_png(const std::string& root, const std::string& rel, const files::ImageLimits& limits) {
   return SceneReader(root).png(rel, limits);
 }
-files::Pixels8 read_photo(const std::string& root, const std::string& rel, const files::ImageLimits& limits) {
-  return SceneReader(root).photo(rel, limits);
+files::Pixels8 read_photo(const std::string& root, const std::string& rel, const files::ImageLimits& limits, std::FILE* notes) {
+  return SceneReader(root).photo(rel, limits, notes);
 }
 std::map<std::string, npy::Array> read_npz(const std::string& root, const std::string& rel) {
   const std::vector<unsigned char> b = SceneReader(root).bytes(rel);

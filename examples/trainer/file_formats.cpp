@@ -15,11 +15,14 @@
 // such object, so a longjmp skips nothing that needed destroying.
 #include "trainer/file_formats.hpp"
 
+#include "cli_args.hpp"  // cli::escape_line
+
 #include <png.h>
 #include <zlib.h>
 
 #include <cstdio>  // jpeglib.h needs FILE and size_t declared first
 #include <jpeglib.h>
+#include <jerror.h>  // the message codes (JWRN_JPEG_EOF)
 
 #include <algorithm>
 #include <cctype>
@@ -32,6 +35,7 @@
 #include <memory>
 #include <new>
 #include <stdexcept>
+#include <string>
 
 namespace trainer::files {
 
@@ -173,6 +177,8 @@ struct JpegState {
   Pixels8 out;
   std::string problem;
   char message[JMSG_LENGTH_MAX + 64] = {};
+  long warnings = 0;                        // libjpeg's warnings read through
+  char first_warning[JMSG_LENGTH_MAX] = {};  // the text of the first
 };
 
 JpegState* jpeg_state(j_common_ptr cinfo) { return static_cast<JpegState*>(cinfo->client_data); }
@@ -182,10 +188,20 @@ void jpeg_error_to_state(j_common_ptr cinfo) {
   (*cinfo->err->format_message)(cinfo, st->message);
   std::longjmp(st->jump, 1);  // NOLINT(cert-err52-cpp): libjpeg's error protocol
 }
-// libjpeg's warnings (level -1) are corrupt or truncated data that it would paper over: errors
-// here. Trace messages (level >= 0) are ignored.
-void jpeg_warning_to_error(j_common_ptr cinfo, int level) {
-  if (level < 0) jpeg_error_to_state(cinfo);
+// libjpeg's warnings (level -1) are data it can read past: stray bytes before a marker (which
+// some writers leave), a bad Huffman code or an early end of one scan's data (those
+// blocks come out flat), an unknown JFIF revision, a bad ICC marker. djpeg, Pillow and OpenCV
+// read such files, so they are read here too: the first warning's text is kept for the one note
+// decode_jpeg prints, the others are counted. One warning is an error: "Premature end of JPEG
+// file" (JWRN_JPEG_EOF), where jpeg_mem_src ran out of bytes and libjpeg would make up the rest
+// of the image in grey; Pillow refuses such a file too ("image file is truncated", unless told
+// LOAD_TRUNCATED_IMAGES), and a cut-off download or copy is the usual cause, which the user
+// should hear about rather than train on a grey band. Trace messages (level >= 0) are ignored.
+void jpeg_warning(j_common_ptr cinfo, int level) {
+  if (level >= 0) return;
+  if (cinfo->err->msg_code == JWRN_JPEG_EOF) jpeg_error_to_state(cinfo);
+  JpegState* st = jpeg_state(cinfo);
+  if (st->warnings++ == 0) (*cinfo->err->format_message)(cinfo, st->first_warning);
 }
 void jpeg_count_scans(j_common_ptr cinfo) {
   if (!cinfo->is_decompressor) return;
@@ -200,7 +216,7 @@ void jpeg_count_scans(j_common_ptr cinfo) {
 bool jpeg_decode_into(JpegState* st, const unsigned char* data, std::size_t size) {
   st->cinfo.err = jpeg_std_error(&st->err);
   st->err.error_exit = jpeg_error_to_state;
-  st->err.emit_message = jpeg_warning_to_error;
+  st->err.emit_message = jpeg_warning;
   st->cinfo.client_data = st;
   if (setjmp(st->jump)) return false;  // NOLINT(cert-err52-cpp): libjpeg's error protocol
   st->created = true;  // jpeg_destroy_decompress is safe on a half-made struct
@@ -260,7 +276,8 @@ Pixels8 decode_png(const std::vector<unsigned char>& bytes, const std::string& l
   return std::move(st.out);
 }
 
-Pixels8 decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& label, const ImageLimits& limits) {
+Pixels8 decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& label, const ImageLimits& limits,
+                    std::FILE* notes) {
   if (!starts_with(bytes, {0xff, 0xd8, 0xff})) throw std::runtime_error(label + ": not a JPEG image (no JPEG start-of-image marker)");
   if (bytes.size() > ULONG_MAX) throw std::runtime_error(label + ": file too large");
   auto st = std::make_unique<JpegState>();
@@ -274,6 +291,13 @@ Pixels8 decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& 
   if (!jpeg_decode_into(st.get(), bytes.data(), bytes.size())) {
     if (!st->problem.empty()) throw std::runtime_error(label + ": " + st->problem);
     throw std::runtime_error(label + ": corrupt JPEG (libjpeg: " + st->message + ")");
+  }
+  if (st->warnings > 0 && notes != nullptr) {
+    std::string note = "[data] " + label + ": libjpeg warning: " + st->first_warning;
+    if (st->warnings > 1) note += " (and " + std::to_string(st->warnings - 1) + " more)";
+    note = cli::escape_line(note + " (read anyway)") + "\n";
+    std::fputs(note.c_str(), notes);
+    std::fflush(notes);
   }
   return std::move(st->out);
 }

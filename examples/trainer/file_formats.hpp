@@ -11,6 +11,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <map>
 #include <string>
 #include <utility>
@@ -52,10 +53,15 @@ ImageLimits image_of_size(int width, int height, std::string expected = {});
 // ...)". libpng's warnings (a bad ancillary chunk) are not printed; the image is read.
 Pixels8 decode_png(const std::vector<unsigned char>& bytes, const std::string& label, const ImageLimits& limits = {});
 // Decodes a baseline or progressive JPEG held in memory with libjpeg-turbo (integer IDCT, as
-// `djpeg -dct int`): grey gives 1 channel, colour 3; CMYK is refused. Any libjpeg warning (corrupt
-// or truncated data, which libjpeg would paper over) is an error, as are more than 1000 scans.
+// `djpeg -dct int`): grey gives 1 channel, colour 3; CMYK is refused. libjpeg's errors are
+// refused ("<label>: corrupt JPEG (libjpeg: ...)"), as are more than 1000 scans and a file that
+// ends early (libjpeg's "Premature end of JPEG file" warning: it would fill the rest with grey).
+// Its other warnings (data it reads past, such as stray bytes before a marker) do not stop it, as
+// djpeg, Pillow and OpenCV read past them: the image is read and one line goes to `notes` (nullptr:
+// none), "[data] <label>: libjpeg warning: <the first> [(and N more)] (read anyway)".
 // Only readers of photographs use it (MoSca's images/): masks and maps stay lossless PNG.
-Pixels8 decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& label, const ImageLimits& limits = {});
+Pixels8 decode_jpeg(const std::vector<unsigned char>& bytes, const std::string& label, const ImageLimits& limits = {},
+                    std::FILE* notes = stderr);
 // Whether a file name ends in .jpg or .jpeg (any case): the readers that accept JPEG pick the
 // decoder by the name, as MoSca's glob does.
 bool is_jpeg_name(const std::string& name);

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <map>
 #include <string>
 #include <vector>
@@ -33,8 +34,10 @@ npy::Array read_npy(const std::string& root, const std::string& rel);
 // Images: `limits` gives the sizes the image may have, checked from its header before anything
 // is decoded (file_formats.hpp).
 files::Pixels8 read_png(const std::string& root, const std::string& rel, const files::ImageLimits& limits);
-// A photograph: JPEG where the name ends in .jpg / .jpeg (any case), else PNG.
-files::Pixels8 read_photo(const std::string& root, const std::string& rel, const files::ImageLimits& limits);
+// A photograph: JPEG where the name ends in .jpg / .jpeg (any case), else PNG. `notes`: where a
+// JPEG read through libjpeg's warnings says so (files::decode_jpeg; nullptr: nowhere).
+files::Pixels8 read_photo(const std::string& root, const std::string& rel, const files::ImageLimits& limits,
+                          std::FILE* notes = stderr);
 std::map<std::string, npy::Array> read_npz(const std::string& root, const std::string& rel);
 // A float array as float32 values (any float dtype, either memory order); non-float refused.
 std::vector<float> float_values(const npy::Array& a, const std::string& rel);

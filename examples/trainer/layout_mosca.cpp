@@ -102,7 +102,9 @@ Camera mosca_read_camera(const std::string& root, const std::string& rel, const 
   files::ImageLimits limits;
   limits.sizes = {{c.width, c.height}, {half.width, half.height}};
   limits.expected = "but " + rel + " says " + std::to_string(c.width) + "x" + std::to_string(c.height) + " (nor half of it)";
-  const files::Pixels8 png = layout_io::read_photo(root, image_rel, limits);
+  // No notes: the caller decodes the image again for its pixels (read_rgb_png), and that read
+  // prints libjpeg's note, once per file.
+  const files::Pixels8 png = layout_io::read_photo(root, image_rel, limits, nullptr);
   if (c.width != png.width || c.height != png.height) c = half;
   c.cx += 0.5;
   c.cy += 0.5;

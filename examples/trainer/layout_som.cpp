@@ -9,9 +9,11 @@
 //   "depth_anything_colmap". colmap/scale.npy (COLMAP units -> metres; SoM applies it in its
 //   evaluation) scales the translations and the depth, so the scene is metric like the others;
 //   without it the scene stays in COLMAP's units (the trainer's lengths follow the scene's extent).
-//   Otherwise camera_type "original": the Nerfies camera/<frame>.json with the depth SoM's README
-//   pairs with those metric cameras, "depth_anything_lidar" (aligned_depth_anything_lidar/1x), or
-//   without it the lidar depth/1x/<frame>.npy [H, W, 1] (0 = none).
+//   Otherwise camera_type "original": the Nerfies camera/<frame>.json with monocular depth aligned
+//   to those metric cameras, aligned_depth_anything_lidar/1x (the depth_type "depth_anything_lidar"
+//   and its pairing with camera_type "original" are HiMoR's README's, a project built on SoM; SoM's
+//   own depth types are midas, depth_anything, lidar, depth_anything_colmap), or without it the
+//   lidar depth/1x/<frame>.npy [H, W, 1] (0 = none).
 // - Pixels: SoM's tracks, depth samples and K use integer pixel centres (grid_sample with
 //   align_corners=True, get_bkgd_points's arange grid, K as stored). The trainer puts the centre
 //   of pixel i at i + 0.5, so track x, y and the principal point get + 0.5 here: every ray is the

@@ -7,10 +7,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
+
+#include <unistd.h>  // dup, dup2: the stderr of one read
 
 #include "npy.hpp"
 #include "support/files.hpp"
@@ -185,6 +188,34 @@ TEST_CASE("read_mosca: one broken file at a time names that file") {
   }
 }
 
+// What `f` writes to stderr (file descriptor 2, redirected to a temporary file meanwhile).
+template <class F>
+static std::string mosca_stderr_of(F&& f) {
+  std::FILE* tmp = std::tmpfile();
+  REQUIRE(tmp != nullptr);
+  std::fflush(stderr);
+  const int saved = ::dup(2);
+  REQUIRE(saved >= 0);
+  REQUIRE(::dup2(::fileno(tmp), 2) == 2);
+  struct Restore {
+    int fd;
+    ~Restore() {
+      std::fflush(stderr);
+      ::dup2(fd, 2);
+      ::close(fd);
+    }
+  };
+  {
+    const Restore restore{saved};
+    f();
+  }
+  std::rewind(tmp);
+  std::string got;
+  for (int ch; (ch = std::fgetc(tmp)) != EOF;) got += static_cast<char>(ch);
+  std::fclose(tmp);
+  return got;
+}
+
 // The three training images as JPEG files written by libjpeg-turbo's cjpeg (tests/data/mosca_jpeg,
 // made by its make_fixture.py), in place of mosca_small's PNGs.
 TEST_CASE("read_mosca: JPEG images written by libjpeg's cjpeg decode as djpeg decodes them") {
@@ -231,5 +262,17 @@ TEST_CASE("read_mosca: JPEG images written by libjpeg's cjpeg decode as djpeg de
     const std::string b = smg::test::slurp(overlay / "images/0_00000.jpg");
     smg::test::write_bytes(d / "images/0_00000.jpg", b.substr(0, 40));
     CHECK(layout_read_error(d).rfind("images/0_00000.jpg: ", 0) == 0);
+  }
+  SUBCASE("a stray byte before the DQT marker (issue 47): read, the same pixels, one note on stderr naming the file") {
+    std::string b = smg::test::slurp(overlay / "images/0_00001.jpg");
+    const std::size_t dqt = b.find("\xff\xdb");
+    REQUIRE(dqt != std::string::npos);
+    b.insert(dqt, 1, '\0');
+    smg::test::write_bytes(d / "images/0_00001.jpg", b);
+    trainer::DycheckScene stray;
+    const std::string err = mosca_stderr_of([&] { stray = trainer::read_mosca(d.string()); });
+    CHECK(err == "[data] images/0_00001.jpg: libjpeg warning: Corrupt JPEG data: 1 extraneous bytes before marker 0xdb (read anyway)\n");
+    REQUIRE(stray.train_rgb.size() == 3);
+    for (std::size_t t = 0; t < 3; ++t) CHECK(stray.train_rgb[t].pixels == s.train_rgb[t].pixels);
   }
 }

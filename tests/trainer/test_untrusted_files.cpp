@@ -4,7 +4,10 @@
 // sizes refused from the header, before anything is decoded.
 #include <doctest/doctest.h>
 
+#include <algorithm>
+#include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <stdexcept>
 #include <string>
@@ -122,9 +125,95 @@ TEST_CASE("JPEG (libjpeg-turbo): the stb_image out-of-bounds input is refused as
   CHECK(p.pixels.size() == 16 * 12 * 3);
   CHECK(untrusted_error([&] { trainer::files::decode_jpeg(good, "g.jpg", trainer::files::image_of_size(32, 24)); }) ==
         "g.jpg: image is 16x12, expected 32x24");
-  // libjpeg would pad a truncated file with grey and warn; the warning is an error here.
+  // libjpeg would pad a truncated file with grey and warn ("Premature end of JPEG file"); that
+  // warning is an error here, as Pillow refuses a truncated file.
   const std::vector<unsigned char> cut(good.begin(), good.end() - 100);
-  CHECK(untrusted_starts_with(untrusted_error([&] { trainer::files::decode_jpeg(cut, "t.jpg"); }), "t.jpg: corrupt JPEG (libjpeg: "));
+  CHECK(untrusted_error([&] { trainer::files::decode_jpeg(cut, "t.jpg"); }) == "t.jpg: corrupt JPEG (libjpeg: Premature end of JPEG file)");
+}
+
+// The bytes with `extra` inserted before the first `marker` (0xFF, code) after the SOI.
+std::vector<unsigned char> untrusted_jpeg_with_extra(const std::vector<unsigned char>& b, unsigned char code, unsigned char extra) {
+  for (std::size_t i = 2; i + 1 < b.size(); ++i) {
+    if (b[i] == 0xFF && b[i + 1] == code) {
+      std::vector<unsigned char> out(b.size() + 1);  // (not vector::insert: a false -Wstringop-overflow in GCC 12)
+      std::copy(b.begin(), b.begin() + static_cast<std::ptrdiff_t>(i), out.begin());
+      out[i] = extra;
+      std::copy(b.begin() + static_cast<std::ptrdiff_t>(i), b.end(), out.begin() + static_cast<std::ptrdiff_t>(i) + 1);
+      return out;
+    }
+  }
+  FAIL("no marker 0xFF " << static_cast<int>(code));
+  return b;
+}
+
+// What decode_jpeg wrote to its notes stream, and its pixels (or the refusal).
+struct UntrustedJpegRead {
+  Pixels8 pixels;
+  std::string error;
+  std::string notes;
+};
+UntrustedJpegRead untrusted_read_jpeg(const std::vector<unsigned char>& b, const std::string& label) {
+  UntrustedJpegRead r;
+  std::FILE* f = std::tmpfile();
+  REQUIRE(f != nullptr);
+  try {
+    r.pixels = trainer::files::decode_jpeg(b, label, {}, f);
+  } catch (const std::runtime_error& e) {
+    r.error = e.what();
+  }
+  std::rewind(f);
+  for (int ch; (ch = std::fgetc(f)) != EOF;) r.notes += static_cast<char>(ch);
+  std::fclose(f);
+  return r;
+}
+
+TEST_CASE("JPEG (libjpeg-turbo): a warning is read through with one note naming the file; regression inputs stay refused") {
+  // Issue 47: a valid JPEG with one stray byte before its DQT marker (0xFF 0xDB), which Pillow,
+  // OpenCV and djpeg decode, was refused ("1 extraneous bytes before marker 0xdb").
+  const std::vector<unsigned char> good = untrusted_corpus_file("jpeg/baseline.jpg");
+  const UntrustedJpegRead clean = untrusted_read_jpeg(good, "images/0_00000.jpg");
+  REQUIRE(clean.error.empty());
+  CHECK(clean.notes.empty());
+  const std::vector<unsigned char> stray = untrusted_jpeg_with_extra(good, 0xDB, 0x00);
+  CHECK(stray.size() == good.size() + 1);
+  const UntrustedJpegRead read = untrusted_read_jpeg(stray, "images/0_00000.jpg");
+  CHECK(read.error.empty());
+  CHECK(read.notes ==
+        "[data] images/0_00000.jpg: libjpeg warning: Corrupt JPEG data: 1 extraneous bytes before marker 0xdb (read anyway)\n");
+  CHECK(read.pixels.width == clean.pixels.width);
+  CHECK(read.pixels.height == clean.pixels.height);
+  CHECK(read.pixels.channels == clean.pixels.channels);
+  CHECK(read.pixels.pixels == clean.pixels.pixels);  // the same pixels: the byte is outside the image data
+
+  // Several warnings: still one line, the first named and the others counted; the label escaped.
+  const std::vector<unsigned char> two = untrusted_jpeg_with_extra(untrusted_jpeg_with_extra(stray, 0xC0, 0x00), 0xC0, 0x00);
+  const UntrustedJpegRead twice = untrusted_read_jpeg(two, "images/a\nb.jpg");
+  CHECK(twice.error.empty());
+  CHECK(twice.notes == "[data] images/a\\nb.jpg: libjpeg warning: Corrupt JPEG data: 1 extraneous bytes before marker 0xdb "
+                       "(and 1 more) (read anyway)\n");
+  CHECK(twice.pixels.pixels == clean.pixels.pixels);
+
+  // Warnings before a file's early end: refused, and no note.
+  const std::vector<unsigned char> cut(stray.begin(), stray.end() - 100);
+  const UntrustedJpegRead truncated = untrusted_read_jpeg(cut, "t.jpg");
+  CHECK(truncated.error == "t.jpg: corrupt JPEG (libjpeg: Premature end of JPEG file)");
+  CHECK(truncated.notes.empty());
+  // Cut after the last scan (the EOI marker missing): refused as well.
+  const UntrustedJpegRead no_eoi = untrusted_read_jpeg({good.begin(), good.end() - 2}, "e.jpg");
+  CHECK(no_eoi.error == "e.jpg: corrupt JPEG (libjpeg: Premature end of JPEG file)");
+
+  // Every regression input of the fuzz corpus is still refused, with no note.
+  int regressions = 0;
+  for (const auto& entry : fs::directory_iterator(fs::path(SMG_TEST_DATA_DIR) / ".." / "fuzz" / "corpus" / "jpeg")) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("regression-", 0) != 0) continue;
+    ++regressions;
+    CAPTURE(name);
+    const UntrustedJpegRead r = untrusted_read_jpeg(untrusted_corpus_file("jpeg/" + name), name);
+    CHECK(untrusted_starts_with(r.error, name + ": corrupt JPEG (libjpeg: "));
+    CHECK(r.notes.empty());
+  }
+  CHECK(regressions >= 1);
 }
 
 TEST_CASE("npz: deflate bombs are refused before they are inflated; a consistent one is read within its bound") {

@@ -226,8 +226,9 @@ def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor
 #: list (smg::for_each_term / smg::for_each_option, smg/energy/options.hpp), so they are the C++
 #: defaults, which are node_confidences', carap's, arap's and lrm's. `weight` multiplies the
 #: term and its gradient; a GapList is `gaps` + `gap_weights` (None = all 1), a Normalization
-#: the bool `normalize`; accel's `form` is "acceleration" or "velocity", its
-#: `confidence_weighted` uses c at the earliest frame of each term (1 otherwise).
+#: the bool `normalize`; accel's `form` is "acceleration" or "velocity", its `penalty`
+#: "squared", "norm" or "sqrt_weighted" (E22, with `penalty_eps`), its `confidence_weighted`
+#: uses c at the earliest frame of each term (1 otherwise).
 REGULARIZER_DEFAULTS = _C._regularizer_options()
 #: The terms of regularizers in the driver's order, each on (True) or off by default.
 REGULARIZER_TERMS = _C._regularizer_terms()
