@@ -1075,7 +1075,8 @@ if '#include "smg/energy/regularizers.hpp"' not in umbrella:
 term_set = term_list_hpp[term_list_hpp.find("struct RegularizerTermSet"):]
 term_set = term_set[:term_set.find("\n};")]
 operators = read_text("tests/support/operators.hpp") or ""
-op_list = re.search(r"using Operators = std::tuple<([^>]*)>", operators)
+# The list: a std::tuple of operators, or one joined with generated variants (std::tuple_cat).
+op_list = re.search(r"using Operators = (?:decltype\(std::tuple_cat\()?std::tuple<([^>]*)>", operators)
 op_names = set(re.findall(r'static constexpr const char\* name = "(\w+)"', operators))
 energy_md = TEXT.get("docs/math/energy.md", "")
 for rel in sorted(f for f in tracked_files() if f.startswith(TERMS_DIR + "/") and f.endswith(".hpp")):

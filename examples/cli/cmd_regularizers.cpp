@@ -65,10 +65,12 @@ void add_flags(std::vector<FlagSpec>& f, const std::string& flag, const smg::Gap
   f.push_back({flag, deltas, "temporal gaps (frames), comma separated"});
   f.push_back({sibling_flag(flag, "gap-weights"), weights, "one weight per gap"});
 }
-void add_flags(std::vector<FlagSpec>& f, const std::string& flag, smg::AccelForm v) {
-  std::string forms;
-  for (const smg::AccelForm a : smg::kAccelForms) forms += std::string(forms.empty() ? "" : " | ") + smg::to_string(a);
-  f.push_back({flag, smg::to_string(v), forms});
+// A named enum (smg::enum_values: AccelForm, AccelPenalty, ...): a choice of its values' names.
+template <class E, class = decltype(smg::enum_values(E{}))>
+void add_flags(std::vector<FlagSpec>& f, const std::string& flag, E v) {
+  std::string names;
+  for (const E a : smg::enum_values(E{})) names += std::string(names.empty() ? "" : " | ") + smg::to_string(a);
+  f.push_back({flag, smg::to_string(v), names});
 }
 
 // The value of one option from its flag(s) (the inverse of add_flags).
@@ -86,12 +88,13 @@ void read_flag(const Args& a, const std::string& flag, smg::Normalization& v) {
 void read_flag(const Args& a, const std::string& flag, smg::GapList& v) {
   v = read_gap_list(a, flag, sibling_flag(flag, "gap-weights"));
 }
-void read_flag(const Args& a, const std::string& flag, smg::AccelForm& v) {
+template <class E, class = decltype(smg::enum_values(E{}))>
+void read_flag(const Args& a, const std::string& flag, E& v) {
   std::vector<std::string> names;
-  for (const smg::AccelForm f : smg::kAccelForms) names.emplace_back(smg::to_string(f));
+  for (const E e : smg::enum_values(E{})) names.emplace_back(smg::to_string(e));
   const std::string s = a.get_choice(flag, names);
-  for (const smg::AccelForm f : smg::kAccelForms)
-    if (s == smg::to_string(f)) v = f;
+  for (const E e : smg::enum_values(E{}))
+    if (s == smg::to_string(e)) v = e;
 }
 
 // The library's defaults, from which the flags and their defaults are generated.

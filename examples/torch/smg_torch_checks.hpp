@@ -98,7 +98,7 @@ inline void require_shape(const at::Tensor& t, const char* name, int64_t rank, i
     value_error(std::string(name) + ": expected shape " + layout + ", got " + shape_of(t));
 }
 
-// For the CPU-only operators (build_graph, render, _library_seconds).
+// For the CPU-only operators (build_graph, render, _library_seconds, _accel).
 inline void require_cpu(const at::Tensor& t, const char* name) {
   if (t.is_cuda()) not_implemented(kCpuOnlyMessage);
   if (!t.device().is_cpu()) value_error(std::string(name) + ": expected a CPU tensor");

@@ -94,17 +94,19 @@ inline void read_option(const py::dict& d, const char*, smg::GapList& v) {
   if (!gw.is_none()) w = gw.cast<std::vector<double>>();
   v = gap_list(d["gaps"].cast<py::sequence>(), w);
 }
-inline void read_option(const py::dict& d, const char* name, smg::AccelForm& v) {
-  const std::string form = d[name].cast<std::string>();
+// A named enum (smg::enum_values: AccelForm, AccelPenalty, ...) by its value's name.
+template <class E, class = decltype(smg::enum_values(E{}))>
+void read_option(const py::dict& d, const char* name, E& v) {
+  const std::string given = d[name].cast<std::string>();
   std::string known;
-  for (const smg::AccelForm f : smg::kAccelForms) {
-    if (form == smg::to_string(f)) {
-      v = f;
+  for (const E e : smg::enum_values(E{})) {
+    if (given == smg::to_string(e)) {
+      v = e;
       return;
     }
-    known += std::string(known.empty() ? "'" : " or '") + smg::to_string(f) + "'";
+    known += std::string(known.empty() ? "'" : " or '") + smg::to_string(e) + "'";
   }
-  value_error(std::string(name) + ": must be " + known + ", got '" + form + "'");
+  value_error(std::string(name) + ": must be " + known + ", got '" + given + "'");
 }
 
 // One option's default into its term's dict (the inverse of read_option).
@@ -124,7 +126,8 @@ inline void write_option(py::dict& d, const char*, const smg::GapList& v) {
   d["gaps"] = py::tuple(deltas);
   d["gap_weights"] = all_one ? py::object(py::none()) : py::object(py::tuple(weights));
 }
-inline void write_option(py::dict& d, const char* name, smg::AccelForm v) {
+template <class E, class = decltype(smg::enum_values(E{}))>
+void write_option(py::dict& d, const char* name, E v) {
   d[name] = py::str(smg::to_string(v));
 }
 

@@ -340,47 +340,71 @@ NodeLossTerms NodeObjective::evaluate(const Nodes& n, double scale, double* gp, 
     }
     out.data = w * e;
   }
-  // Energies add their gradient into the buffers; the scale goes through options.weight.
+  // The regularisers: one call of the library's fused step, smg::regularizers, with the options
+  // regularizer_options() builds from the settings (the scale through each term's weight). The
+  // energies add their gradient into the buffers. The directed reading of C-ARAP is no term of
+  // the fused step (an update, not a gradient, E20): it stays the separate carap_directed().
+  const smg::RegularizerOptions ro = regularizer_options(T, N, scale);
+  bool any = false;
+  smg::for_each_term(ro, [&](const char*, bool on, const auto&) { any = any || on; });
+  const bool directed = directed_carap();
+  if (!any && !directed) return out;
   smg::PositionsView<double> gpv(gp, gp ? T : 0, gp ? N : 0);
-  if (options_.accel_weight > 0) {
-    smg::AccelOptions ao;
-    ao.weight = options_.accel_weight * per_node_frame * scale;
-    check(smg::validate_accel<double>(n.positions_view(), {}, ao, gpv), "accel");
-    const double e = smg::accel<double>(n.positions_view(), {}, ao, gpv, &ws_, parallel_);
-    out.accel = scale != 0 ? e / scale : 0.0;
-  }
-  if (variant_.rigidity == Rigidity::none && !variant_.lrm) return out;
   smg::TangentsView<double> grv(gr, gr ? T : 0, gr ? N : 0);
   const bool conf = uses_confidence();
   if (conf && confidence_.size() != sz(T) * N) update_confidences(n);
-  smg::FrameScalarsView<const double> cview(conf ? confidence_.data() : nullptr, conf ? T : 0, conf ? N : 0);
-  if (variant_.rigidity != Rigidity::none) {
-    double frames_gaps = 0;
-    for (const smg::Gap& g : options_.gaps) frames_gaps += g.weight * std::max(0, T - g.delta);
-    smg::CarapOptions co;
-    co.gaps = options_.gaps;
-    co.alpha = variant_.rigidity == Rigidity::carap ? options_.alpha : 1.0;
-    const double w = frames_gaps > 0 ? options_.rigidity_weight / (N * frames_gaps) : 0.0;
-    co.weight = w * scale;
-    const auto c = variant_.rigidity == Rigidity::carap ? cview : smg::FrameScalarsView<const double>{};
-    check(smg::validate_carap<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv, grv), "carap");
-    const bool directed = variant_.rigidity == Rigidity::carap && options_.carap_reading == CarapReading::directed;
-    const double e = directed ? smg::carap_directed<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co,
-                                                            gpv, grv, parallel_)
-                              : smg::carap<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv,
-                                                   grv, &ws_, parallel_);
-    out.rigidity = scale != 0 ? e / scale : 0.0;
+  // The trainer's confidences (refreshed every few iterations, or from the truth) as the caller's
+  // c of the fused step, which computes none itself here (ro.terms.confidence is off).
+  smg::FrameScalarsView<double> cview(conf ? confidence_.data() : nullptr, conf ? T : 0, conf ? N : 0);
+  if (any) {
+    check(smg::validate_regularizers<double>(n.positions_view(), n.rotations_view(), {}, n.graph.view(), ro, cview,
+                                             gpv, grv),
+          "regularizers");
+    const smg::RegularizerResult<double> r = smg::regularizers<double>(
+        n.positions_view(), n.rotations_view(), {}, n.graph.view(), ro, cview, gpv, grv, &ws_, parallel_);
+    out.rigidity = (r.carap + r.arap) / scale;
+    out.lrm = r.lrm / scale;
+    out.accel = r.accel / scale;
   }
-  if (variant_.lrm) {
-    smg::LrmOptions lo;
-    lo.alpha = options_.alpha;
-    lo.huber_delta = options_.lrm_huber;
-    lo.weight = options_.lrm_weight * per_node_frame * scale;
-    check(smg::validate_lrm<double>(n.positions_view(), cview, n.graph.view(), lo, gpv), "lrm");
-    const double e = smg::lrm<double>(n.positions_view(), cview, n.graph.view(), lo, gpv, &ws_, parallel_);
-    out.lrm = scale != 0 ? e / scale : 0.0;
+  if (directed) {
+    smg::CarapOptions co = ro.carap;  // configured as for the fused step's C-ARAP
+    const smg::FrameScalarsView<const double> c(cview.data(), cview.frames(), cview.nodes());
+    check(smg::validate_carap<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv, grv), "carap");
+    out.rigidity = smg::carap_directed<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv, grv,
+                                               parallel_) /
+                   scale;
   }
   return out;
+}
+
+bool NodeObjective::directed_carap() const {
+  return variant_.rigidity == Rigidity::carap && options_.carap_reading == CarapReading::directed;
+}
+
+smg::RegularizerOptions NodeObjective::regularizer_options(int T, int N, double scale) const {
+  smg::RegularizerOptions ro;
+  const double per_node_frame = 1.0 / (static_cast<double>(T) * N);
+  ro.terms.confidence = false;  // the trainer's own (update_confidences), passed as the caller's
+  // Rigidity: C-ARAP or plain ARAP over the gaps, normalised per node and weighted frame pair.
+  double frames_gaps = 0;
+  for (const smg::Gap& g : options_.gaps) frames_gaps += g.weight * std::max(0, T - g.delta);
+  const double w_rigid = frames_gaps > 0 ? options_.rigidity_weight / (N * frames_gaps) : 0.0;
+  ro.terms.carap = variant_.rigidity == Rigidity::carap;  // the directed reading: configured, run apart
+  ro.carap.gaps = options_.gaps;
+  ro.carap.alpha = options_.alpha;
+  ro.carap.weight = w_rigid * scale;
+  ro.terms.arap = variant_.rigidity == Rigidity::arap;
+  ro.arap.gaps = options_.gaps;
+  ro.arap.weight = w_rigid * scale;
+  ro.terms.lrm = variant_.lrm;
+  ro.lrm.alpha = options_.alpha;
+  ro.lrm.huber_delta = options_.lrm_huber;
+  ro.lrm.weight = options_.lrm_weight * per_node_frame * scale;
+  // Smoothness (E21): unweighted accelerations, every variant, 0 = off.
+  ro.terms.accel = options_.accel_weight > 0;
+  ro.accel.weight = options_.accel_weight * per_node_frame * scale;
+  if (directed_carap()) ro.terms.carap = false;
+  return ro;
 }
 
 Stage1Result fit_nodes(Nodes& n, NodeObjective& obj, const Stage1Options& o, const Progress& progress) {

@@ -162,8 +162,16 @@ class NodeObjective {
   const VariantSpec& variant() const { return variant_; }
   const NodeLossOptions& options() const { return options_; }
 
+  // The options of the library's fused step (smg::regularizers) that evaluate() calls for T frames
+  // and N nodes, every weight times `scale`: the variant's rigidity (C-ARAP or plain ARAP, over
+  // the gaps, per node and weighted frame pair), LRM and smoothness (per node and frame), the
+  // confidences off (the trainer passes its own). The directed reading of C-ARAP is configured in
+  // `carap` but off: evaluate() runs it apart (carap_directed, no term of the fused step).
+  smg::RegularizerOptions regularizer_options(int frames, int nodes, double scale = 1.0) const;
+
  private:
   bool uses_confidence() const;
+  bool directed_carap() const;
   VariantSpec variant_;
   NodeLossOptions options_;
   smg::ParallelOptions parallel_;

@@ -220,23 +220,31 @@ TEST_SUITE("cuda-host") {
     }
   }
 
-  TEST_CASE("cuda regularizers: host scheme, smoothness forms, weighted or not, with and without the others") {
+  TEST_CASE("cuda regularizers: host scheme, smoothness forms and penalties, weighted or not, with and without the others") {
     using namespace fused_cuda_test;
     const Case<double, std::int32_t> s(scene(8, 17, 5, 22));
-    for (const unsigned mask : {16u, 17u, 31u})
-      for (const bool velocity : {false, true})
-        for (const bool weighted : {false, true}) {
-          CAPTURE(mask);
-          CAPTURE(velocity);
-          CAPTURE(weighted);
-          smg::RegularizerOptions o = options(mask);
-          o.accel.form = velocity ? smg::AccelForm::velocity : smg::AccelForm::acceleration;
-          o.accel.confidence_weighted = weighted;
-          Flags f;
-          const Out<double> ref = cpu(s, o, f);
-          CHECK(double(ref.e.accel) > 0.0);
-          check_same(host_scheme(s, o, f, 3, 2), ref, o, f, "accel");
-        }
+    const Case<float, std::int32_t> sf(scene(8, 17, 5, 22));
+    const unsigned accel = 1u << smg::test::fused_term_index("accel");
+    // Every form and penalty of the library's lists (kAccelForms, kAccelPenalties).
+    for (const unsigned mask : {accel, accel | 1u, smg::test::fused_all_terms()})
+      for (const smg::AccelForm form : smg::kAccelForms)
+        for (const smg::AccelPenalty penalty : smg::kAccelPenalties)
+          for (const bool weighted : {false, true}) {
+            CAPTURE(mask);
+            CAPTURE(smg::to_string(form));
+            CAPTURE(smg::to_string(penalty));
+            CAPTURE(weighted);
+            smg::RegularizerOptions o = options(mask);
+            o.accel.form = form;
+            o.accel.penalty = penalty;
+            o.accel.penalty_eps = 1e-3;  // large enough to change the value
+            o.accel.confidence_weighted = weighted;
+            Flags f;
+            const Out<double> ref = cpu(s, o, f);
+            CHECK(double(ref.e.accel) > 0.0);
+            check_same(host_scheme(s, o, f, 3, 2), ref, o, f, "accel");
+            check_same(host_scheme(sf, o, f, 2, 3), cpu(sf, o, f), o, f, "accel float");
+          }
   }
 
   TEST_CASE("cuda regularizers: host scheme, rotation-angle forms, weighted or not, tangent or raw") {

@@ -1,4 +1,4 @@
-// Term-specific tests of the rotation-angle velocity / acceleration (E22, smg/energy/angle.hpp,
+// Term-specific tests of the rotation-angle velocity / acceleration (E23, smg/energy/angle.hpp,
 // docs/math/terms/angle.md). The operator list (tests/support/operators.hpp) gives the generic
 // ones (central differences, AutoDiffScalar, float against double, threads, hard cases, the fused
 // step); here: exact values on constructed rotations, the zero sub-gradient, the sign of q, half

@@ -238,6 +238,13 @@ TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the l
     smg::for_each_term(one, [&](const char* t, bool& on, const auto&) { on = std::string(t) == term; });
     runs.push_back({std::string("--terms ") + term, one});
   });
+  // Smoothness with each penalty of the library's list (E22), by its name.
+  for (const smg::AccelPenalty p : smg::kAccelPenalties) {
+    smg::RegularizerOptions one;
+    smg::for_each_term(one, [&](const char* t, bool& on, const auto&) { on = std::string(t) == "accel"; });
+    one.accel.penalty = p;
+    runs.push_back({std::string("--terms accel --accel-penalty ") + smg::to_string(p), one});
+  }
   // Every term of the list, by name, as `--terms` and the "known" list of the error below.
   std::string every_term, known_terms;
   smg::for_each_term(defaults, [&](const char* term, bool, const auto&) {
@@ -257,10 +264,13 @@ TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the l
   all.accel.form = smg::AccelForm::velocity;
   all.accel.confidence_weighted = true;
   all.accel.normalization = smg::Normalization::mean;
+  all.accel.penalty = smg::AccelPenalty::sqrt_weighted;
+  all.accel.penalty_eps = 0.25;
   all.confidence.kappa_m = 1.5;
   runs.push_back({"--terms " + every_term + " --carap-alpha 0.5 --arap-gaps 1,3 "
                   "--arap-gap-weights 1,0.5 --lrm-huber-delta 0.02 --lrm-detach-omega --accel-form velocity "
-                  "--accel-confidence-weighted --accel-normalize --confidence-kappa-m 1.5",
+                  "--accel-confidence-weighted --accel-normalize --accel-penalty sqrt_weighted "
+                  "--accel-penalty-eps 0.25 --confidence-kappa-m 1.5",
                   all});
   for (const auto& run : runs) {
     // Not a structured binding: Clang's C++17 cannot capture one in INFO's lambda.
@@ -300,6 +310,10 @@ TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the l
   CHECK(r.err == "smg_cli regularizers: error: --lrm-alpha: alpha must be in [0, 1], got 1.5\n");
   r = run_cli("regularizers " + c.string() + " " + o.string() + " --terms accel --accel-form jerk");
   CHECK(r.err == "smg_cli regularizers: error: --accel-form: must be one of acceleration | velocity, got 'jerk'\n");
+  r = run_cli("regularizers " + c.string() + " " + o.string() + " --terms accel --accel-penalty cube");
+  CHECK(r.err == "smg_cli regularizers: error: --accel-penalty: must be one of squared | norm | sqrt_weighted, got 'cube'\n");
+  r = run_cli("regularizers " + c.string() + " " + o.string() + " --terms accel --accel-penalty-eps 0");
+  CHECK(r.err == "smg_cli regularizers: error: --accel-penalty-eps: penalty_eps must be finite and > 0, got 0\n");
   CHECK(!fs::exists(o));
   fs::remove_all(c);
 }

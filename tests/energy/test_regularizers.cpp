@@ -57,10 +57,11 @@ smg::ParallelOptions threads_option(int threads) {
 }
 
 // The fused step; raw: rotation gradient as raw quaternions [T][N][4].
+// given: the caller's confidences, passed when o.terms.confidence is off (null: none, c ≡ 1).
 template <class S>
 FusedOut<S> fused_run(const Scene<S>& s, const smg::RegularizerOptions& o, int threads,
                       bool raw = false, bool grad = true, bool vis = true,
-                      smg::EnergyWorkspace<S>* ws = nullptr) {
+                      smg::EnergyWorkspace<S>* ws = nullptr, std::vector<S>* given = nullptr) {
   FusedOut<S> r = fused_buffers(s, raw);
   const smg::ParallelOptions par = threads_option(threads);
   const smg::RotationGradientView<S> gr = grad ? r.rotation_gradient(s, raw) : smg::RotationGradientView<S>();
@@ -68,6 +69,7 @@ FusedOut<S> fused_run(const Scene<S>& s, const smg::RegularizerOptions& o, int t
       vis ? s.visibility() : smg::VisibilityView<const std::uint8_t>();
   const smg::FrameScalarsView<S> c =
       o.terms.confidence ? smg::FrameScalarsView<S>(r.conf.data(), s.T, s.N)
+      : given            ? smg::FrameScalarsView<S>(given->data(), s.T, s.N)
                          : smg::FrameScalarsView<S>();
   REQUIRE(smg::validate_regularizers<S>(s.positions(), s.rotations(), v, s.graph(), o, c,
                                         smg::PositionsView<S>(r.gx.data(), s.T, s.N), gr));
@@ -84,7 +86,7 @@ FusedOut<S> fused_run(const Scene<S>& s, const smg::RegularizerOptions& o, int t
 // list without its separate operator, or with an energy the result does not list, fails here.
 template <class S>
 FusedOut<S> fused_separate(const Scene<S>& s, const smg::RegularizerOptions& o, int threads,
-                           bool raw = false, bool vis = true) {
+                           bool raw = false, bool vis = true, const std::vector<S>* given = nullptr) {
   FusedOut<S> r = fused_buffers(s, raw);
   const smg::ParallelOptions par = threads_option(threads);
   const smg::RotationGradientView<S> gr = r.rotation_gradient(s, raw);
@@ -94,6 +96,7 @@ FusedOut<S> fused_separate(const Scene<S>& s, const smg::RegularizerOptions& o, 
       s.positions(), s.rotations(),
       vis ? s.visibility() : smg::VisibilityView<const std::uint8_t>(),
       o.terms.confidence ? smg::FrameScalarsView<const S>(r.conf.data(), s.T, s.N)
+      : given            ? smg::FrameScalarsView<const S>(given->data(), s.T, s.N)
                          : smg::FrameScalarsView<const S>(),
       s.graph()};
   smg::for_each_term(o, [&](const char* term, bool on, const auto&) {
@@ -215,6 +218,39 @@ TEST_CASE("fused regularizers equal the separate operators for every subset of t
   // T = 23: three blocks of frames, the last one short; random degrees and weights.
   fused_check_equal(smg::test::random_scene(23, 30, 6, rng), "random graph");
   fused_check_equal(smg::test::rigid_bodies_scene(17, 40, 5), "rigid bodies");
+}
+
+TEST_CASE("fused regularizers read the caller's confidences when they compute none") {
+  // terms.confidence off and a confidence view given: C-ARAP, LRM and weighted smoothness read
+  // the caller's c, as the separate operators read theirs (bitwise for one energy alone), the
+  // view is not written, and the energies differ from c ≡ 1 (the values are read, not ignored).
+  SMG_TEST_RNG(rng, 2406);
+  const Scene<double> s = smg::test::random_scene(23, 30, 6, rng);
+  std::vector<double> given(s.c.size());
+  for (double& c : given) c = rng.uniform(0.0, 1.0);
+  const std::vector<double> kept = given;
+  const unsigned conf_bit = 1u << smg::test::fused_term_index("confidence");
+  for (unsigned mask = 1; mask <= smg::test::fused_all_terms(); ++mask) {
+    if (mask & conf_bit) continue;
+    CAPTURE(mask);
+    const smg::RegularizerOptions o = fused_options(mask);
+    const FusedOut<double> f = fused_run<double>(s, o, 2, false, true, true, nullptr, &given);
+    const FusedOut<double> r = fused_separate(s, o, 2, false, true, &given);
+    const FusedOut<double> ones = fused_run(s, o, 2);
+    CHECK(given == kept);
+    if ((mask & (mask - 1)) == 0) check_fused_bitwise(f, r);
+    smg::RegularizerResult<double>::each_energy(
+        [&](const char* name, double fused, double separate, double unit) {
+          CAPTURE(name);
+          CHECK(fused_rel(fused, separate) <= 1e-12);
+          // ARAP reads no confidences (c ≡ 1, α = 1); every other energy that is on does here.
+          if (fused != 0.0 && std::string(name) != "arap") CHECK(fused != unit);
+          if (std::string(name) == "arap") CHECK(fused == unit);
+        },
+        f.e, r.e, ones.e);
+    CHECK(fused_rel_diff(f.gx, r.gx) <= 1e-12);
+    CHECK(fused_rel_diff(f.gr, r.gr) <= 1e-12);
+  }
 }
 
 TEST_CASE("fused regularizers are bit-identical for 1, 2 and 3 threads") {
@@ -404,8 +440,17 @@ TEST_CASE("validate_regularizers names the bad argument in one line") {
   o.lrm.huber_delta = 0;
   check(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o),
         "LrmOptions.huber_delta");
-  o = fused_options(14);  // confidences off, but an output given
+  o = fused_options(14);  // confidences off: `confidence` is the caller's, read, in [0, 1]
+  CHECK(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o, c));
+  conf[3] = 1.5;
   check(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o, c),
+        "confidence");
+  conf[3] = std::nan("");
+  check(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o, c),
+        "confidence");
+  conf[3] = 0;
+  check(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o,
+                                           smg::FrameScalarsView<double>(conf.data(), s.T, s.N - 1)),
         "confidence");
   o = fused_options(15);
   check(smg::validate_regularizers<double>(s.positions(), s.rotations(), {}, s.graph(), o, c,

@@ -3,9 +3,11 @@
 // iterates over the list, so an operator added here is covered by all of them.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <tuple>
 #include <type_traits>
+#include <utility>
 
 #include "smg/energy.hpp"
 
@@ -201,7 +203,7 @@ struct Accel {
   }
 };
 
-// Rotation-angle acceleration (E22), weighted by the given confidences: it reads the rotations
+// Rotation-angle acceleration (E23), weighted by the given confidences: it reads the rotations
 // only (no positions) and writes the rotation gradient only.
 struct Angle {
   static constexpr const char* name = "angle";
@@ -229,6 +231,61 @@ struct Angle {
     return validate_angle<S>(in.rotations, in.confidence, options().angle, out.rotations);
   }
 };
+
+// (E21) with each other penalty (E22) of the library's list (kAccelPenalties; `squared`, the
+// default, is Accel above): the same calls with options().accel.penalty = P. Variants of the
+// term, not terms (term = nullptr): the fused-step tests find Accel by its term.
+struct OperatorName {
+  char text[48] = {};
+};
+constexpr OperatorName accel_operator_name(AccelPenalty p) {
+  OperatorName n;
+  std::size_t k = 0;
+  for (const char* c = "accel_"; *c != 0; ++c) n.text[k++] = *c;
+  for (const char* c = to_string(p); *c != 0 && k + 1 < sizeof(n.text); ++c) n.text[k++] = *c;
+  return n;
+}
+template <AccelPenalty P>
+struct AccelWithPenalty : Accel {
+  static constexpr AccelPenalty penalty = P;
+  // sqrt(w‖a‖² + ε) is k sqrt(ε) per term at a = 0: a still trajectory's energy is not 0.
+  static constexpr bool still_floor = P == AccelPenalty::sqrt_weighted;
+  static constexpr OperatorName name_text = accel_operator_name(P);
+  static constexpr const char* name = name_text.text;  // "accel_norm", ...
+  static constexpr const char* term = nullptr;
+  static RegularizerOptions options() {
+    RegularizerOptions o = Accel::options();
+    o.accel.penalty = P;
+    return o;
+  }
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+                    ParallelOptions parallel = {}) {
+    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
+  }
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
+    return validate_accel(in.positions, in.confidence, options().accel, out.positions);
+  }
+};
+// Whether Op declares `still_floor` true: its energy on a still trajectory is a constant above 0
+// (tests/energy/test_terms.cpp's hard cases); an operator without the member has none.
+template <class Op, class = void>
+struct StillFloor : std::false_type {};
+template <class Op>
+struct StillFloor<Op, std::void_t<decltype(Op::still_floor)>> : std::bool_constant<Op::still_floor> {};
+template <class Op>
+constexpr bool still_floor() { return StillFloor<Op>::value; }
+
+namespace detail_operators {
+template <std::size_t... K>
+auto accel_penalty_operators(std::index_sequence<K...>)
+    -> decltype(std::tuple_cat(std::conditional_t<kAccelPenalties[K] == AccelPenalty::squared, std::tuple<>,
+                                                  std::tuple<AccelWithPenalty<kAccelPenalties[K]>>>{}...));
+}  // namespace detail_operators
+// AccelWithPenalty<P> for every penalty of the list but the default.
+using AccelPenaltyOperators = decltype(detail_operators::accel_penalty_operators(
+    std::make_index_sequence<sizeof(kAccelPenalties) / sizeof(kAccelPenalties[0])>{}));
 
 // The fused step (regularizers.hpp) with every term: the confidences it computes (from the
 // visibility; the confidence input is not read), C-ARAP, ARAP, LRM and smoothness; returns their
@@ -262,7 +319,8 @@ struct Regularizers {
 
 // The list. A new regulariser gets a struct like the ones above and an entry here; a term of the
 // fused step that has none fails test_regularizers.cpp's "every term on the list".
-using Operators = std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Accel, Angle, Regularizers>;
+using Operators = decltype(std::tuple_cat(std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Accel, Angle>{},
+                                          AccelPenaltyOperators{}, std::tuple<Regularizers>{}));
 
 // Calls f(Op{}) for each operator of the list, in its order.
 template <class F>

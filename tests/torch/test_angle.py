@@ -1,4 +1,4 @@
-"""smg_torch.regularizers' rotation-angle term (angle, docs/math/terms/angle.md (E22)) against an
+"""smg_torch.regularizers' rotation-angle term (angle, docs/math/terms/angle.md (E23)) against an
 independent plain-torch implementation of MoSca's rotation velocity / acceleration
 (`compute_vel_acc`): F.normalize, quaternion -> matrix, R^{t+1} R^{tT}, matrix -> quaternion
 (standardised, w >= 0) -> axis-angle, its norm, all as pytorch3d's rotation_conversions compute

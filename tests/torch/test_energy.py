@@ -340,6 +340,8 @@ def test_regularizers_follow_the_term_list():
     assert smg.REGULARIZER_DEFAULTS["carap"] == dict(alpha=0.6, lambda_c=1.0, lambda_l=1.0, gaps=(1, 2, 4),
                                                    gap_weights=None, normalize=False, weight=1.0)
     assert smg.REGULARIZER_DEFAULTS["accel"]["form"] == "acceleration"
+    assert smg.REGULARIZER_DEFAULTS["accel"]["penalty"] == "squared"
+    assert smg.REGULARIZER_DEFAULTS["accel"]["penalty_eps"] == 1e-20
     x, q, idx, w, _ = random_scene(T=6)
     # A keyword that is not a term: TypeError, as Python's for an unknown keyword, naming it.
     with pytest.raises(TypeError, match="unexpected keyword argument 'smoothness'"):
@@ -382,26 +384,32 @@ def test_regularizers_threads_bitwise():
 
 # ---- trajectory smoothness (accel, E21) against torch's own arithmetic and autograd ------------
 
-def accel_reference(x, c, form, weighted, weight):
-    """(E21) written in torch: squared second (or first) differences of every node trajectory,
-    weighted by c at the earliest frame of each term when weighted."""
+def accel_reference(x, c, form, weighted, weight, penalty="squared", eps=1e-20):
+    """(E21)-(E22) written in torch: the penalty of the second (or first) differences of every
+    node trajectory, weighted by c at the earliest frame of each term when weighted."""
     d = x[2:] - 2 * x[1:-1] + x[:-2] if form == "acceleration" else x[1:] - x[:-1]
-    per = (d * d).sum(-1)
-    if weighted:
-        per = per * c[: per.shape[0]]
+    sq = (d * d).sum(-1)
+    w = c[: sq.shape[0]] if weighted else torch.ones_like(sq)
+    if penalty == "squared":
+        per = w * sq
+    elif penalty == "norm":
+        per = w * d.norm(dim=-1)
+    else:
+        per = torch.sqrt(w * sq + eps)
     return weight * per.sum()
 
 
 @pytest.mark.parametrize("form", ["acceleration", "velocity"])
 @pytest.mark.parametrize("weighted", [False, True])
-def test_regularizers_accel_equals_torch_autograd(form, weighted):
+@pytest.mark.parametrize("penalty", ["squared", "norm", "sqrt_weighted"])
+def test_regularizers_accel_equals_torch_autograd(form, weighted, penalty):
     x, q, idx, w, _ = random_scene(T=9)
     vis = torch.rand(x.shape[0], x.shape[1]) > 0.2
-    opts = dict(form=form, confidence_weighted=weighted, weight=0.7)
+    opts = dict(form=form, confidence_weighted=weighted, weight=0.7, penalty=penalty, penalty_eps=1e-4)
     xs = x.clone().requires_grad_()
     r = smg.regularizers(xs, q, (idx, w), vis, carap=False, lrm=False, accel=opts)
     xr = x.clone().requires_grad_()
-    e = accel_reference(xr, r.confidence, form, weighted, 0.7)
+    e = accel_reference(xr, r.confidence, form, weighted, 0.7, penalty, 1e-4)
     assert float(e) > 0
     assert rel(r.accel, e) < 1e-12 and rel(r.total, e) < 1e-12
     assert float(r.carap) == float(r.lrm) == 0.0

@@ -82,6 +82,10 @@ def test_regularizers_option_errors():
              "lrm.huber_delta:": lambda: smg.regularizers(x, q, g, lrm=dict(huber_delta=0)),
              "accel.weight:": lambda: smg.regularizers(x, q, g, accel=dict(weight=-1)),
              "accel.form:": lambda: smg.regularizers(x, q, g, accel=dict(form="jerk")),
+             "accel.penalty: must be 'squared' or 'norm' or 'sqrt_weighted', got 'cube'":
+                 lambda: smg.regularizers(x, q, g, accel=dict(penalty="cube")),
+             "accel.penalty_eps: must be finite and > 0, got 0":
+                 lambda: smg.regularizers(x, q, g, accel=dict(penalty="sqrt_weighted", penalty_eps=0)),
              "confidence.kappa_m:": lambda: smg.regularizers(x, q, g, confidence=dict(kappa_m=0)),
              "carap: unknown option": lambda: smg.regularizers(x, q, g, carap=dict(beta=1)),
              "lrm: expected True, False or a dict": lambda: smg.regularizers(x, q, g, lrm=3),

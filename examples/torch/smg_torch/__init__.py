@@ -226,8 +226,9 @@ def lrm(positions: torch.Tensor, g: GraphLike, confidence: Optional[torch.Tensor
 #: list (smg::for_each_term / smg::for_each_option, smg/energy/options.hpp), so they are the C++
 #: defaults, which are node_confidences', carap's, arap's and lrm's. `weight` multiplies the
 #: term and its gradient; a GapList is `gaps` + `gap_weights` (None = all 1), a Normalization
-#: the bool `normalize`; accel's `form` is "acceleration" or "velocity", its
-#: `confidence_weighted` uses c at the earliest frame of each term (1 otherwise).
+#: the bool `normalize`; accel's `form` is "acceleration" or "velocity", its `penalty`
+#: "squared", "norm" or "sqrt_weighted" (E22, with `penalty_eps`), its `confidence_weighted`
+#: uses c at the earliest frame of each term (1 otherwise).
 REGULARIZER_DEFAULTS = _C._regularizer_options()
 #: The terms of regularizers in the driver's order, each on (True) or off by default.
 REGULARIZER_TERMS = _C._regularizer_terms()
@@ -309,7 +310,7 @@ def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: Grap
     visibility [T, N] or None = all visible), C-ARAP (carap, E7-E10), plain ARAP (arap), LRM
     (lrm, E11-E16), trajectory smoothness (accel, E21: squared accelerations or velocities of
     the node trajectories, as MoSca and Shape-of-Motion regularise) and the rotation-angle term
-    (angle, E22: MoSca's rotation velocity / acceleration, the angles of R^{t+1} R^{tT}). With
+    (angle, E23: MoSca's rotation velocity / acceleration, the angles of R^{t+1} R^{tT}). With
     confidence off, C-ARAP and LRM use c = 1. quats [T, N, 4] may be None when no term on uses
     them. Returns
     Regularizers(total, carap, arap, lrm, confidence, ...the other energies): `total` is

@@ -79,7 +79,9 @@ Status validate_regularizers_shapes(smg::detail::NonDeducedT<PositionsView<const
   if (Status s = detail::check_cuda_terms<S, I>(options); !s) return s;
   if (confidence.data() != nullptr) {
     if (!on.confidence)
-      return Status::error("confidence: an output was given but options.terms.confidence is off");
+      return Status::error(
+          "confidence: smg::cuda::regularizers takes no caller's confidences (options.terms.confidence is "
+          "off); compute them (terms.confidence) or call the CPU regularizers()");
     if (Status s = shape(confidence.frames(), confidence.nodes(), "confidence", ""); !s) return s;
   }
   if (grad_positions.data() != nullptr)

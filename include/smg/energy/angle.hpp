@@ -1,4 +1,4 @@
-// smg/energy/angle.hpp — the rotation-angle velocity or acceleration (E22) as a separate
+// smg/energy/angle.hpp — the rotation-angle velocity or acceleration (E23) as a separate
 // operator: the angles θ_i^t of R_i^{t+1} R_i^{tT} summed (or their changes |θ_i^{t+1} − θ_i^t|),
 // weighted by given confidences or 1, with the rotation gradient (docs/math/terms/angle.md). The
 // same term the fused step runs (regularizers.hpp, options.terms.angle), through the same driver:
@@ -25,7 +25,7 @@ namespace smg {
 
 inline namespace SMG_ISA_NAMESPACE {
 
-// Rotation-angle smoothness (E22), returned in Accumulator<S> (double for float): with the
+// Rotation-angle smoothness (E23), returned in Accumulator<S> (double for float): with the
 // acceleration form Σ_i Σ_t w_i^t |θ_i^{t+1} − θ_i^t| times options.weight (the velocity form:
 // Σ_i Σ_t w_i^t θ_i^t), θ_i^t ∈ [0, π] the angle of R_i^{t+1} R_i^{tT}, w = confidence(t, i) at the
 // earliest frame when options.confidence_weighted, else 1. rotations [T][N][4] (w, x, y, z;

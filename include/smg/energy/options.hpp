@@ -122,22 +122,37 @@ struct LrmOptions {
 };
 
 // Smoothness of node trajectories (E21), as MoSca and Shape-of-Motion regularise their motion:
-// the squared second differences x^{t+2} − 2x^{t+1} + x^t (acceleration) or first differences
-// (velocity) of every node, weighted by c_{t,i} at the earliest frame or by 1.
+// the second differences x^{t+2} − 2x^{t+1} + x^t (acceleration) or first differences
+// (velocity) of every node, weighted by c_{t,i} at the earliest frame or by 1, under a penalty
+// (E22): squared by default, or the unsquared norm, or D3DGS's sqrt(w‖a‖² + ε).
 enum class AccelForm { acceleration, velocity };
 // The forms and their names ("acceleration", "velocity"), as the bindings spell them.
 inline constexpr AccelForm kAccelForms[] = {AccelForm::acceleration, AccelForm::velocity};
-inline const char* to_string(AccelForm f) {
+constexpr const char* to_string(AccelForm f) {
   return f == AccelForm::velocity ? "velocity" : "acceleration";
+}
+// The penalty on a term's difference a with factor k and weight w (E22): squared k w ‖a‖² (the
+// default), norm k w ‖a‖ (sub-gradient 0 at a = 0, as torch's norm), sqrt_weighted
+// k sqrt(w ‖a‖² + ε) (the weight inside the root, as Dynamic 3D Gaussians writes its losses).
+enum class AccelPenalty { squared, norm, sqrt_weighted };
+// The penalties and their names ("squared", "norm", "sqrt_weighted"), as the bindings spell them.
+inline constexpr AccelPenalty kAccelPenalties[] = {AccelPenalty::squared, AccelPenalty::norm,
+                                                   AccelPenalty::sqrt_weighted};
+constexpr const char* to_string(AccelPenalty p) {
+  return p == AccelPenalty::norm            ? "norm"
+         : p == AccelPenalty::sqrt_weighted ? "sqrt_weighted"
+                                            : "squared";
 }
 struct AccelOptions {
   AccelForm form = AccelForm::acceleration;
+  AccelPenalty penalty = AccelPenalty::squared;  // (E22)
   bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
   Normalization normalization = Normalization::sum;  // mean: over (T − 2) · N terms (or T − 1)
-  double weight = 1.0;                               // overall factor (units: 1 / length²)
+  double weight = 1.0;  // overall factor (units: 1 / length² squared, 1 / length otherwise)
+  double penalty_eps = 1e-20;  // ε of sqrt_weighted (length²), finite and > 0; read by it only
 };
 
-// Rotation-angle velocity or acceleration of node rotations (E22, docs/math/terms/angle.md), as
+// Rotation-angle velocity or acceleration of node rotations (E23, docs/math/terms/angle.md), as
 // MoSca regularises its motion bases' rotations: θ_i^t, the angle of R_i^{t+1} R_i^{tT}, summed
 // (velocity) or |θ_i^{t+1} − θ_i^t| summed (acceleration), unsquared, weighted by c_{t,i} at the
 // earliest frame or by 1. The forms are AccelForm's.
@@ -148,6 +163,13 @@ struct AngleOptions {
   double weight = 1.0;                               // overall factor (units: 1 / radian)
 };
 
+// The named enums of the options: enum_values(E{}) is the list of E's values, each with its
+// name to_string(e). The bindings read and write an option of such a type by its name
+// (smg_torch's string, smg_cli's choice flag) and validate_options refuses a value not listed,
+// so an enum added here (its list, to_string and this overload) needs no code in them.
+constexpr const auto& enum_values(AccelForm) { return kAccelForms; }
+constexpr const auto& enum_values(AccelPenalty) { return kAccelPenalties; }
+
 // The fused step (regularizers.hpp): which terms it computes. Confidences off: C-ARAP and LRM
 // use c ≡ 1 (as carap() and lrm() do with an empty confidence view).
 struct RegularizerTerms {
@@ -156,7 +178,7 @@ struct RegularizerTerms {
   bool arap = false;       // (E9) with c ≡ 1, α = 1 (ablations)
   bool lrm = true;         // (E14), weights (E7) with the confidences
   bool accel = false;      // (E21), trajectory smoothness
-  bool angle = false;      // (E22), rotation-angle velocity / acceleration
+  bool angle = false;      // (E23), rotation-angle velocity / acceleration
 };
 
 // Whether a term that is on reads the rotations (so the caller must give them).
@@ -183,7 +205,7 @@ using IfOptions = std::enable_if_t<std::is_same<std::remove_const_t<O>, T>::valu
 // declaration order, by the field's name; `options` const or mutable. Why: the bindings
 // (smg_torch.regularizers, smg_cli regularizers) read, default and print every option through
 // these lists, so an option is declared in its struct and named once, here. Field types: double,
-// bool, GapList, Normalization, AccelForm.
+// bool, GapList, Normalization and the named enums (enum_values: AccelForm, AccelPenalty).
 template <class O, class F, detail::IfOptions<O, ConfidenceOptions> = 0>
 void for_each_option(O& o, F&& f) {
   f("kappa_m", o.kappa_m);
@@ -227,8 +249,10 @@ void for_each_option(O& o, F&& f) {
 template <class O, class F, detail::IfOptions<O, AccelOptions> = 0>
 void for_each_option(O& o, F&& f) {
   f("form", o.form);
+  f("penalty", o.penalty);
   f("confidence_weighted", o.confidence_weighted);
   detail::for_each_scaling_option(o, f);
+  f("penalty_eps", o.penalty_eps);
 }
 template <class O, class F, detail::IfOptions<O, AngleOptions> = 0>
 void for_each_option(O& o, F&& f) {
@@ -326,6 +350,22 @@ inline Status check_gaps(const char* what, const GapList& gaps) {
   }
   return Status::ok();
 }
+// A named enum (enum_values) holding one of its listed values: "AccelOptions.penalty must be
+// squared, norm or sqrt_weighted, got 7".
+template <class E>
+inline Status check_enum(const char* what, const char* name, E v) {
+  std::ostringstream s;
+  const auto& values = enum_values(E{});
+  const std::size_t n = sizeof(values) / sizeof(values[0]);
+  for (std::size_t k = 0; k < n; ++k) {
+    if (values[k] == v) return Status::ok();
+    s << (k == 0 ? "" : k + 1 == n ? " or " : ", ") << to_string(values[k]);
+  }
+  std::ostringstream m;
+  m << what << "." << name << " must be " << s.str() << ", got "
+    << static_cast<long long>(static_cast<std::underlying_type_t<E>>(v));
+  return Status::error(m.str());
+}
 // The first failing Status of `checks` (all evaluated, in order), or ok.
 inline Status first_error(std::initializer_list<Status> checks) {
   for (const Status& s : checks)
@@ -366,15 +406,15 @@ inline Status validate_options(const LrmOptions& o) {
 }
 
 inline Status validate_options(const AccelOptions& o) {
-  if (o.form != AccelForm::acceleration && o.form != AccelForm::velocity)
-    return Status::error("AccelOptions.form must be acceleration or velocity");
-  return detail::check_nonneg("AccelOptions", "weight", o.weight);
+  return detail::first_error({detail::check_enum("AccelOptions", "form", o.form),
+                              detail::check_enum("AccelOptions", "penalty", o.penalty),
+                              detail::check_nonneg("AccelOptions", "weight", o.weight),
+                              detail::check_positive("AccelOptions", "penalty_eps", o.penalty_eps)});
 }
 
 inline Status validate_options(const AngleOptions& o) {
-  if (o.form != AccelForm::acceleration && o.form != AccelForm::velocity)
-    return Status::error("AngleOptions.form must be acceleration or velocity");
-  return detail::check_nonneg("AngleOptions", "weight", o.weight);
+  return detail::first_error({detail::check_enum("AngleOptions", "form", o.form),
+                              detail::check_nonneg("AngleOptions", "weight", o.weight)});
 }
 
 // Plain ARAP is C-ARAP with α = 1 and no confidences (the caller passes none).

@@ -74,12 +74,17 @@ std::size_t regularizers_extra_bytes(Index frames, Index nodes, Index k,
 }
 
 // The fused regulariser step: any subset of confidences (E6), C-ARAP (E9), ARAP, LRM (E14),
-// trajectory smoothness (E21) and the rotation-angle term (E22) (options.terms) in one pass over the graph; returns the energies,
+// trajectory smoothness (E21) and the rotation-angle term (E23) (options.terms) in one pass over the graph; returns the energies,
 // each equal to what node_confidences + carap()/arap()/lrm() give on the same inputs (to
 // rounding: the sums are associated differently, see tests/energy/test_regularizers.cpp).
 //   positions [T][N][3]; rotations [T][N][4] (w, x, y, z; normalised on entry), may be empty
-//   without C-ARAP, ARAP and angle (reads_rotations); visibility [T][N] (0/1) multiplies the confidences (E6), empty =
-//   all visible; confidence (output [T][N]) receives c_{t,i} when given.
+//   without C-ARAP, ARAP and angle (reads_rotations); visibility [T][N] (0/1) multiplies the
+//   confidences (E6), empty = all visible. confidence [T][N]: with options.terms.confidence an
+//   output, receiving c_{t,i}; without, an input when given: the caller's c (in [0, 1];
+//   visibility not applied), which C-ARAP, LRM, confidence-weighted smoothness and angle read as
+//   their separate calls read theirs (empty: c ≡ 1). Why both in one view: a trainer that
+//   refreshes its confidences every few iterations, or takes them from elsewhere, passes them
+//   here and keeps one call.
 //   grad_positions [T][N][3] and grad_rotations (right tangent [T][N][3] or raw quaternion
 //   [T][N][4], (Q5)) receive the gradient of the energies, *added* to their contents.
 // Confidences are constants for the gradient (stop-gradient), as in the separate operators.
@@ -106,7 +111,10 @@ RegularizerResult<S> regularizers(
   detail::RegularizerTermSet<S, I> terms(T, N, K, edge_count(graph), options, want_x, want_r);
   if (!terms.any_energy() && !options.terms.confidence) return {};
   terms.confidence.vis = visibility;
-  terms.confidence.out = confidence;
+  if (options.terms.confidence)
+    terms.confidence.out = confidence;
+  else
+    terms.confidence.given = FrameScalarsView<const S>(confidence.data(), confidence.frames(), confidence.nodes());
   return terms.apply([&](auto&... t) {
     return detail::drive_views<S, I>(positions, rotations, visibility.data() != nullptr, graph,
                                      grad_positions, grad_rotations, workspace, parallel, t...);

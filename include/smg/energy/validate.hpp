@@ -125,9 +125,10 @@ Status validate_angle(detail::NonDeducedT<QuaternionsView<const S>> rotations,
 }
 
 // Checks the arguments of regularizers(); one line naming the bad argument. `rotations` may be
-// empty when no term that reads them is on (C-ARAP, ARAP, angle: reads_rotations); `visibility` [T][N] (0/1) may be empty (all
-// visible); `confidence` (output [T][N]) may be given only with terms.confidence; the
-// gradients may be empty (not computed).
+// empty when no term that reads them is on (C-ARAP, ARAP, angle: reads_rotations); `visibility`
+// [T][N] (0/1) may be empty (all visible); `confidence` [T][N] is the output with
+// terms.confidence, else the caller's confidences (finite, in [0, 1]) or empty; the gradients
+// may be empty (not computed).
 template <class S, class I>
 Status validate_regularizers(detail::NonDeducedT<PositionsView<const S>> positions,
                              detail::NonDeducedT<QuaternionsView<const S>> rotations,
@@ -148,9 +149,13 @@ Status validate_regularizers(detail::NonDeducedT<PositionsView<const S>> positio
     if (Status s = validate_visibility<std::uint8_t>(visibility, T, N, "visibility"); !s) return s;
   if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
   if (Status s = validate_options(options); !s) return s;
-  if (confidence.data() != nullptr && !on.confidence)
-    return Status::error("confidence: an output was given but options.terms.confidence is off");
-  if (Status s = validate_optional_output(confidence, T, N, "confidence"); !s) return s;
+  if (on.confidence) {
+    if (Status s = validate_optional_output(confidence, T, N, "confidence"); !s) return s;
+  } else if (Status s = validate_optional_confidence<S>(
+                 FrameScalarsView<const S>(confidence.data(), confidence.frames(), confidence.nodes()), T, N);
+             !s) {
+    return s;  // the caller's confidences (input): [T][N], finite, in [0, 1]
+  }
   return detail::validate_gradient_outputs<S>(grad_positions, grad_rotations, T, N);
 }
 

@@ -1,8 +1,9 @@
 // smg/energy/terms/accel.hpp — smoothness of node trajectories, the regulariser MoSca and
 // Shape-of-Motion put on their motion bases, as a term of the regulariser driver
-// (energy/block.hpp has the concept; docs/math/energy.md (E21)):
-//   acceleration form  A = k Σ_i Σ_{t=0}^{T−3} w_i^t ‖x_i^{t+2} − 2 x_i^{t+1} + x_i^t‖²
-//   velocity form      A = k Σ_i Σ_{t=0}^{T−2} w_i^t ‖x_i^{t+1} − x_i^t‖²
+// (energy/block.hpp has the concept; docs/math/energy.md (E21)–(E22), the term and its penalties):
+//   acceleration form  A = Σ_i Σ_{t=0}^{T−3} P(a_i^t),  a_i^t = x_i^{t+2} − 2 x_i^{t+1} + x_i^t
+//   velocity form      A = Σ_i Σ_{t=0}^{T−2} P(v_i^t),  v_i^t = x_i^{t+1} − x_i^t
+//   P(a) = k w ‖a‖² (squared, the default), k w ‖a‖ (norm), k sqrt(w ‖a‖² + ε) (sqrt_weighted)
 // with w_i^t = c_{t,i} (confidence-weighted, taken at the earliest frame as (E7) takes it) or 1,
 // and k the weight (divided by the term count with Normalization::mean). Each term is indexed by
 // its earliest frame, which the block owns; its later frames are in the block's overlap (reach
@@ -12,6 +13,7 @@
 #include "smg/core/config.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 #include "smg/core/scalar.hpp"
 #include "smg/core/views.hpp"
@@ -20,16 +22,37 @@
 
 namespace smg {
 
-// One term of (E21): the difference a (3 values) of frames t, t+1[, t+2] and its factor
-// f = k w; returns f ‖a‖² and writes g = ∂/∂a = 2 f a. The frames' gradients are g·(1, −2, 1)
-// (acceleration) or g·(−1, 1) (velocity).
+// The penalty (E22) of one term of (E21): the difference a (3 values) of frames t, t+1[, t+2],
+// the factor k (the weight, / the term count with Normalization::mean), the term's weight w (its
+// confidence, or 1) and ε (AccelOptions::penalty_eps); returns P(a) and writes g = ∂P/∂a:
+//   squared        k w ‖a‖²             g = 2 k w a
+//   norm           k w ‖a‖              g = k w a / ‖a‖, and 0 at a = 0 (torch's norm backward)
+//   sqrt_weighted  k sqrt(w ‖a‖² + ε)   g = k w a / sqrt(w ‖a‖² + ε)
+// The frames' gradients are g·(1, −2, 1) (acceleration) or g·(−1, 1) (velocity). CPU
+// (AccelTerm::node) and CUDA (AccelElement::at) both evaluate the term through this function.
 template <class S, class L>
-SMG_FORCE_INLINE SMG_HOST_DEVICE S accel_term(S f, S ax, S ay, S az, S& gx, S& gy, S& gz) {
-  const S h = L(2) * f;
+SMG_FORCE_INLINE SMG_HOST_DEVICE S accel_penalty(AccelPenalty p, S k, S w, S eps, S ax, S ay,
+                                                 S az, S& gx, S& gy, S& gz) {
+  using std::sqrt;
+  const S aa = ax * ax + ay * ay + az * az;
+  S h, e;
+  if (p == AccelPenalty::norm) {
+    const S f = k * w, n = sqrt(aa);
+    h = n > S(0) ? S(f / n) : S(0);
+    e = f * n;
+  } else if (p == AccelPenalty::sqrt_weighted) {
+    const S r = sqrt(w * aa + eps);  // >= sqrt(ε) > 0
+    h = k * w / r;
+    e = k * r;
+  } else {
+    const S f = k * w;
+    h = L(2) * f;
+    e = f * aa;
+  }
   gx = h * ax;
   gy = h * ay;
   gz = h * az;
-  return f * (ax * ax + ay * ay + az * az);
+  return e;
 }
 
 // The number of terms of (E21) over T frames and N nodes (Normalization::mean divides by it).
@@ -56,7 +79,7 @@ inline double accel_scale(const AccelOptions& o, Index frames, Index nodes) {
                                                              : o.weight;
 }
 
-// (E21) as one element (frame t, node i) of the CUDA driver (cuda/driver.cuh), a step without
+// (E21) with its penalty (E22) as one element (frame t, node i) of the CUDA driver (cuda/driver.cuh), a step without
 // scratch that a kernel thread or a host loop runs: the energy of the term whose earliest frame
 // is t into `energy`, and the gradient of x_i^t from every term containing frame t (earliest
 // frames t − order … t, in that order) added to grad_x [T][N][3] when not null. x [T][N][3]; conf
@@ -64,8 +87,10 @@ inline double accel_scale(const AccelOptions& o, Index frames, Index nodes) {
 template <class S>
 struct AccelElement {
   Literal<S> k = Literal<S>(0);  // the weight, / the number of terms with Normalization::mean
+  Literal<S> eps = Literal<S>(0);  // ε of sqrt_weighted
   bool weighted = false;
   int order = 2;  // 2: acceleration, 1: velocity
+  AccelPenalty penalty = AccelPenalty::squared;
 
   // The difference a of the term with earliest frame u.
   SMG_HOST_DEVICE void difference(PositionsView<const S> x, Index u, Index i, S* a) const {
@@ -83,10 +108,11 @@ struct AccelElement {
     S g[3] = {S(0), S(0), S(0)};
     for (Index u = t - order; u <= t; ++u) {
       if (u < 0 || u + order >= T) continue;
-      const S f = weighted && conf != nullptr ? S(S(k) * conf[u * N + i]) : S(k);
+      const S w = weighted && conf != nullptr ? S(conf[u * N + i]) : S(1);
       S a[3], ga[3];
       difference(x, u, i, a);
-      const S ev = accel_term<S, Literal<S>>(f, a[0], a[1], a[2], ga[0], ga[1], ga[2]);
+      const S ev = accel_penalty<S, Literal<S>>(penalty, S(k), w, S(eps), a[0], a[1], a[2], ga[0],
+                                                ga[1], ga[2]);
       if (u == t) energy += ev;
       // ∂a/∂x^t: (1, −2, 1) or (−1, 1) by the position of t in the term.
       const Index p = t - u;
@@ -107,12 +133,15 @@ struct AccelTerm : TermDefaults {
 
   bool enabled = false, weighted = false;
   Index order = 2;  // 2: acceleration, 1: velocity
-  double scale_d = 0;
+  AccelPenalty penalty = AccelPenalty::squared;
+  double scale_d = 0, eps_d = 0;
   Index T = 0;
 
   void configure(const AccelOptions& o, Index frames, Index nodes) {
     T = frames;
     order = o.form == AccelForm::acceleration ? 2 : 1;
+    penalty = o.penalty;
+    eps_d = o.penalty_eps;
     weighted = o.confidence_weighted;
     scale_d = accel_scale(o, frames, nodes);
     enabled = accel_active(o, frames, nodes);
@@ -127,6 +156,8 @@ struct AccelTerm : TermDefaults {
   Element element() const {
     Element e;
     e.k = L(scale_d);
+    e.eps = L(eps_d);
+    e.penalty = penalty;
     e.weighted = weighted;
     e.order = static_cast<int>(order);
     return e;
@@ -138,13 +169,24 @@ struct AccelTerm : TermDefaults {
   Block begin(BlockView<S, I>&, S*) const { return {}; }
 
   // The terms of node i whose earliest frame the block owns; the gradient into the block's rows.
+  // The penalty is a template argument of the loop (one branch per node, not per term).
   template <class E>
-  void node(const BlockView<S, I>& v, Block&, Index i, E& energy) const {
+  void node(const BlockView<S, I>& v, Block& b, Index i, E& energy) const {
+    switch (penalty) {
+      case AccelPenalty::norm: return node_with<AccelPenalty::norm>(v, b, i, energy);
+      case AccelPenalty::sqrt_weighted: return node_with<AccelPenalty::sqrt_weighted>(v, b, i, energy);
+      case AccelPenalty::squared: break;
+    }
+    node_with<AccelPenalty::squared>(v, b, i, energy);
+  }
+
+  template <AccelPenalty P, class E>
+  void node_with(const BlockView<S, I>& v, Block&, Index i, E& energy) const {
     const Index ne = v.ne, last = std::min(v.nown, T - order - v.t0);
     const S* X = v.Xb + i * v.n4();
     const S* c = X + 3 * ne;
     S* G = v.GBx ? v.GBx + i * v.n3() : nullptr;
-    const S k = S(L(scale_d));
+    const S k = S(L(scale_d)), eps = S(L(eps_d));
     Acc e(0);
     for (Index l = 0; l < last; ++l) {
       S a[3];
@@ -154,7 +196,8 @@ struct AccelTerm : TermDefaults {
                                       order == 2 ? r[2] : r[1]);
       }
       S g[3];
-      e += Acc(accel_term<S, L>(weighted ? S(k * c[l]) : S(k), a[0], a[1], a[2], g[0], g[1], g[2]));
+      e += Acc(accel_penalty<S, L>(P, k, weighted ? c[l] : S(1), eps, a[0], a[1], a[2], g[0], g[1],
+                                   g[2]));
       if (!G) continue;
       for (int d = 0; d < 3; ++d) {
         S* r = G + d * ne + l;

@@ -1,6 +1,6 @@
 // smg/energy/terms/angle.hpp — the rotation-angle velocity or acceleration of node rotations, the
 // regulariser MoSca puts on its motion bases' rotations (`compute_vel_acc`), as a term of the
-// regulariser driver (energy/block.hpp has the concept; docs/math/terms/angle.md (E22)):
+// regulariser driver (energy/block.hpp has the concept; docs/math/terms/angle.md (E23)):
 //   θ_i^t = the angle of R_i^{t+1} R_i^{tT} = 2 atan2(‖v‖, |w|), (w, v) = q_i^{t*} ⊗ q_i^{t+1}
 //   velocity form      Θ = k Σ_i Σ_{t=0}^{T−2} w_i^t θ_i^t
 //   acceleration form  Θ = k Σ_i Σ_{t=0}^{T−3} w_i^t |θ_i^{t+1} − θ_i^t|
@@ -25,7 +25,7 @@
 
 namespace smg {
 
-// θ of (E22), the rotation angle of R_b R_aᵀ in [0, π], from the quaternions qa, qb (w, x, y, z;
+// θ of (E23), the rotation angle of R_b R_aᵀ in [0, π], from the quaternions qa, qb (w, x, y, z;
 // any nonzero norm: θ and u do not depend on it), and u (3 values) with ∂θ/∂φ_b = u, ∂θ/∂φ_a = −u
 // for right-tangent perturbations R ← R Exp(φ). u = 0 where ‖v‖ = 0 (θ = 0) or w = 0 (θ = π, a
 // kink of θ: torch's |w|' = sign(0) = 0 gives 0 there too).
@@ -50,7 +50,7 @@ SMG_FORCE_INLINE SMG_HOST_DEVICE S rotation_angle(const S* qa, const S* qb, S* u
   return L(2) * atan2(n, aw_abs);
 }
 
-// One term of (E22) from its angles θ0 = θ^t and (acceleration) θ1 = θ^{t+1}, with factor
+// One term of (E23) from its angles θ0 = θ^t and (acceleration) θ1 = θ^{t+1}, with factor
 // f = k w: returns f θ0 (order 1) or f |θ1 − θ0| (order 2), and g0 = ∂/∂θ0, g1 = ∂/∂θ1.
 template <class S>
 SMG_FORCE_INLINE SMG_HOST_DEVICE S angle_term(int order, S f, S th0, S th1, S& g0, S& g1) {
@@ -66,7 +66,7 @@ SMG_FORCE_INLINE SMG_HOST_DEVICE S angle_term(int order, S f, S th0, S th1, S& g
   return d < S(0) ? S(-f * d) : S(f * d);
 }
 
-// The number of terms of (E22) over T frames and N nodes (Normalization::mean divides by it).
+// The number of terms of (E23) over T frames and N nodes (Normalization::mean divides by it).
 inline Index angle_term_count(const AngleOptions& o, Index frames, Index nodes) {
   const Index span = o.form == AccelForm::acceleration ? 2 : 1;
   return std::max<Index>(0, frames - span) * nodes;
@@ -80,7 +80,7 @@ inline double angle_scale(const AngleOptions& o, Index frames, Index nodes) {
                                                              : o.weight;
 }
 
-// (E22) at frame t of node i, the one step both drivers run: the energy of the term whose
+// (E23) at frame t of node i, the one step both drivers run: the energy of the term whose
 // earliest frame is t (when own_energy), and the right-tangent gradient of R_i^t from the terms
 // containing frame t whose earliest frame u lies in [u_lo, u_hi) (the CPU block: its owned
 // frames; the GPU: all), added to g[3]. q [T][N][4]; weight(u): w_i^u.
@@ -108,7 +108,7 @@ SMG_FORCE_INLINE SMG_HOST_DEVICE void angle_at(Index t, Index i, QuaternionsView
   }
 }
 
-// (E22) as one element (frame t, node i) of the CUDA driver (cuda/driver.cuh): it reads the
+// (E23) as one element (frame t, node i) of the CUDA driver (cuda/driver.cuh): it reads the
 // rotations and writes the rotation gradient (kReadsRotations), so its step also takes q
 // [T][N][4] and the gradient rows grad_tangent [T][N][3] or grad_raw [T][N][4] (either or both
 // null). conf [T][N] or null (c ≡ 1; read only when weighted). Host values: AngleTerm::element().

@@ -1,0 +1,108 @@
+#!/usr/bin/env python3
+"""smg_torch.compat against the upstream loss written in plain PyTorch (CPU): forward + backward,
+best of --repeat runs, and peak memory.
+
+usage: PYTHONPATH=<build>/python /usr/bin/python3 bench/torch/bench_compat.py [--repeat 10]
+           [--threads 2] [--json FILE] [--quick]
+
+Shape of Motion's track smoothness (flow3d/trainer.py): means [G, 3, B, 3] (the Gaussians'
+positions at t − 1, t, t + 1 for B batch frames), loss = mean ‖2 x_t − x_{t−1} − x_{t+1}‖ over
+G·B (the trainer then scales it by 0.5 · w_smooth_tracks), G = 40 000, T = 3, B = 8, float32:
+smg_torch.compat.som_accel(means) against the same expression in torch
+((2 m[:, 1:-1] − m[:, :-2] − m[:, 2:]).norm(dim=-1).mean(), eager), each with backward to
+means (a leaf; its .grad is dropped between runs). Also the initial optimisation's
+compute_accel_loss on tracks [G, T, 3] with T = 30. Time: best of --repeat calls at
+torch.set_num_threads(--threads), the peers by turns in each round. Peak: resident-set growth over one call
+(bench_torch.RssPeak: pages touched, the inputs excluded, the gradient included; smg's
+workspace, kept between calls, is not counted once warm).
+--quick: G = 4 000, 3 repeats (a smoke run). Prints a markdown table; --json writes the rows.
+"""
+import argparse
+import gc
+import json
+import os
+import sys
+import time
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import torch  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+import bench_torch  # noqa: E402  (RssPeak)
+from smg_torch.compat import som_accel  # noqa: E402
+
+
+def som_accel_torch(m):
+    """The upstream expression, eager PyTorch."""
+    return (2 * m[:, 1:-1] - m[:, :-2] - m[:, 2:]).norm(dim=-1).mean()
+
+
+def call(fn, x):
+    x.grad = None
+    fn(x).backward()
+
+
+def best_times(peers, x, repeat):
+    """Best seconds of fn(x).backward() over `repeat` rounds per peer, the peers taken by turns in
+    each round (a load change on a shared machine then hits both)."""
+    for _, fn in peers:
+        call(fn, x)  # warm-up (allocator, thread pool, smg's workspace)
+    best = {name: float("inf") for name, _ in peers}
+    for _ in range(repeat):
+        for name, fn in peers:
+            t0 = time.perf_counter()
+            call(fn, x)
+            best[name] = min(best[name], time.perf_counter() - t0)
+    x.grad = None
+    return best
+
+
+def peak(fn, x):
+    """Resident-set growth of one call (after a warm-up call)."""
+    gc.collect()
+    rss = bench_torch.RssPeak()
+    rss.reset()
+    call(fn, x)
+    p = rss.peak()
+    x.grad = None
+    return p
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--repeat", type=int, default=10)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--json", default=None)
+    ap.add_argument("--quick", action="store_true")
+    a = ap.parse_args()
+    repeat = 3 if a.quick else a.repeat
+    G = 4000 if a.quick else 40000
+    torch.set_num_threads(a.threads)
+    g = torch.Generator().manual_seed(0)
+    cases = [("SoM tracks [G, 3, B, 3]", (G, 3, 8, 3)), ("SoM init tracks [G, T, 3]", (G, 30, 3))]
+    rows = []
+    for name, shape in cases:
+        x = (torch.randn(shape, generator=g).cumsum(1) * 0.1).float().requires_grad_()
+        e_smg, e_ref = float(som_accel(x)), float(som_accel_torch(x))
+        peers = (("smg", som_accel), ("torch", som_accel_torch))
+        best = best_times(peers, x, repeat)
+        for peer, fn in peers:
+            rows.append(dict(case=name, shape=list(shape), peer=peer, seconds=best[peer], peak_bytes=peak(fn, x),
+                             input_bytes=x.numel() * x.element_size(),
+                             rel_diff=abs(e_smg - e_ref) / abs(e_ref)))
+    print(f"threads {a.threads}, float32, best of {repeat}, forward + backward; peak = resident-set growth of one call")
+    print("| case | shape | peer | ms | peak MiB | input MiB | energy rel. diff smg/torch |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['case']} | {r['shape']} | {r['peer']} | {r['seconds'] * 1e3:.2f} | "
+              f"{r['peak_bytes'] / 2**20:.1f} | {r['input_bytes'] / 2**20:.1f} | {r['rel_diff']:.1e} |")
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(dict(threads=a.threads, repeat=repeat, torch=torch.__version__, rows=rows), f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
