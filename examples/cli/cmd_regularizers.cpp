@@ -163,7 +163,7 @@ template <class S>
 void compute(const Invocation& inv, const smg::RegularizerOptions& o, const EnergyCase& c,
              JsonLine& summary) {
   const std::int64_t T = c.x.dim(0), N = c.x.dim(1);
-  const bool rigid = o.terms.carap || o.terms.arap;
+  const bool rigid = smg::reads_rotations(o.terms);  // a term that reads the rotations is on
   const std::vector<S> x(c.x.data.begin(), c.x.data.end()), q(c.q.begin(), c.q.end()),
       w(c.g.weights.begin(), c.g.weights.end());
   const smg::PositionsView<const S> xv(x.data(), T, N);

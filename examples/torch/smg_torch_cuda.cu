@@ -185,7 +185,7 @@ void regularizers_cuda(const EnergyInputs& in, const smg::RegularizerOptions& o,
                        const at::Tensor& gq) {
   const c10::cuda::CUDAGuard guard(in.ref.device);
   const cudaStream_t stream = stream_of(in.ref);
-  const bool rigid = o.terms.carap || o.terms.arap;
+  const bool rigid = smg::reads_rotations(o.terms);  // a term that reads the rotations is on
   dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
     using S = decltype(s);
     using I = decltype(i);

@@ -182,8 +182,8 @@ py::tuple regularizers_impl(const at::Tensor& positions, const OptTensor& quats,
       if (const smg::Status st = smg::validate_options(opts); !st)
         value_error(std::string(term) + "." + python_message(st.message(), {}));
   });
-  const bool rigid = o.terms.carap || o.terms.arap;
-  if (rigid && !quats) value_error("quats: needed for carap or arap");
+  const bool rigid = smg::reads_rotations(o.terms);  // a term that reads the rotations is on
+  if (rigid && !quats) value_error("quats: needed for carap, arap or angle");
   const EnergyInputs in = prepare(positions, rigid ? quats : std::nullopt, indices, weights,
                                   std::nullopt, visibility, validate);
   const at::Tensor gx = zeros_if(grad_x, in, 3), gq = zeros_if(grad_q && rigid, in, 4);

@@ -247,6 +247,29 @@ TEST_SUITE("cuda-host") {
           }
   }
 
+  TEST_CASE("cuda regularizers: host scheme, rotation-angle forms, weighted or not, tangent or raw") {
+    using namespace fused_cuda_test;
+    const Case<double, std::int32_t> s(scene(9, 13, 5, 23));
+    // Bit 5 of fused_options: angle (for_each_term's order); alone, with the confidences, with all.
+    for (const unsigned mask : {32u, 33u, 63u})
+      for (const bool velocity : {false, true})
+        for (const bool weighted : {false, true})
+          for (const bool raw : {false, true}) {
+            CAPTURE(mask);
+            CAPTURE(velocity);
+            CAPTURE(weighted);
+            CAPTURE(raw);
+            smg::RegularizerOptions o = options(mask);
+            o.angle.form = velocity ? smg::AccelForm::velocity : smg::AccelForm::acceleration;
+            o.angle.confidence_weighted = weighted;
+            Flags f;
+            f.raw = raw;
+            const Out<double> ref = cpu(s, o, f);
+            CHECK(double(ref.e.angle) > 0.0);
+            check_same(host_scheme(s, o, f, 3, 2), ref, o, f, "angle");
+          }
+  }
+
   TEST_CASE("cuda regularizers: host scheme on hard cases") {
     using namespace fused_cuda_test;
     const smg::RegularizerOptions o = options(smg::test::fused_all_terms());

@@ -283,7 +283,7 @@ TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the l
     CHECK(r.err.empty());
     const std::size_t tn = static_cast<std::size_t>(s.T * s.N);
     std::vector<double> conf(tn), gx(3 * tn, 0.0), gr(3 * tn, 0.0);
-    const bool rigid = opts.terms.carap || opts.terms.arap;
+    const bool rigid = smg::reads_rotations(opts.terms);
     const smg::RegularizerResult<double> e = smg::regularizers<double>(
         s.positions(), s.rotations(), s.visibility(), s.graph(), opts,
         opts.terms.confidence ? smg::FrameScalarsView<double>(conf.data(), s.T, s.N) : smg::FrameScalarsView<double>(),

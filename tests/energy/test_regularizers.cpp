@@ -221,15 +221,18 @@ TEST_CASE("fused regularizers equal the separate operators for every subset of t
 }
 
 TEST_CASE("fused regularizers read the caller's confidences when they compute none") {
-  // terms.confidence off and a confidence view given: C-ARAP, LRM and weighted smoothness read
-  // the caller's c, as the separate operators read theirs (bitwise for one energy alone), the
-  // view is not written, and the energies differ from c ≡ 1 (the values are read, not ignored).
+  // terms.confidence off and a confidence view given: every energy reads the caller's c as its
+  // separate operator reads it (bitwise for one energy alone), the view is not written, and an
+  // energy differs from its value with c ≡ 1 exactly where the separate operator's does (the
+  // values are read, not ignored; terms that read no c, such as plain ARAP, are equal). No term
+  // is named: which ones read c is the separate operators' business.
   SMG_TEST_RNG(rng, 2406);
   const Scene<double> s = smg::test::random_scene(23, 30, 6, rng);
   std::vector<double> given(s.c.size());
   for (double& c : given) c = rng.uniform(0.0, 1.0);
   const std::vector<double> kept = given;
   const unsigned conf_bit = 1u << smg::test::fused_term_index("confidence");
+  int differing = 0;
   for (unsigned mask = 1; mask <= smg::test::fused_all_terms(); ++mask) {
     if (mask & conf_bit) continue;
     CAPTURE(mask);
@@ -237,20 +240,21 @@ TEST_CASE("fused regularizers read the caller's confidences when they compute no
     const FusedOut<double> f = fused_run<double>(s, o, 2, false, true, true, nullptr, &given);
     const FusedOut<double> r = fused_separate(s, o, 2, false, true, &given);
     const FusedOut<double> ones = fused_run(s, o, 2);
+    const FusedOut<double> r_ones = fused_separate(s, o, 2);
     CHECK(given == kept);
     if ((mask & (mask - 1)) == 0) check_fused_bitwise(f, r);
     smg::RegularizerResult<double>::each_energy(
-        [&](const char* name, double fused, double separate, double unit) {
+        [&](const char* name, double fused, double separate, double unit, double separate_unit) {
           CAPTURE(name);
           CHECK(fused_rel(fused, separate) <= 1e-12);
-          // ARAP reads no confidences (c ≡ 1, α = 1); every other energy that is on does here.
-          if (fused != 0.0 && std::string(name) != "arap") CHECK(fused != unit);
-          if (std::string(name) == "arap") CHECK(fused == unit);
+          CHECK((fused == unit) == (separate == separate_unit));
+          if (fused != unit) ++differing;
         },
-        f.e, r.e, ones.e);
+        f.e, r.e, ones.e, r_ones.e);
     CHECK(fused_rel_diff(f.gx, r.gx) <= 1e-12);
     CHECK(fused_rel_diff(f.gr, r.gr) <= 1e-12);
   }
+  CHECK(differing > 0);
 }
 
 TEST_CASE("fused regularizers are bit-identical for 1, 2 and 3 threads") {

@@ -283,8 +283,10 @@ TEST_CASE("every operator's validator takes good arguments and names a bad one")
     const smg::Status ok = Op::validate(good, out);
     CHECK_MESSAGE(ok, ok.message());
     t::OperatorInputs<double> in = good;
-    in.positions = {x_nan.data(), T, N};
-    CHECK(names(Op::validate(in, out), "positions"));
+    if (!(Op::reads & t::kNoPositions)) {
+      in.positions = {x_nan.data(), T, N};
+      CHECK(names(Op::validate(in, out), "positions"));
+    }
     if (Op::reads & t::kReadsGraph) {
       in = good;
       in.graph = {idx_bad.data(), s.w.data(), N, K};
@@ -311,9 +313,11 @@ TEST_CASE("every operator's validator takes good arguments and names a bad one")
     t::OperatorOutputs<double> bad = out;
     bad.positions = {big.data(), T + 1, N};
     bad.confidence = {big.data(), T + 1, N};
+    bad.rotations = {big.data(), T + 1, N};
     const smg::Status st = Op::validate(good, bad);
     CHECK(!st);
     const std::string& m = st.message();
-    CHECK((m.rfind("grad_positions", 0) == 0 || m.rfind("confidence", 0) == 0));
+    CHECK((m.rfind("grad_positions", 0) == 0 || m.rfind("confidence", 0) == 0 ||
+           m.rfind("grad_rotations", 0) == 0));
   });
 }

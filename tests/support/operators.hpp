@@ -47,6 +47,8 @@ struct OperatorOutputs {
 
 // Which optional inputs an operator reads (its `reads`).
 constexpr unsigned kReadsGraph = 1, kReadsConfidence = 2, kReadsVisibility = 4, kReadsRotations = 8;
+// ... and whether it reads no positions at all (a term of the rotations alone: angle).
+constexpr unsigned kNoPositions = 16;
 
 // Each operator: `name` (also the smg_assert_probe mode that misuses it), `exact_gradient` (its
 // outputs are the exact gradient of its energy in the given inputs: tests/energy/test_terms.cpp
@@ -201,6 +203,35 @@ struct Accel {
   }
 };
 
+// Rotation-angle acceleration (E23), weighted by the given confidences: it reads the rotations
+// only (no positions) and writes the rotation gradient only.
+struct Angle {
+  static constexpr const char* name = "angle";
+  static constexpr const char* term = "angle";
+  static constexpr bool exact_gradient = true;
+  static RegularizerOptions options() {
+    RegularizerOptions o;
+    o.angle.confidence_weighted = true;
+    return o;
+  }
+  template <class S, class I, bool M>
+  static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S>,
+                                 detail::NonDeducedT<RotationGradientView<S>> gr, FrameScalarsView<S>,
+                                 EnergyWorkspace<S>* workspace, ParallelOptions parallel) {
+    return angle(in.rotations, in.confidence, o.angle, gr, workspace, parallel);
+  }
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+                    ParallelOptions parallel = {}) {
+    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
+  }
+  static constexpr unsigned reads = kReadsConfidence | kReadsRotations | kNoPositions;
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
+    return validate_angle<S>(in.rotations, in.confidence, options().angle, out.rotations);
+  }
+};
+
 // (E21) with each other penalty (E22) of the library's list (kAccelPenalties; `squared`, the
 // default, is Accel above): the same calls with options().accel.penalty = P. Variants of the
 // term, not terms (term = nullptr): the fused-step tests find Accel by its term.
@@ -288,7 +319,7 @@ struct Regularizers {
 
 // The list. A new regulariser gets a struct like the ones above and an entry here; a term of the
 // fused step that has none fails test_regularizers.cpp's "every term on the list".
-using Operators = decltype(std::tuple_cat(std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Accel>{},
+using Operators = decltype(std::tuple_cat(std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Accel, Angle>{},
                                           AccelPenaltyOperators{}, std::tuple<Regularizers>{}));
 
 // Calls f(Op{}) for each operator of the list, in its order.

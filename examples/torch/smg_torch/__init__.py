@@ -308,9 +308,11 @@ def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: Grap
     (REGULARIZER_DEFAULTS; `weight` scales the term); a term not given is on or off as
     REGULARIZER_TERMS says. The terms today, for example: the confidences (confidence, E2-E6;
     visibility [T, N] or None = all visible), C-ARAP (carap, E7-E10), plain ARAP (arap), LRM
-    (lrm, E11-E16) and trajectory smoothness (accel, E21: squared accelerations or velocities of
-    the node trajectories, as MoSca and Shape-of-Motion regularise). With confidence off, C-ARAP
-    and LRM use c = 1. quats [T, N, 4] may be None when no term on uses them. Returns
+    (lrm, E11-E16), trajectory smoothness (accel, E21: squared accelerations or velocities of
+    the node trajectories, as MoSca and Shape-of-Motion regularise) and the rotation-angle term
+    (angle, E23: MoSca's rotation velocity / acceleration, the angles of R^{t+1} R^{tT}). With
+    confidence off, C-ARAP and LRM use c = 1. quats [T, N, 4] may be None when no term on uses
+    them. Returns
     Regularizers(total, carap, arap, lrm, confidence, ...the other energies): `total` is
     differentiable w.r.t. positions and the raw quats (the confidences are constants, as with
     the separate operators); the per-term energies are detached. The same values as the separate

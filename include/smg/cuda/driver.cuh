@@ -31,7 +31,9 @@
 // its host-device step, `using Element = ...; Element element() const;`, and its energy,
 // `static Accumulator<S>& energy_of(RegularizerResult<S>&)` (AccelTerm is the example). The step
 // has `SMG_HOST_DEVICE void at(t, n, x, conf, grad_x, S& energy) const` and
-// `bool reads_confidence() const`. The list is read on the host: a term's Element is configured
+// `bool reads_confidence() const`; a step that reads the rotations (AngleElement) says so with
+// `static constexpr bool kReadsRotations = true` and takes q and the rotation gradient rows too,
+// `at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, S& energy)`. The list is read on the host: a term's Element is configured
 // there (RegularizerTermSet's constructor, with edges = N·K, so a step must not scale by the
 // graph's edge count, which only the device knows).
 #pragma once
@@ -63,13 +65,24 @@ namespace detail {
 
 // The steps of the element terms, in list order; at() runs those that are on, term k's energy
 // into e[k]. A recursive pack rather than std::tuple: device code calls it.
+// An Element that reads the rotations says so (`static constexpr bool kReadsRotations = true`,
+// AngleElement): its step then also takes q [T][N][4] and the rotation gradient rows,
+// at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, energy).
+template <class E, class = void>
+struct ElementReadsRotations : std::false_type {};
+template <class E>
+struct ElementReadsRotations<E, std::void_t<decltype(E::kReadsRotations)>>
+    : std::integral_constant<bool, E::kReadsRotations> {};
+
 template <class... Es>
 struct ElementPack {
   static constexpr int size = 0;
   template <class S>
-  SMG_HOST_DEVICE void at(Index, Index, PositionsView<const S>, const S*, S*, S*) const {}
+  SMG_HOST_DEVICE void at(Index, Index, PositionsView<const S>, QuaternionsView<const S>, const S*,
+                          S*, S*, S*, S*) const {}
   bool any_on() const { return false; }
   bool reads_confidence() const { return false; }
+  bool reads_rotations() const { return false; }
 };
 template <class E, class... Es>
 struct ElementPack<E, Es...> {
@@ -78,13 +91,20 @@ struct ElementPack<E, Es...> {
   E step;
   ElementPack<Es...> rest;
   template <class S>
-  SMG_HOST_DEVICE void at(Index t, Index n, PositionsView<const S> x, const S* conf, S* grad_x,
-                          S* e) const {
-    if (on) step.at(t, n, x, conf, grad_x, e[0]);
-    rest.at(t, n, x, conf, grad_x, e + 1);
+  SMG_HOST_DEVICE void at(Index t, Index n, PositionsView<const S> x, QuaternionsView<const S> q,
+                          const S* conf, S* grad_x, S* grad_tangent, S* grad_raw, S* e) const {
+    if constexpr (ElementReadsRotations<E>::value) {
+      if (on) step.at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, e[0]);
+    } else {
+      if (on) step.at(t, n, x, conf, grad_x, e[0]);
+    }
+    rest.at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, e + 1);
   }
   bool any_on() const { return on || rest.any_on(); }
   bool reads_confidence() const { return (on && step.reads_confidence()) || rest.reads_confidence(); }
+  bool reads_rotations() const {
+    return (on && ElementReadsRotations<E>::value) || rest.reads_rotations();
+  }
 };
 
 // ElementPack of the Elements of Ts (in order), skipping the terms without one.
@@ -219,7 +239,7 @@ FusedPlan fused_plan(Index T, Index N, Index K, const RegularizerOptions& o, boo
   p.elements = elements.any_on();
   p.confidence = on.confidence && (conf_out || p.rigid || p.lrm || elements.reads_confidence());
   p.want_x = want_x && (p.rigid || p.lrm || p.elements);
-  p.want_r = want_r && p.rigid;
+  p.want_r = want_r && (p.rigid || elements.reads_rotations());
   p.conf_scratch = p.confidence && !conf_out;
   if (T == 0 || N == 0) return p;
   const std::size_t bound =
@@ -323,7 +343,7 @@ struct ElementTerms {
     if (rigid)
       fused_rigid_node_at(t, n, rigid_constants, x, q, conf, graph, rev_offsets, rev_entries,
                           grad_x, grad_tangent, grad_raw, e);
-    elements.at(t, n, x, conf, grad_x, e + 2);
+    elements.at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, e + 2);
   }
 };
 
@@ -506,7 +526,8 @@ struct HostBackend {
 // ---- The driver ----
 
 // Every phase of one call, through `be`. Views and pointers are in the backend's memory (device
-// memory for DeviceBackend): positions [T][N][3], rotations [T][N][4] (with C-ARAP or ARAP),
+// memory for DeviceBackend): positions [T][N][3], rotations [T][N][4] (with a term that reads
+// them: C-ARAP, ARAP, angle),
 // visibility [T][N] or empty, graph [N][K]; rev_offsets [N + 1] and rev_entries: the graph's
 // in-edges (ReverseGraph), edge_count = &rev_offsets[N]; result: overwritten; confidence,
 // grad_positions, grad_rotations: as smg::cuda::regularizers. `p` is fused_plan's for these

@@ -68,7 +68,7 @@ Status validate_regularizers_shapes(smg::detail::NonDeducedT<PositionsView<const
   };
   if (positions.size() > 0 && positions.data() == nullptr)
     return Status::error("positions: null data pointer for a non-empty array");
-  if ((on.carap || on.arap) && !(rotations.data() == nullptr && T * N == 0))
+  if (reads_rotations(on) && !(rotations.data() == nullptr && T * N == 0))
     if (Status s = shape(rotations.frames(), rotations.nodes(), "rotations", "[4]"); !s) return s;
   if (visibility.data() != nullptr)
     if (Status s = shape(visibility.frames(), visibility.nodes(), "visibility", ""); !s) return s;
@@ -118,13 +118,13 @@ Status validate_regularizers(smg::detail::NonDeducedT<PositionsView<const S>> po
 // smg::regularizers() with the same options (to rounding: sums are associated differently).
 // Every view is over DEVICE memory:
 //   positions [T][N][3]; rotations [T][N][4] (w, x, y, z; normalised on use), may be empty
-//   without C-ARAP and ARAP; visibility [T][N] (0/1) or empty; graph indices [N][K] (int32 or
+//   without C-ARAP, ARAP and angle (reads_rotations); visibility [T][N] (0/1) or empty; graph indices [N][K] (int32 or
 //   int64, −1 padded; K <= kLrmMaxK with LRM) and weights [N][K];
 //   reverse: build_reverse_graph(graph.indices.data(), N, K, stream, reverse), once per graph;
 //   result_device: one RegularizerResult<S> (energies in Accumulator<S>), overwritten;
 //   confidence [T][N]: receives c (E6) when given (terms.confidence on);
 //   grad_positions [T][N][3], grad_rotations (right tangent [T][N][3] or raw [T][N][4], Q5): the
-//   gradient of carap + arap + lrm + accel is ADDED; empty = not computed.
+//   gradient of carap + arap + lrm + accel + angle is ADDED; empty = not computed.
 // Confidences are constants for the gradient (stop-gradient), as on the CPU. Queued on
 // `stream`; nothing is synchronised; bit-identical run to run on a given device. Shapes and
 // options are checked on the host first (validate_regularizers_shapes); contents are the

@@ -212,7 +212,10 @@ E drive_checked(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>
     // The block's frames node-major (contiguous per neighbour: the strided [T][N][3] layout
     // would cost a cache line per frame and neighbour).
     std::fill(v.Xb, v.Xb + N * n4, S(0));
-    for (Index l = 0; l < v.nr; ++l) {
+    // Rotation terms add into the block's rotation spill (a term need not write every entry).
+    if (p.want_r && p.G > 0) std::fill(rot.spill_r(b), rot.spill_r(b) + p.G * N * 3, S(0));
+    // No positions when no term reads them (a one-term call of a rotation term).
+    for (Index l = 0; io.x.data() != nullptr && l < v.nr; ++l) {
       const S* row = io.x.ptr(v.t0 + l, 0);
       for (Index j = 0; j < N; ++j) {
         S* dst = v.Xb + j * n4 + l;

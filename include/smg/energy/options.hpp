@@ -152,6 +152,17 @@ struct AccelOptions {
   double penalty_eps = 1e-20;  // ε of sqrt_weighted (length²), finite and > 0; read by it only
 };
 
+// Rotation-angle velocity or acceleration of node rotations (E23, docs/math/terms/angle.md), as
+// MoSca regularises its motion bases' rotations: θ_i^t, the angle of R_i^{t+1} R_i^{tT}, summed
+// (velocity) or |θ_i^{t+1} − θ_i^t| summed (acceleration), unsquared, weighted by c_{t,i} at the
+// earliest frame or by 1. The forms are AccelForm's.
+struct AngleOptions {
+  AccelForm form = AccelForm::acceleration;
+  bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
+  Normalization normalization = Normalization::sum;  // mean: over (T − 2) · N terms (or T − 1)
+  double weight = 1.0;                               // overall factor (units: 1 / radian)
+};
+
 // The named enums of the options: enum_values(E{}) is the list of E's values, each with its
 // name to_string(e). The bindings read and write an option of such a type by its name
 // (smg_torch's string, smg_cli's choice flag) and validate_options refuses a value not listed,
@@ -167,7 +178,11 @@ struct RegularizerTerms {
   bool arap = false;       // (E9) with c ≡ 1, α = 1 (ablations)
   bool lrm = true;         // (E14), weights (E7) with the confidences
   bool accel = false;      // (E21), trajectory smoothness
+  bool angle = false;      // (E23), rotation-angle velocity / acceleration
 };
+
+// Whether a term that is on reads the rotations (so the caller must give them).
+inline bool reads_rotations(const RegularizerTerms& t) { return t.carap || t.arap || t.angle; }
 
 // The options of the fused step: the terms, and each term's own options (plain values).
 struct RegularizerOptions {
@@ -177,6 +192,7 @@ struct RegularizerOptions {
   ArapOptions arap;
   LrmOptions lrm;
   AccelOptions accel;
+  AngleOptions angle;
 };
 
 namespace detail {
@@ -238,6 +254,12 @@ void for_each_option(O& o, F&& f) {
   detail::for_each_scaling_option(o, f);
   f("penalty_eps", o.penalty_eps);
 }
+template <class O, class F, detail::IfOptions<O, AngleOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("form", o.form);
+  f("confidence_weighted", o.confidence_weighted);
+  detail::for_each_scaling_option(o, f);
+}
 
 // The term list of the fused step: f(name, on, options) for every term of RegularizerOptions, in
 // the driver's order, with on = o.terms.<name> (bool& or const bool&). validate_options below,
@@ -250,6 +272,7 @@ void for_each_term(RO& o, F&& f) {
   f("arap", o.terms.arap, o.arap);
   f("lrm", o.terms.lrm, o.lrm);
   f("accel", o.terms.accel, o.accel);
+  f("angle", o.terms.angle, o.angle);
 }
 
 // The energies of one fused step, each as the separate operator returns it (0 for a term that
@@ -261,6 +284,7 @@ struct RegularizerResult {
   Accumulator<S> arap = Accumulator<S>(0);
   Accumulator<S> lrm = Accumulator<S>(0);
   Accumulator<S> accel = Accumulator<S>(0);
+  Accumulator<S> angle = Accumulator<S>(0);
 
   // f(name, r.<energy>...) for each energy, in the order above, of one or more results. The list
   // of energies: total(), +=, the torch glue's energies tensor and smg_torch.Regularizers' names,
@@ -271,6 +295,7 @@ struct RegularizerResult {
     f("arap", r.arap...);
     f("lrm", r.lrm...);
     f("accel", r.accel...);
+    f("angle", r.angle...);
   }
   Accumulator<S> total() const {
     Accumulator<S> t(0);
@@ -385,6 +410,11 @@ inline Status validate_options(const AccelOptions& o) {
                               detail::check_enum("AccelOptions", "penalty", o.penalty),
                               detail::check_nonneg("AccelOptions", "weight", o.weight),
                               detail::check_positive("AccelOptions", "penalty_eps", o.penalty_eps)});
+}
+
+inline Status validate_options(const AngleOptions& o) {
+  return detail::first_error({detail::check_enum("AngleOptions", "form", o.form),
+                              detail::check_nonneg("AngleOptions", "weight", o.weight)});
 }
 
 // Plain ARAP is C-ARAP with α = 1 and no confidences (the caller passes none).

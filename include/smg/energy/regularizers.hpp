@@ -43,6 +43,7 @@
 // header): including the fused step gives every regulariser, and a new term is included here,
 // where it joins RegularizerTermSet, and nowhere else.
 #include "smg/energy/accel.hpp"
+#include "smg/energy/angle.hpp"
 #include "smg/energy/arap.hpp"
 #include "smg/energy/carap.hpp"
 #include "smg/energy/confidence.hpp"
@@ -72,17 +73,18 @@ std::size_t regularizers_extra_bytes(Index frames, Index nodes, Index k,
   return sizeof(S) * static_cast<std::size_t>(n);
 }
 
-// The fused regulariser step: any subset of confidences (E6), C-ARAP (E9), ARAP, LRM (E14) and
-// trajectory smoothness (E21) (options.terms) in one pass over the graph; returns the energies,
+// The fused regulariser step: any subset of confidences (E6), C-ARAP (E9), ARAP, LRM (E14),
+// trajectory smoothness (E21) and the rotation-angle term (E23) (options.terms) in one pass over the graph; returns the energies,
 // each equal to what node_confidences + carap()/arap()/lrm() give on the same inputs (to
 // rounding: the sums are associated differently, see tests/energy/test_regularizers.cpp).
 //   positions [T][N][3]; rotations [T][N][4] (w, x, y, z; normalised on entry), may be empty
-//   without C-ARAP and ARAP; visibility [T][N] (0/1) multiplies the confidences (E6), empty =
-//   all visible. confidence [T][N]: with options.terms.confidence an output, receiving c_{t,i};
-//   without, an input when given: the caller's c (in [0, 1]; visibility not applied), which
-//   C-ARAP, LRM and confidence-weighted smoothness read as carap(), lrm() and accel() read
-//   theirs (empty: c ≡ 1). Why both in one view: a trainer that refreshes its confidences every
-//   few iterations, or takes them from elsewhere, passes them here and keeps one call.
+//   without C-ARAP, ARAP and angle (reads_rotations); visibility [T][N] (0/1) multiplies the
+//   confidences (E6), empty = all visible. confidence [T][N]: with options.terms.confidence an
+//   output, receiving c_{t,i}; without, an input when given: the caller's c (in [0, 1];
+//   visibility not applied), which C-ARAP, LRM, confidence-weighted smoothness and angle read as
+//   their separate calls read theirs (empty: c ≡ 1). Why both in one view: a trainer that
+//   refreshes its confidences every few iterations, or takes them from elsewhere, passes them
+//   here and keeps one call.
 //   grad_positions [T][N][3] and grad_rotations (right tangent [T][N][3] or raw quaternion
 //   [T][N][4], (Q5)) receive the gradient of the energies, *added* to their contents.
 // Confidences are constants for the gradient (stop-gradient), as in the separate operators.
@@ -98,7 +100,7 @@ RegularizerResult<S> regularizers(
     detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {},
     EnergyWorkspace<S>* workspace = nullptr, ParallelOptions parallel = {}) {
   const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
-  SMG_ASSERT(!(options.terms.carap || options.terms.arap) || (rotations.frames() == T && rotations.nodes() == N),
+  SMG_ASSERT(!reads_rotations(options.terms) || (rotations.frames() == T && rotations.nodes() == N),
              "regularizers: rotations shape");
   SMG_ASSERT(detail::graph_operator_shapes(confidence, graph, grad_positions, T, N),
              "regularizers: confidence, graph or grad_positions shape");

@@ -13,6 +13,7 @@
 #include "smg/core/types.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/terms/accel.hpp"
+#include "smg/energy/terms/angle.hpp"
 #include "smg/energy/terms/confidence.hpp"
 #include "smg/energy/terms/lrm.hpp"
 #include "smg/energy/terms/rigid.hpp"
@@ -34,6 +35,7 @@ struct RegularizerTermSet {
   RigidTerm<S, I> rigid;  // C-ARAP and ARAP, sharing d (E8)
   LrmTerm<S, I> lrm;
   AccelTerm<S, I> accel;
+  AngleTerm<S, I> angle;
 
   RegularizerTermSet(Index T, Index N, Index K, Index edges, const RegularizerOptions& o,
                      bool want_x, bool want_r) {
@@ -45,13 +47,15 @@ struct RegularizerTermSet {
     rigid.want_rotations = want_r;
     if (on.lrm) lrm.configure(o.lrm, T, K, edges, want_x);
     if (on.accel) accel.configure(o.accel, T, N);
+    if (on.angle) angle.configure(o.angle, T, N);
+    angle.want_rotations = want_r;
   }
-  bool any_energy() const { return rigid.on() || lrm.on() || accel.on(); }
+  bool any_energy() const { return rigid.on() || lrm.on() || accel.on() || angle.on(); }
   // f(terms...) over the list, each checked against the term concept (energy/block.hpp) first:
   // both drivers (the CPU's drive(), the CUDA element pass's ListElements) take the list here.
   template <class F>
   decltype(auto) apply(F&& f) {
-    return checked(f, confidence, rigid, lrm, accel);
+    return checked(f, confidence, rigid, lrm, accel, angle);
   }
 
  private:

@@ -1,6 +1,6 @@
 // smg/energy/validate.hpp — the argument checks of the separate energy operators:
-// validate_confidence (node_confidences), validate_carap, validate_arap, validate_lrm and
-// validate_accel, and the fused step's validate_regularizers; one line naming the bad argument.
+// validate_confidence (node_confidences), validate_carap, validate_arap, validate_lrm,
+// validate_accel and validate_angle, and the fused step's validate_regularizers; one line naming the bad argument.
 //
 // Why a header of their own: the CUDA launchers' device-memory validators (cuda/validate.cuh)
 // call these on host copies, so that the messages are exactly the CPU's, and device headers
@@ -106,11 +106,29 @@ Status validate_accel(detail::NonDeducedT<PositionsView<const S>> positions,
   return validate_optional_output(grad_positions, T, N, "grad_positions");
 }
 
+// Checks the arguments of angle(): rotations [T][N][4] (nonzero, normalised on entry);
+// `confidence` [T][N] may be empty (all 1; read only with options.confidence_weighted), the
+// gradient may be empty (not computed).
+template <class S>
+Status validate_angle(detail::NonDeducedT<QuaternionsView<const S>> rotations,
+                      detail::NonDeducedT<FrameScalarsView<const S>> confidence,
+                      const AngleOptions& options,
+                      detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
+  const Index T = rotations.frames(), N = rotations.nodes();
+  if (Status s = validate_quaternions<S>(rotations, -1, -1, QuaternionNorm::normalize_on_entry,
+                                         "rotations");
+      !s)
+    return s;
+  if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
+  if (Status s = validate_options(options); !s) return s;
+  return detail::validate_gradient_outputs<S>(PositionsView<S>(), grad_rotations, T, N);
+}
 
 // Checks the arguments of regularizers(); one line naming the bad argument. `rotations` may be
-// empty when neither C-ARAP nor ARAP is on; `visibility` [T][N] (0/1) may be empty (all
-// visible); `confidence` [T][N] is the output with terms.confidence, else the caller's
-// confidences (finite, in [0, 1]) or empty; the gradients may be empty (not computed).
+// empty when no term that reads them is on (C-ARAP, ARAP, angle: reads_rotations); `visibility`
+// [T][N] (0/1) may be empty (all visible); `confidence` [T][N] is the output with
+// terms.confidence, else the caller's confidences (finite, in [0, 1]) or empty; the gradients
+// may be empty (not computed).
 template <class S, class I>
 Status validate_regularizers(detail::NonDeducedT<PositionsView<const S>> positions,
                              detail::NonDeducedT<QuaternionsView<const S>> rotations,
@@ -122,7 +140,7 @@ Status validate_regularizers(detail::NonDeducedT<PositionsView<const S>> positio
   const Index T = positions.frames(), N = positions.nodes();
   const RegularizerTerms& on = options.terms;
   if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (on.carap || on.arap || rotations.data() != nullptr)
+  if (reads_rotations(on) || rotations.data() != nullptr)
     if (Status s = validate_quaternions<S>(rotations, T, N, QuaternionNorm::normalize_on_entry,
                                            "rotations");
         !s)

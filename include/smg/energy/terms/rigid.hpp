@@ -391,9 +391,9 @@ struct RigidTerm : TermDefaults {
           v.rot->add(t0 + l, i, Ri + l, ne);
         } else {
           S* dst = v.rot->spill_r(v.b) + (l - nown) * N * 3 + 3 * i;
-          dst[0] = Ri[l];
-          dst[1] = Ri[ne + l];
-          dst[2] = Ri[2 * ne + l];
+          dst[0] += Ri[l];
+          dst[1] += Ri[ne + l];
+          dst[2] += Ri[2 * ne + l];
         }
       }
   }

@@ -1,0 +1,224 @@
+// smg/energy/terms/angle.hpp — the rotation-angle velocity or acceleration of node rotations, the
+// regulariser MoSca puts on its motion bases' rotations (`compute_vel_acc`), as a term of the
+// regulariser driver (energy/block.hpp has the concept; docs/math/terms/angle.md (E23)):
+//   θ_i^t = the angle of R_i^{t+1} R_i^{tT} = 2 atan2(‖v‖, |w|), (w, v) = q_i^{t*} ⊗ q_i^{t+1}
+//   velocity form      Θ = k Σ_i Σ_{t=0}^{T−2} w_i^t θ_i^t
+//   acceleration form  Θ = k Σ_i Σ_{t=0}^{T−3} w_i^t |θ_i^{t+1} − θ_i^t|
+// with w_i^t = c_{t,i} (confidence-weighted, at the earliest frame) or 1, and k the weight
+// (divided by the term count with Normalization::mean). Unsquared, as MoSca's defaults. The
+// gradient goes to the rotations only (right tangent, or raw quaternions through (Q5)): with u
+// the unit axis of q^{t*} ⊗ q^{t+1} (sign(w) v / ‖v‖, 0 at θ = 0 and at w = 0),
+// ∂θ^t/∂φ^{t+1} = u, ∂θ^t/∂φ^t = −u; |·| has sub-gradient 0 at 0 (torch's conventions). Each
+// term is indexed by its earliest frame, which the block owns; its later frames are in the
+// block's overlap (reach 1 or 2) and reach the caller through the rotation spill.
+#pragma once
+
+#include "smg/core/config.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "smg/core/scalar.hpp"
+#include "smg/core/views.hpp"
+#include "smg/energy/block.hpp"
+#include "smg/energy/options.hpp"
+
+namespace smg {
+
+// θ of (E23), the rotation angle of R_b R_aᵀ in [0, π], from the quaternions qa, qb (w, x, y, z;
+// any nonzero norm: θ and u do not depend on it), and u (3 values) with ∂θ/∂φ_b = u, ∂θ/∂φ_a = −u
+// for right-tangent perturbations R ← R Exp(φ). u = 0 where ‖v‖ = 0 (θ = 0) or w = 0 (θ = π, a
+// kink of θ: torch's |w|' = sign(0) = 0 gives 0 there too).
+template <class S, class L>
+SMG_FORCE_INLINE SMG_HOST_DEVICE S rotation_angle(const S* qa, const S* qb, S* u) {
+  using std::atan2;
+  using std::sqrt;
+  const S aw = qa[0], ax = qa[1], ay = qa[2], az = qa[3];
+  const S bw = qb[0], bx = qb[1], by = qb[2], bz = qb[3];
+  // s = qa* ⊗ qb (the relative rotation R_aᵀ R_b: the same angle as R_b R_aᵀ).
+  const S w = aw * bw + ax * bx + ay * by + az * bz;
+  const S vx = aw * bx - bw * ax - (ay * bz - az * by);
+  const S vy = aw * by - bw * ay - (az * bx - ax * bz);
+  const S vz = aw * bz - bw * az - (ax * by - ay * bx);
+  const S n = sqrt(vx * vx + vy * vy + vz * vz);
+  const S aw_abs = w < S(0) ? S(-w) : w;
+  const S sg = w > S(0) ? S(1) : (w < S(0) ? S(-1) : S(0));
+  const S f = n > S(0) ? S(sg / n) : S(0);
+  u[0] = f * vx;
+  u[1] = f * vy;
+  u[2] = f * vz;
+  return L(2) * atan2(n, aw_abs);
+}
+
+// One term of (E23) from its angles θ0 = θ^t and (acceleration) θ1 = θ^{t+1}, with factor
+// f = k w: returns f θ0 (order 1) or f |θ1 − θ0| (order 2), and g0 = ∂/∂θ0, g1 = ∂/∂θ1.
+template <class S>
+SMG_FORCE_INLINE SMG_HOST_DEVICE S angle_term(int order, S f, S th0, S th1, S& g0, S& g1) {
+  if (order == 1) {
+    g0 = f;
+    g1 = S(0);
+    return f * th0;
+  }
+  const S d = th1 - th0;
+  const S s = d > S(0) ? f : (d < S(0) ? S(-f) : S(0));
+  g0 = -s;
+  g1 = s;
+  return d < S(0) ? S(-f * d) : S(f * d);
+}
+
+// The number of terms of (E23) over T frames and N nodes (Normalization::mean divides by it).
+inline Index angle_term_count(const AngleOptions& o, Index frames, Index nodes) {
+  const Index span = o.form == AccelForm::acceleration ? 2 : 1;
+  return std::max<Index>(0, frames - span) * nodes;
+}
+inline bool angle_active(const AngleOptions& o, Index frames, Index nodes) {
+  return angle_term_count(o, frames, nodes) > 0 && o.weight != 0.0;
+}
+inline double angle_scale(const AngleOptions& o, Index frames, Index nodes) {
+  const Index terms = angle_term_count(o, frames, nodes);
+  return o.normalization == Normalization::mean && terms > 0 ? o.weight / static_cast<double>(terms)
+                                                             : o.weight;
+}
+
+// (E23) at frame t of node i, the one step both drivers run: the energy of the term whose
+// earliest frame is t (when own_energy), and the right-tangent gradient of R_i^t from the terms
+// containing frame t whose earliest frame u lies in [u_lo, u_hi) (the CPU block: its owned
+// frames; the GPU: all), added to g[3]. q [T][N][4]; weight(u): w_i^u.
+template <class S, class W>
+SMG_FORCE_INLINE SMG_HOST_DEVICE void angle_at(Index t, Index i, QuaternionsView<const S> q,
+                                               int order, Literal<S> k, const W& weight,
+                                               Index u_lo, Index u_hi, bool own_energy, S* g,
+                                               S& energy) {
+  using L = Literal<S>;
+  const Index T = q.frames();
+  for (Index u = t - order; u <= t; ++u) {
+    if (u < 0 || u + order >= T || u < u_lo || u >= u_hi) continue;
+    S a0[3], a1[3] = {S(0), S(0), S(0)};
+    const S th0 = rotation_angle<S, L>(q.ptr(u, i), q.ptr(u + 1, i), a0);
+    const S th1 = order == 2 ? rotation_angle<S, L>(q.ptr(u + 1, i), q.ptr(u + 2, i), a1) : S(0);
+    S g0, g1;
+    const S e = angle_term<S>(order, S(S(k) * weight(u)), th0, th1, g0, g1);
+    if (u == t && own_energy) energy += e;
+    // θ^u = θ(u, u+1): −u_0 on frame u, +u_0 on u+1; θ^{u+1} = θ(u+1, u+2): −u_1 on u+1, +u_1 on
+    // u+2.
+    const Index p = t - u;
+    const S m0 = p == 0 ? S(-g0) : (p == 1 ? g0 : S(0));
+    const S m1 = p == 1 ? S(-g1) : (p == 2 ? g1 : S(0));
+    for (int d = 0; d < 3; ++d) g[d] += m0 * a0[d] + m1 * a1[d];
+  }
+}
+
+// (E23) as one element (frame t, node i) of the CUDA driver (cuda/driver.cuh): it reads the
+// rotations and writes the rotation gradient (kReadsRotations), so its step also takes q
+// [T][N][4] and the gradient rows grad_tangent [T][N][3] or grad_raw [T][N][4] (either or both
+// null). conf [T][N] or null (c ≡ 1; read only when weighted). Host values: AngleTerm::element().
+template <class S>
+struct AngleElement {
+  static constexpr bool kReadsRotations = true;
+  Literal<S> k = Literal<S>(0);
+  bool weighted = false;
+  int order = 2;  // 2: acceleration, 1: velocity
+
+  struct Weight {
+    const S* conf;
+    Index N, i;
+    SMG_HOST_DEVICE S operator()(Index u) const { return conf != nullptr ? conf[u * N + i] : S(1); }
+  };
+
+  bool reads_confidence() const { return weighted; }
+
+  SMG_HOST_DEVICE void at(Index t, Index i, PositionsView<const S>, QuaternionsView<const S> q,
+                          const S* conf, S*, S* grad_tangent, S* grad_raw, S& energy) const {
+    const Index T = q.frames(), N = q.nodes();
+    S g[3] = {S(0), S(0), S(0)};
+    angle_at<S>(t, i, q, order, k, Weight{weighted ? conf : nullptr, N, i}, Index(0), T, true, g,
+                energy);
+    if (grad_tangent != nullptr)
+      for (int d = 0; d < 3; ++d) grad_tangent[(t * N + i) * 3 + d] += g[d];
+    if (grad_raw != nullptr)
+      add_quaternion_gradient_from_tangent(q.ptr(t, i), g, grad_raw + (t * N + i) * 4);  // (Q5)
+  }
+};
+
+namespace detail {
+
+template <class S, class I>
+struct AngleTerm : TermDefaults {
+  using L = Literal<S>;
+  using Acc = Accumulator<S>;
+
+  bool enabled = false, weighted = false, want_rotations = false;
+  Index order = 2;  // 2: acceleration, 1: velocity
+  double scale_d = 0;
+  Index T = 0;
+
+  void configure(const AngleOptions& o, Index frames, Index nodes) {
+    T = frames;
+    order = o.form == AccelForm::acceleration ? 2 : 1;
+    weighted = o.confidence_weighted;
+    scale_d = angle_scale(o, frames, nodes);
+    enabled = angle_active(o, frames, nodes);
+  }
+
+  bool on() const { return enabled; }
+  Index reach() const { return order; }
+  bool reads_rotations() const { return true; }
+  bool position_gradient() const { return false; }
+  bool rotation_gradient() const { return want_rotations; }
+
+  using Element = AngleElement<S>;
+  Element element() const {
+    Element e;
+    e.k = L(scale_d);
+    e.weighted = weighted;
+    e.order = static_cast<int>(order);
+    return e;
+  }
+  static Acc& energy_of(RegularizerResult<S>& r) { return r.angle; }
+  Index slot_scalars(const BlockPlan&) const { return 0; }
+  void bind(const BlockPlan&, S*, const NeighborsView<S, I>&) {}
+  struct Block {};
+  Block begin(BlockView<S, I>&, S*) const { return {}; }
+
+  // The block's weights: c of node i at the owned frame u (the record's c row).
+  struct BlockWeight {
+    const S* c;
+    Index t0;
+    bool weighted;
+    SMG_HOST_DEVICE S operator()(Index u) const { return weighted ? c[u - t0] : S(1); }
+  };
+
+  // The terms of node i whose earliest frame the block owns; R_i's gradient of the block's
+  // frames: owned ones into the caller's rows, the overlap into the block's rotation spill.
+  template <class E>
+  void node(const BlockView<S, I>& v, Block&, Index i, E& energy) const {
+    const Index t0 = v.t0, N = v.plan->N;
+    const S* c = v.Xb + i * v.n4() + 3 * v.ne;
+    const BlockWeight w{c, t0, weighted};
+    const int ord = static_cast<int>(order);
+    const Index u_hi = std::min(v.t1, T - order);
+    if (u_hi <= t0) return;
+    Acc e(0);
+    // The overlap's frames only receive gradient.
+    const Index frames = v.want_r ? v.nr : v.nown;
+    for (Index l = 0; l < frames; ++l) {
+      S g[3] = {S(0), S(0), S(0)};
+      S el(0);
+      angle_at<S>(t0 + l, i, v.q, ord, L(scale_d), w, t0, u_hi, l < v.nown, g, el);
+      e += Acc(el);
+      if (!v.want_r) continue;
+      if (l < v.nown) {
+        v.rot->add(t0 + l, i, g, 1);
+      } else {
+        S* dst = v.rot->spill_r(v.b) + (l - v.nown) * N * 3 + 3 * i;
+        dst[0] += g[0];
+        dst[1] += g[1];
+        dst[2] += g[2];
+      }
+    }
+    energy.angle += e;
+  }
+};
+
+}  // namespace detail
+}  // namespace smg
