@@ -5,18 +5,20 @@ operators, so that a training script swaps one line (docs/compat.md).
     loss = som_accel(transls)          # Shape of Motion's compute_accel_loss(transls)
 
 Covered: Shape of Motion's `compute_accel_loss` (flow3d/loss_utils.py), on 3-vectors; MoSca's
-`MoSca.compute_arap_loss` and `MoSca.compute_vel_acc_loss` (lib_mosca/mosca.py).
+`MoSca.compute_arap_loss` and `MoSca.compute_vel_acc_loss` (lib_mosca/mosca.py); SC-GS's
+`cal_arap_error` (utils/deform_utils.py: per-node Procrustes rotations, then the weighted sum of
+squared stretches) as `scgs_arap`, through smg's plain ARAP (E9).
 """
 from __future__ import annotations
 
+from typing import Optional, Sequence, Tuple
+
 import torch
 
-from typing import Sequence, Tuple
-
 from . import (_REGULARIZER_ENERGIES, REGULARIZER_DEFAULTS, REGULARIZER_TERMS, _C, _scale, _term_options,
-               has_cuda, regularizers)
+               arap, has_cuda, regularizers)
 
-__all__ = ["som_accel", "mosca_arap", "mosca_vel_acc"]
+__all__ = ["som_accel", "mosca_arap", "mosca_vel_acc", "scgs_arap"]
 
 # smg's smoothness (E21) with the unsquared norm (E22) and Normalization::mean, i.e. the mean of
 # ‖a‖ over the (T − 2)·N terms: the accel term's options.
@@ -331,3 +333,193 @@ def mosca_vel_acc(node_xyz: torch.Tensor, node_quat: torch.Tensor, *, reduce: st
         out.append(regularizers(node_xyz, None, empty, **dict(_ALL_OFF, accel=accel)).total)
         out.append(regularizers(node_xyz, node_quat, empty, **dict(_ALL_OFF, angle=angle)).total)
     return out[0], out[1], out[2], out[3]
+
+
+# SC-GS's cal_arap_error keeps every row up to this many nodes; above it, it samples this many
+# rows with replacement (np.random.choice), which scgs_arap does not reproduce.
+_SCGS_SAMPLE_NUM = 512
+
+
+def _scgs_edges(x: torch.Tensor, ii, jj, nn, K: int) -> torch.Tensor:
+    """SC-GS's produce_edge_matrix_nfmt (utils/deform_utils.py l.35-42) on x [Nv, 3]: E [Nv, K, 3]
+    with E[i, n] = x_i − x_j for each edge (i, j, n) and 0 in the other slots. In x's dtype
+    (upstream allocates E in torch's default dtype)."""
+    E = x.new_zeros((x.shape[0], K, 3))
+    E[ii, nn] = x[ii] - x[jj]
+    return E
+
+
+def _scgs_rotations(E0: torch.Tensor, Et: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+    """SC-GS's estimate_rotation (utils/deform_utils.py l.130-166) from the edge matrices E0, Et
+    [Nv, K, 3] and the weights w [Nv, K]: R_i [Nv, 3, 3] minimising Σ_k w_ik ‖e'_ik − R e_ik‖².
+    S_i = Σ_k w_ik e_ik e'_ikᵀ (l.144-146); S_i = 0 for the rows upstream calls unchanged, i.e.
+    where for SOME coordinate c all K slots have e[.., c] == e'[.., c] exactly (l.148: .all over
+    the K dim, then any row index torch.where returns), so R_i = V Uᵀ of a zero matrix (I with
+    torch's SVD); S = U Σ Vᵀ, R = V Uᵀ (l.152-153); where det R <= 0, the column of U at the
+    smallest singular value (the first one on a tie, argmin) is negated and R recomputed
+    (l.158-163)."""
+    S = torch.bmm(E0.transpose(1, 2), w[:, :, None] * Et)  # [Nv, 3, 3]
+    unchanged = (E0 == Et).all(dim=1).any(dim=1)
+    S[unchanged] = 0
+    U, sig, Vh = torch.linalg.svd(S)
+    V = Vh.transpose(1, 2)
+    R = torch.bmm(V, U.transpose(1, 2))
+    rows = torch.nonzero(torch.det(R) <= 0, as_tuple=False).flatten()
+    if rows.numel() > 0:
+        Um = U.clone()
+        Um[rows, :, sig[rows].argmin(dim=1)] *= -1
+        R[rows] = torch.bmm(V[rows], Um[rows].transpose(1, 2))
+    return R
+
+
+def _quat_from_matrix(R: torch.Tensor) -> torch.Tensor:
+    """Unit quaternions (w, x, y, z) [..., 4] of rotation matrices R [..., 3, 3] (Shepperd's
+    method): the largest of 4w², 4x², 4y², 4z² (the diagonal combinations below, summing to 4)
+    picks the row of the symmetric table 4 q qᵀ that is divided by 4 |q_k| >= 2."""
+    m = R.reshape(R.shape[:-2] + (9,)).unbind(-1)
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
+    d = torch.stack([1 + m00 + m11 + m22, 1 + m00 - m11 - m22,
+                     1 - m00 + m11 - m22, 1 - m00 - m11 + m22], -1)  # 4w², 4x², 4y², 4z²
+    a, b, c = m21 - m12, m02 - m20, m10 - m01  # 4wx, 4wy, 4wz
+    p, q, r = m01 + m10, m02 + m20, m12 + m21  # 4xy, 4xz, 4yz
+    table = torch.stack([torch.stack([d[..., 0], a, b, c], -1),
+                         torch.stack([a, d[..., 1], p, q], -1),
+                         torch.stack([b, p, d[..., 2], r], -1),
+                         torch.stack([c, q, r, d[..., 3]], -1)], -2)  # [..., 4, 4] = 4 q qᵀ
+    k = d.argmax(-1, keepdim=True)  # [..., 1]
+    row = table.gather(-2, k[..., None].expand(k.shape + (4,))).squeeze(-2)
+    return row / (2 * d.gather(-1, k).sqrt())
+
+
+def _scgs_index(name: str, t, n_edges: Optional[int], hi: int, hi_name: str, device) -> torch.Tensor:
+    if not isinstance(t, torch.Tensor):
+        raise ValueError(f"{name}: expected a torch.Tensor, got {type(t).__name__}")
+    if t.dim() != 1:
+        raise ValueError(f"{name}: expected shape [Ne], got {list(t.shape)}")
+    if t.dtype not in (torch.int32, torch.int64):
+        raise ValueError(f"{name}: dtype must be int32 or int64, got {t.dtype}")
+    if n_edges is not None and t.shape[0] != n_edges:
+        raise ValueError(f"{name}: expected {n_edges} entries (as ii), got {t.shape[0]}")
+    t = t.detach().to(device=device, dtype=torch.int64)
+    if t.numel() > 0:
+        lo, top = int(t.min()), int(t.max())
+        if lo < 0 or top >= hi:
+            bad = lo if lo < 0 else top
+            raise ValueError(f"{name}: entry {bad} is out of range [0, {hi_name} = {hi})")
+    return t
+
+
+def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, nn: torch.Tensor,
+              K: int = 10, weight: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """SC-GS's `cal_arap_error(nodes_sequence, ii, jj, nn, K, weight)` (yihua7/SC-GS,
+    utils/deform_utils.py l.177-205), the ARAP loss of its control nodes
+    (ControlNodeWarp.arap_loss in utils/time_utils.py calls it with the ii, jj, nn of
+    cal_connectivity_from_points, l.58-110, and weight=None), as the SUM
+
+        Σ_{t=1}^{Nt−1} Σ_i Σ_{(i, j, n)} w_in ‖e^t_in − R_i^t e^0_in‖²,   e^t_in = x^t_i − x^t_j,
+
+    over the edges (i, j, n): node i's n-th neighbour is j (edge slot n of row i, as
+    produce_edge_matrix_nfmt places it, l.35-42). R_i^t is the Procrustes rotation of row i's
+    edges from frame 0 to frame t (estimate_rotation, l.130-166, with its rules: weighted SVD;
+    S zeroed for the rows l.148 calls unchanged, i.e. where some coordinate of all K slots is
+    exactly equal in both frames; the U column at the smallest singular value flipped where
+    det R <= 0), computed without gradient as upstream does (torch.no_grad, l.196-197): the
+    result is differentiable w.r.t. nodes_sequence with the rotations held constant. weight=None
+    is upstream's: 1 on every (ii, nn) slot, 0 elsewhere (l.184-186).
+
+    nodes_sequence: [Nt, Nv, 3], float32 or float64, CPU (or CUDA with a CUDA build), finite;
+    Nt >= 2 (upstream returns the Python int 0 for Nt = 1) and 1 <= Nv <= 512 (above its
+    sample_num = 512 upstream samples 512 rows with replacement, np.random.choice, l.189-190: not
+    reproduced, refused). ii, jj, nn: [Ne] int32/int64 (any device), ii, jj in [0, Nv), nn in
+    [0, K), each slot (ii, nn) at most once (upstream's scatter would keep one of the duplicates).
+    K: int >= 1, the slots per row. weight: None or [Nv, K] float32/float64, finite (upstream: a
+    NaN or inf weight, even in a slot without an edge, makes S NaN and its SVD fails on CPU;
+    cal_connectivity_from_points' adaptive weights are NaN in the rows with a neighbour beyond
+    the radius), >= 0 on the edges; a constant here (no gradient to it, where upstream would
+    differentiate a weight that requires grad).
+    Returns a 0-dim tensor of nodes_sequence's dtype and device.
+
+    How: the rotations are computed here in torch, in nodes_sequence's dtype, exactly as above;
+    the energy and its gradient come from smg's plain ARAP (E9) with d^t = R_iᵀ(x_j − x_i),
+    positions [x^0, x^t] (T = 2), quaternions [identity, quat(R_i^t)], gap 1 of weight 1,
+    lambda_c = 1, lambda_l = 0, squared, normalize=False, since ‖R_iᵀ e^t − e^0‖ = ‖e^t − R_i e^0‖
+    (the sign of e does not matter). The Nt − 1 frame pairs go into one call as Nt − 1 copies of
+    the graph side by side ([2, (Nt − 1)·Nv, 3]). smg's graph: row i lists the j of its edges in
+    slot order with the weights w_in, padded with −1 / 0; self edges (ii = jj) are dropped (their
+    edge is 0 in both frames: they add nothing to S or to the energy)."""
+    x = nodes_sequence
+    if not isinstance(x, torch.Tensor):
+        raise ValueError(f"nodes_sequence: expected a torch.Tensor, got {type(x).__name__}")
+    if x.dim() != 3 or x.shape[-1] != 3:
+        raise ValueError(f"nodes_sequence: expected shape [Nt, Nv, 3], got {list(x.shape)}")
+    if x.dtype not in (torch.float32, torch.float64):
+        raise ValueError(f"nodes_sequence: dtype must be float32 or float64, got {x.dtype}")
+    if x.device.type not in ("cpu", "cuda"):
+        raise ValueError(f"nodes_sequence: device must be cpu or cuda, got {x.device}")
+    if x.is_cuda and not has_cuda:
+        raise NotImplementedError("nodes_sequence: a CUDA tensor, but smg_torch was built without its "
+                                  "CUDA operators (smg_torch.has_cuda is False)")
+    Nt, Nv = int(x.shape[0]), int(x.shape[1])
+    if Nt < 2:
+        raise ValueError(f"nodes_sequence: needs Nt >= 2 frames, got shape {list(x.shape)} (SC-GS "
+                         "returns the Python int 0 for a single frame)")
+    if Nv < 1:
+        raise ValueError(f"nodes_sequence: has no nodes, shape {list(x.shape)}")
+    if Nv > _SCGS_SAMPLE_NUM:
+        raise ValueError(f"nodes_sequence: Nv = {Nv} nodes > {_SCGS_SAMPLE_NUM} (SC-GS's sample_num): "
+                         "SC-GS then sums over a random sample of rows drawn with replacement "
+                         "(np.random.choice), which scgs_arap does not reproduce")
+    if not bool(torch.isfinite(x.detach()).all()):
+        raise ValueError("nodes_sequence: has a NaN or infinite coordinate")
+    if isinstance(K, bool) or not isinstance(K, int) or K < 1:
+        raise ValueError(f"K: expected an int >= 1 (the neighbour slots per node), got {K!r}")
+    dev, dt = x.device, x.dtype
+    ii = _scgs_index("ii", ii, None, Nv, "Nv", dev)
+    jj = _scgs_index("jj", jj, ii.shape[0], Nv, "Nv", dev)
+    nn = _scgs_index("nn", nn, ii.shape[0], K, "K", dev)
+    slot_key = ii * K + nn
+    if torch.unique(slot_key).numel() != slot_key.numel():
+        raise ValueError("nn: a slot (ii[e], nn[e]) appears more than once (SC-GS's edge matrix "
+                         "would keep one of the edges written there)")
+    with torch.no_grad():
+        if weight is None:
+            w = torch.zeros((Nv, K), dtype=dt, device=dev)
+            w[ii, nn] = 1
+        else:
+            if not isinstance(weight, torch.Tensor):
+                raise ValueError(f"weight: expected a torch.Tensor or None, got {type(weight).__name__}")
+            if tuple(weight.shape) != (Nv, K):
+                raise ValueError(f"weight: expected shape [Nv, K] = [{Nv}, {K}], got {list(weight.shape)}")
+            if weight.dtype not in (torch.float32, torch.float64):
+                raise ValueError(f"weight: dtype must be float32 or float64, got {weight.dtype}")
+            w = weight.detach().to(device=dev, dtype=dt)
+            if not bool(torch.isfinite(w).all()):
+                raise ValueError("weight: has a NaN or infinite entry (in SC-GS it reaches the "
+                                 "covariance S, whose SVD then fails on CPU; cal_connectivity_from_points' "
+                                 "adaptive weights are NaN in the rows with a neighbour beyond the radius)")
+        # smg's neighbour table: row i's edges in slot order, self edges dropped, -1 / 0 after.
+        slot = torch.full((Nv, K), -1, dtype=torch.int64, device=dev)
+        slot[ii, nn] = jj
+        keep = (slot >= 0) & (slot != torch.arange(Nv, device=dev)[:, None])
+        if bool((w[keep] < 0).any()):
+            raise ValueError("weight: negative on an edge (smg's ARAP takes weights >= 0)")
+        order = torch.sort((~keep).to(torch.int32), dim=1, stable=True).indices
+        g_idx = slot.masked_fill(~keep, -1).gather(1, order)
+        g_w = w.masked_fill(~keep, 0).gather(1, order)
+        # The rotations of every frame pair, as upstream computes them.
+        xd = x.detach()
+        E0 = _scgs_edges(xd[0], ii, jj, nn, K)
+        P = Nt - 1
+        R = torch.stack([_scgs_rotations(E0, _scgs_edges(xd[t], ii, jj, nn, K), w)
+                         for t in range(1, Nt)])  # [P, Nv, 3, 3]
+        q1 = _quat_from_matrix(R).reshape(P * Nv, 4)
+        q0 = torch.zeros_like(q1)
+        q0[:, 0] = 1
+        quats = torch.stack([q0, q1])  # [2, P·Nv, 4]: constants (no gradient, as upstream)
+        # Pair p uses nodes p·Nv … p·Nv + Nv − 1.
+        off = (torch.arange(P, device=dev, dtype=torch.int64) * Nv)[:, None, None]
+        g_idx = torch.where(g_idx >= 0, g_idx + off, g_idx).reshape(P * Nv, K)
+        g_w = g_w.expand(P, Nv, K).reshape(P * Nv, K)
+    positions = torch.stack([x[0].expand(P, Nv, 3).reshape(P * Nv, 3), x[1:].reshape(P * Nv, 3)])
+    return arap(positions, quats, (g_idx, g_w), lambda_c=1.0, lambda_l=0.0, gaps=(1,),
+                gap_weights=(1.0,), normalize=False)
