@@ -28,6 +28,18 @@ _SOM_ACCEL = dict(REGULARIZER_DEFAULTS["accel"], form="acceleration", penalty="n
 _OFF = dict(confidence=False, carap=False, arap=False, lrm=False)
 
 
+def _check_floats(name, t):
+    """A float32/float64 tensor on the CPU, or on CUDA with smg's CUDA operators: else one error
+    naming the argument."""
+    if t.dtype not in (torch.float32, torch.float64):
+        raise ValueError(f"{name}: dtype must be float32 or float64, got {t.dtype}")
+    if t.device.type not in ("cpu", "cuda"):
+        raise ValueError(f"{name}: device must be cpu or cuda, got {t.device}")
+    if t.is_cuda and not has_cuda:
+        raise NotImplementedError(f"{name}: a CUDA tensor, but smg_torch was built without its CUDA "
+                                  "operators (smg_torch.has_cuda is False)")
+
+
 class _AccelFunction(torch.autograd.Function):
     """smg::accel (the one-term operator) on CPU tensors x [T, N, 3]: the energy, and its gradient
     computed in the same pass when x requires grad (scaled by grad_output in backward)."""
@@ -77,13 +89,7 @@ def som_accel(transls: torch.Tensor) -> torch.Tensor:
     if transls.shape[-1] != 3:
         raise ValueError(f"transls: the last dim must be 3 (smg's smoothness is on 3-vectors; Shape of "
                          f"Motion's 6-D rotation bases are not covered), got shape {list(transls.shape)}")
-    if transls.dtype not in (torch.float32, torch.float64):
-        raise ValueError(f"transls: dtype must be float32 or float64, got {transls.dtype}")
-    if transls.device.type not in ("cpu", "cuda"):
-        raise ValueError(f"transls: device must be cpu or cuda, got {transls.device}")
-    if transls.is_cuda and not has_cuda:
-        raise NotImplementedError("transls: a CUDA tensor, but smg_torch was built without its CUDA "
-                                  "operators (smg_torch.has_cuda is False)")
+    _check_floats("transls", transls)
     T = transls.shape[1]
     if T < 3:
         raise ValueError(f"transls: needs T >= 3 frames on dim 1 for a second difference, got shape "
@@ -111,13 +117,7 @@ def _check_nodes(node_xyz, node_quat):
     if not isinstance(node_xyz, torch.Tensor) or node_xyz.dim() != 3 or node_xyz.shape[-1] != 3:
         raise ValueError(f"node_xyz: expected a tensor of shape [T, M, 3], got "
                          f"{list(node_xyz.shape) if isinstance(node_xyz, torch.Tensor) else type(node_xyz).__name__}")
-    if node_xyz.dtype not in (torch.float32, torch.float64):
-        raise ValueError(f"node_xyz: dtype must be float32 or float64, got {node_xyz.dtype}")
-    if node_xyz.device.type not in ("cpu", "cuda"):
-        raise ValueError(f"node_xyz: device must be cpu or cuda, got {node_xyz.device}")
-    if node_xyz.is_cuda and not has_cuda:
-        raise NotImplementedError("node_xyz: a CUDA tensor, but smg_torch was built without its CUDA "
-                                  "operators (smg_torch.has_cuda is False)")
+    _check_floats("node_xyz", node_xyz)
     if not isinstance(node_quat, torch.Tensor) or tuple(node_quat.shape) != tuple(node_xyz.shape[:2]) + (4,):
         raise ValueError(f"node_quat: expected shape {list(node_xyz.shape[:2]) + [4]} ([T, M, 4] of node_xyz), "
                          f"got {list(node_quat.shape) if isinstance(node_quat, torch.Tensor) else type(node_quat).__name__}")
@@ -452,13 +452,7 @@ def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, 
         raise ValueError(f"nodes_sequence: expected a torch.Tensor, got {type(x).__name__}")
     if x.dim() != 3 or x.shape[-1] != 3:
         raise ValueError(f"nodes_sequence: expected shape [Nt, Nv, 3], got {list(x.shape)}")
-    if x.dtype not in (torch.float32, torch.float64):
-        raise ValueError(f"nodes_sequence: dtype must be float32 or float64, got {x.dtype}")
-    if x.device.type not in ("cpu", "cuda"):
-        raise ValueError(f"nodes_sequence: device must be cpu or cuda, got {x.device}")
-    if x.is_cuda and not has_cuda:
-        raise NotImplementedError("nodes_sequence: a CUDA tensor, but smg_torch was built without its "
-                                  "CUDA operators (smg_torch.has_cuda is False)")
+    _check_floats("nodes_sequence", x)
     Nt, Nv = int(x.shape[0]), int(x.shape[1])
     if Nt < 2:
         raise ValueError(f"nodes_sequence: needs Nt >= 2 frames, got shape {list(x.shape)} (SC-GS "

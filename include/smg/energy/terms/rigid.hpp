@@ -378,24 +378,19 @@ struct RigidTerm : TermDefaults {
         carap_loops::pair_terms<Pp, Gg>(n, d, mk, Wb[en], Dx, Dy, Dz, Len, lc, ll, ep, Eacc[en],
                                         k.P(g, 0), k.P(g, 1), k.P(g, 2), k.P(g, 3), Gx, Gy, Gz, H);
       };
-      using Sq = std::integral_constant<Penalty, Penalty::squared>;
-      using No = std::integral_constant<Penalty, Penalty::norm>;
-      using Sw = std::integral_constant<Penalty, Penalty::sqrt_weighted>;
-      if (!grad) {
+      auto by_penalty = [&](auto gc) {
         if (pen == Penalty::norm)
-          run(No{}, std::false_type{});
+          run(std::integral_constant<Penalty, Penalty::norm>{}, gc);
         else if (pen == Penalty::sqrt_weighted)
-          run(Sw{}, std::false_type{});
+          run(std::integral_constant<Penalty, Penalty::sqrt_weighted>{}, gc);
         else
-          run(Sq{}, std::false_type{});
+          run(std::integral_constant<Penalty, Penalty::squared>{}, gc);
+      };
+      if (!grad) {
+        by_penalty(std::false_type{});
         continue;
       }
-      if (pen == Penalty::norm)
-        run(No{}, std::true_type{});
-      else if (pen == Penalty::sqrt_weighted)
-        run(Sw{}, std::true_type{});
-      else
-        run(Sq{}, std::true_type{});
+      by_penalty(std::true_type{});
       for (int c = 0; c < 4; ++c) std::fill(k.P(g, c) + n, k.P(g, c) + m, S(0));
       k.active[static_cast<std::size_t>(n_active++)] = g;
     }
