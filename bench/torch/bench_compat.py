@@ -11,11 +11,18 @@ G·B (the trainer then scales it by 0.5 · w_smooth_tracks), G = 40 000, T = 3, 
 smg_torch.compat.som_accel(means) against the same expression in torch
 ((2 m[:, 1:-1] − m[:, :-2] − m[:, 2:]).norm(dim=-1).mean(), eager), each with backward to
 means (a leaf; its .grad is dropped between runs). Also the initial optimisation's
-compute_accel_loss on tracks [G, T, 3] with T = 30. Time: best of --repeat calls at
+compute_accel_loss on tracks [G, T, 3] with T = 30.
+
+MoSca's photometric stage (lib_mosca/photo_recon.py): a window of T' = 25 frames, M = 10 000
+nodes, K = 16 (self + 15), shifts [1, 3, 6] with weights [0.6, 0.3, 0.1], reduce "mean", one
+coarse level (every node to its 8 nearest of a third, detach_nn), loss = 10·coord + 10·len:
+smg_torch.compat.mosca_arap against MoSca's compute_arap_loss as a plain-torch reading
+(tests/torch/test_compat.py's mosca_arap_torch, eager), and mosca_vel_acc (the sum of its four
+losses) against compute_vel_acc_loss's reading; backward to the positions and raw quaternions. Time: best of --repeat calls at
 torch.set_num_threads(--threads), the peers by turns in each round. Peak: resident-set growth over one call
 (bench_torch.RssPeak: pages touched, the inputs excluded, the gradient included; smg's
 workspace, kept between calls, is not counted once warm).
---quick: G = 4 000, 3 repeats (a smoke run). Prints a markdown table; --json writes the rows.
+--quick: G = 4 000, M = 1 000, 3 repeats (a smoke run). Prints a markdown table; --json writes the rows.
 """
 import argparse
 import gc
@@ -30,9 +37,12 @@ import torch  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+# The upstream readings the tests check smg against (one copy of each, in the tests).
+sys.path.insert(0, os.path.join(HERE, "..", "..", "tests", "torch"))
 
 import bench_torch  # noqa: E402  (RssPeak)
-from smg_torch.compat import som_accel  # noqa: E402
+from smg_torch.compat import mosca_arap, mosca_vel_acc, som_accel  # noqa: E402
+from test_compat import GAMMAS, SHIFTS, mosca_arap_torch, mosca_scene, mosca_vel_acc_torch  # noqa: E402
 
 
 def som_accel_torch(m):
@@ -40,35 +50,56 @@ def som_accel_torch(m):
     return (2 * m[:, 1:-1] - m[:, :-2] - m[:, 2:]).norm(dim=-1).mean()
 
 
-def call(fn, x):
-    x.grad = None
-    fn(x).backward()
+def call(fn, xs):
+    for x in xs:
+        x.grad = None
+    fn(*xs).backward()
 
 
-def best_times(peers, x, repeat):
-    """Best seconds of fn(x).backward() over `repeat` rounds per peer, the peers taken by turns in
-    each round (a load change on a shared machine then hits both)."""
+def best_times(peers, xs, repeat):
+    """Best seconds of fn(*xs).backward() over `repeat` rounds per peer, the peers taken by turns
+    in each round (a load change on a shared machine then hits both)."""
     for _, fn in peers:
-        call(fn, x)  # warm-up (allocator, thread pool, smg's workspace)
+        call(fn, xs)  # warm-up (allocator, thread pool, smg's workspace)
     best = {name: float("inf") for name, _ in peers}
     for _ in range(repeat):
         for name, fn in peers:
             t0 = time.perf_counter()
-            call(fn, x)
+            call(fn, xs)
             best[name] = min(best[name], time.perf_counter() - t0)
-    x.grad = None
+    for x in xs:
+        x.grad = None
     return best
 
 
-def peak(fn, x):
+def peak(fn, xs):
     """Resident-set growth of one call (after a warm-up call)."""
     gc.collect()
     rss = bench_torch.RssPeak()
     rss.reset()
-    call(fn, x)
+    call(fn, xs)
     p = rss.peak()
-    x.grad = None
+    for x in xs:
+        x.grad = None
     return p
+
+
+def mosca_cases(M, g):
+    """MoSca's photometric window: (name, shape, inputs, smg loss, torch loss)."""
+    xyz, q, ti, mask, lv = mosca_scene(T=25, M=M, K=16, seed=0, dtype=torch.float32)
+    x, r = xyz.requires_grad_(), q.requires_grad_()
+
+    def arap_smg(x, r):
+        c, l = mosca_arap(x, r, ti, mask, SHIFTS, GAMMAS, levels=lv)
+        return 10 * c + 10 * l
+
+    def arap_torch(x, r):
+        c, l = mosca_arap_torch(x, r, ti, mask, SHIFTS, GAMMAS, levels=lv)
+        return 10 * c + 10 * l
+
+    return [("MoSca ARAP, one coarse level", [25, M, 16], [x, r], arap_smg, arap_torch),
+            ("MoSca vel/acc", [25, M], [x, r], lambda x, r: sum(mosca_vel_acc(x, r)),
+             lambda x, r: sum(mosca_vel_acc_torch(x, r)))]
 
 
 def main():
@@ -82,16 +113,19 @@ def main():
     G = 4000 if a.quick else 40000
     torch.set_num_threads(a.threads)
     g = torch.Generator().manual_seed(0)
-    cases = [("SoM tracks [G, 3, B, 3]", (G, 3, 8, 3)), ("SoM init tracks [G, T, 3]", (G, 30, 3))]
-    rows = []
-    for name, shape in cases:
+    cases = []
+    for name, shape in [("SoM tracks [G, 3, B, 3]", (G, 3, 8, 3)), ("SoM init tracks [G, T, 3]", (G, 30, 3))]:
         x = (torch.randn(shape, generator=g).cumsum(1) * 0.1).float().requires_grad_()
-        e_smg, e_ref = float(som_accel(x)), float(som_accel_torch(x))
-        peers = (("smg", som_accel), ("torch", som_accel_torch))
-        best = best_times(peers, x, repeat)
+        cases.append((name, list(shape), [x], som_accel, som_accel_torch))
+    cases += mosca_cases(1000 if a.quick else 10000, g)
+    rows = []
+    for name, shape, xs, f_smg, f_ref in cases:
+        e_smg, e_ref = float(f_smg(*xs)), float(f_ref(*xs))
+        peers = (("smg", f_smg), ("torch", f_ref))
+        best = best_times(peers, xs, repeat)
         for peer, fn in peers:
-            rows.append(dict(case=name, shape=list(shape), peer=peer, seconds=best[peer], peak_bytes=peak(fn, x),
-                             input_bytes=x.numel() * x.element_size(),
+            rows.append(dict(case=name, shape=shape, peer=peer, seconds=best[peer], peak_bytes=peak(fn, xs),
+                             input_bytes=sum(x.numel() * x.element_size() for x in xs),
                              rel_diff=abs(e_smg - e_ref) / abs(e_ref)))
     print(f"threads {a.threads}, float32, best of {repeat}, forward + backward; peak = resident-set growth of one call")
     print("| case | shape | peer | ms | peak MiB | input MiB | energy rel. diff smg/torch |")

@@ -65,7 +65,7 @@ void add_flags(std::vector<FlagSpec>& f, const std::string& flag, const smg::Gap
   f.push_back({flag, deltas, "temporal gaps (frames), comma separated"});
   f.push_back({sibling_flag(flag, "gap-weights"), weights, "one weight per gap"});
 }
-// A named enum (smg::enum_values: AccelForm, AccelPenalty, ...): a choice of its values' names.
+// A named enum (smg::enum_values: AccelForm, Penalty, ...): a choice of its values' names.
 template <class E, class = decltype(smg::enum_values(E{}))>
 void add_flags(std::vector<FlagSpec>& f, const std::string& flag, E v) {
   std::string names;

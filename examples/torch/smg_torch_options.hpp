@@ -94,7 +94,7 @@ inline void read_option(const py::dict& d, const char*, smg::GapList& v) {
   if (!gw.is_none()) w = gw.cast<std::vector<double>>();
   v = gap_list(d["gaps"].cast<py::sequence>(), w);
 }
-// A named enum (smg::enum_values: AccelForm, AccelPenalty, ...) by its value's name.
+// A named enum (smg::enum_values: AccelForm, Penalty, ...) by its value's name.
 template <class E, class = decltype(smg::enum_values(E{}))>
 void read_option(const py::dict& d, const char* name, E& v) {
   const std::string given = d[name].cast<std::string>();

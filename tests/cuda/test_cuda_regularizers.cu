@@ -220,31 +220,34 @@ TEST_SUITE("cuda-host") {
     }
   }
 
-  TEST_CASE("cuda regularizers: host scheme, smoothness forms and penalties, weighted or not, with and without the others") {
+  TEST_CASE("cuda regularizers: host scheme, every option value of every term, alone, with the confidences, with all") {
+    // smg::test::for_each_option_variant: each named-enum option (forms, penalties,
+    // stop-gradients) at each other value, each bool flipped, of every term that is on; so an
+    // option added to any term is run here with no edit.
     using namespace fused_cuda_test;
     const Case<double, std::int32_t> s(scene(8, 17, 5, 22));
     const Case<float, std::int32_t> sf(scene(8, 17, 5, 22));
-    const unsigned accel = 1u << smg::test::fused_term_index("accel");
-    // Every form and penalty of the library's lists (kAccelForms, kAccelPenalties).
-    for (const unsigned mask : {accel, accel | 1u, smg::test::fused_all_terms()})
-      for (const smg::AccelForm form : smg::kAccelForms)
-        for (const smg::AccelPenalty penalty : smg::kAccelPenalties)
-          for (const bool weighted : {false, true}) {
-            CAPTURE(mask);
-            CAPTURE(smg::to_string(form));
-            CAPTURE(smg::to_string(penalty));
-            CAPTURE(weighted);
-            smg::RegularizerOptions o = options(mask);
-            o.accel.form = form;
-            o.accel.penalty = penalty;
-            o.accel.penalty_eps = 1e-3;  // large enough to change the value
-            o.accel.confidence_weighted = weighted;
-            Flags f;
-            const Out<double> ref = cpu(s, o, f);
-            CHECK(double(ref.e.accel) > 0.0);
-            check_same(host_scheme(s, o, f, 3, 2), ref, o, f, "accel");
-            check_same(host_scheme(sf, o, f, 2, 3), cpu(sf, o, f), o, f, "accel float");
-          }
+    const unsigned conf = 1u << smg::test::fused_term_index("confidence");
+    std::vector<unsigned> masks;
+    for (unsigned k = 0; k < smg::test::fused_term_count(); ++k) {
+      masks.push_back(1u << k);
+      if ((1u << k) != conf) masks.push_back((1u << k) | conf);
+    }
+    masks.push_back(smg::test::fused_all_terms());
+    int calls = 0;
+    for (const unsigned mask : masks) {
+      CAPTURE(mask);
+      smg::RegularizerOptions base = options(mask);
+      base.accel.penalty_eps = base.carap.penalty_eps = base.arap.penalty_eps = 1e-3;  // visible
+      calls += smg::test::for_each_option_variant(base, [&](const std::string& label,
+                                                            const smg::RegularizerOptions& o) {
+        CAPTURE(label);
+        Flags f;
+        check_same(host_scheme(s, o, f, 3, 2), cpu(s, o, f), o, f, "variant");
+        check_same(host_scheme(sf, o, f, 2, 3), cpu(sf, o, f), o, f, "variant float");
+      });
+    }
+    CHECK(calls >= 30);
   }
 
   TEST_CASE("cuda regularizers: host scheme, rotation-angle forms, weighted or not, tangent or raw") {

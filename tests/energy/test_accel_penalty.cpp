@@ -1,6 +1,6 @@
 // The penalties of trajectory smoothness (E21)-(E22), AccelOptions::penalty: each against an
 // independent reference written here in plain loops, for every form and penalty of the library's
-// lists (kAccelForms, kAccelPenalties), weighted or not, sum or mean; the cases where torch's
+// lists (kAccelForms, kPenalties), weighted or not, sum or mean; the cases where torch's
 // gradient is exactly 0 (a still or constant-velocity window: a = 0); sqrt_weighted with w = 0;
 // the options' validation. The generic properties (central differences, AutoDiffScalar, float
 // against double, thread counts, hard cases) run for every penalty through the operator list
@@ -45,9 +45,9 @@ AccelRef accel_penalty_reference(const std::vector<double>& x, const std::vector
       const double aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2], n = std::sqrt(aa);
       double e = 0, h = 0;  // P(a) and ∂P/∂a = h a
       switch (o.penalty) {
-        case smg::AccelPenalty::squared: e = k * w * aa; h = 2 * k * w; break;
-        case smg::AccelPenalty::norm: e = k * w * n; h = n > 0 ? k * w / n : 0.0; break;
-        case smg::AccelPenalty::sqrt_weighted:
+        case smg::Penalty::squared: e = k * w * aa; h = 2 * k * w; break;
+        case smg::Penalty::norm: e = k * w * n; h = n > 0 ? k * w / n : 0.0; break;
+        case smg::Penalty::sqrt_weighted:
           e = k * std::sqrt(w * aa + o.penalty_eps);
           h = k * w / std::sqrt(w * aa + o.penalty_eps);
           break;
@@ -86,9 +86,9 @@ std::vector<double> random_values(std::size_t n, double lo, double hi, unsigned 
 }  // namespace
 
 TEST_CASE("accel penalties: the default is squared") {
-  CHECK(smg::AccelOptions{}.penalty == smg::AccelPenalty::squared);
+  CHECK(smg::AccelOptions{}.penalty == smg::Penalty::squared);
   CHECK(smg::AccelOptions{}.penalty_eps == 1e-20);
-  CHECK(std::string(smg::to_string(smg::kAccelPenalties[0])) == "squared");
+  CHECK(std::string(smg::to_string(smg::kPenalties[0])) == "squared");
 }
 
 TEST_CASE("accel penalties: energy and gradient equal the written-out (E22) for every form and penalty") {
@@ -96,7 +96,7 @@ TEST_CASE("accel penalties: energy and gradient equal the written-out (E22) for 
   const std::vector<double> x = random_values(static_cast<std::size_t>(3 * T * N), -1, 1, 4101);
   const std::vector<double> c = random_values(static_cast<std::size_t>(T * N), 0, 1, 4102);
   for (const smg::AccelForm form : smg::kAccelForms)
-    for (const smg::AccelPenalty penalty : smg::kAccelPenalties)
+    for (const smg::Penalty penalty : smg::kPenalties)
       for (const bool weighted : {false, true})
         for (const smg::Normalization nm : {smg::Normalization::sum, smg::Normalization::mean}) {
           CAPTURE(smg::to_string(form));
@@ -135,7 +135,7 @@ TEST_CASE("accel penalties: a still or constant-velocity window has exactly zero
         x[static_cast<std::size_t>((t * N + i) * 3 + d)] =
             0.125 * double(i + d) + double(t) * 0.0625 * double(i * (d + 1)) + (i == 3 ? 0.03 * double(t * t) : 0.0);
   const std::vector<double> c(static_cast<std::size_t>(T * N), 0.5);
-  for (const smg::AccelPenalty penalty : smg::kAccelPenalties)
+  for (const smg::Penalty penalty : smg::kPenalties)
     for (const bool weighted : {false, true}) {
       CAPTURE(smg::to_string(penalty));
       CAPTURE(weighted);
@@ -165,7 +165,7 @@ TEST_CASE("accel penalties: a still or constant-velocity window has exactly zero
           still[static_cast<std::size_t>((t * N + 3) * 3 + k)] = 0.125 * double(3 + k) + double(t) * 0.25;
       const AccelOut<double> s = run_accel(still, c, T, N, o);
       for (const double g : s.g) CHECK(g == 0.0);
-      if (penalty == smg::AccelPenalty::sqrt_weighted)
+      if (penalty == smg::Penalty::sqrt_weighted)
         CHECK(std::abs(s.energy - std::sqrt(o.penalty_eps)) <= 1e-12 * std::sqrt(o.penalty_eps));  // mean of sqrt(ε)
       else
         CHECK(s.energy == 0.0);
@@ -178,7 +178,7 @@ TEST_CASE("accel penalties: sqrt_weighted with zero confidences is finite, k sqr
   std::vector<double> c = random_values(static_cast<std::size_t>(T * N), 0, 1, 4104);
   for (Index i = 0; i < N; ++i) c[static_cast<std::size_t>(2 * N + i)] = 0.0;  // frame 2: w = 0
   smg::AccelOptions o;
-  o.penalty = smg::AccelPenalty::sqrt_weighted;
+  o.penalty = smg::Penalty::sqrt_weighted;
   o.confidence_weighted = true;
   const AccelRef ref = accel_penalty_reference(x, c, T, N, o);
   const AccelOut<double> d = run_accel(x, c, T, N, o);
@@ -220,7 +220,7 @@ TEST_CASE("accel penalties: the options are validated, naming the option") {
     CHECK(message(o).rfind("AccelOptions.penalty_eps must be finite and > 0, got ", 0) == 0);
   }
   o = {};
-  o.penalty = static_cast<smg::AccelPenalty>(7);
+  o.penalty = static_cast<smg::Penalty>(7);
   CHECK(message(o) == "AccelOptions.penalty must be squared, norm or sqrt_weighted, got 7");
   o = {};
   o.form = static_cast<smg::AccelForm>(5);

@@ -239,7 +239,7 @@ TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the l
     runs.push_back({std::string("--terms ") + term, one});
   });
   // Smoothness with each penalty of the library's list (E22), by its name.
-  for (const smg::AccelPenalty p : smg::kAccelPenalties) {
+  for (const smg::Penalty p : smg::kPenalties) {
     smg::RegularizerOptions one;
     smg::for_each_term(one, [&](const char* t, bool& on, const auto&) { on = std::string(t) == "accel"; });
     one.accel.penalty = p;
@@ -264,7 +264,7 @@ TEST_CASE("smg_cli regularizers: flags from the term list, outputs bitwise the l
   all.accel.form = smg::AccelForm::velocity;
   all.accel.confidence_weighted = true;
   all.accel.normalization = smg::Normalization::mean;
-  all.accel.penalty = smg::AccelPenalty::sqrt_weighted;
+  all.accel.penalty = smg::Penalty::sqrt_weighted;
   all.accel.penalty_eps = 0.25;
   all.confidence.kappa_m = 1.5;
   runs.push_back({"--terms " + every_term + " --carap-alpha 0.5 --arap-gaps 1,3 "

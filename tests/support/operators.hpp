@@ -104,10 +104,17 @@ struct Carap {
     return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsConfidence | kReadsRotations;
+  static constexpr Penalty default_penalty = Penalty::squared;
+  static Penalty& penalty_of(RegularizerOptions& o) { return o.carap.penalty; }
+  template <class S, class I, bool M>
+  static Status validate_with(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out,
+                              const RegularizerOptions& o) {
+    return validate_carap(in.positions, in.rotations, in.confidence, in.graph, o.carap, out.positions,
+                             out.rotations);
+  }
   template <class S, class I, bool M>
   static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_carap(in.positions, in.rotations, in.confidence, in.graph, options().carap, out.positions,
-                             out.rotations);
+    return validate_with(in, out, options());
   }
 };
 
@@ -197,9 +204,16 @@ struct Accel {
     return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsConfidence;
+  static constexpr Penalty default_penalty = Penalty::squared;
+  static Penalty& penalty_of(RegularizerOptions& o) { return o.accel.penalty; }
+  template <class S, class I, bool M>
+  static Status validate_with(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out,
+                              const RegularizerOptions& o) {
+    return validate_accel(in.positions, in.confidence, o.accel, out.positions);
+  }
   template <class S, class I, bool M>
   static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_accel(in.positions, in.confidence, options().accel, out.positions);
+    return validate_with(in, out, options());
   }
 };
 
@@ -226,46 +240,57 @@ struct Angle {
     return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsConfidence | kReadsRotations | kNoPositions;
+  static constexpr Penalty default_penalty = Penalty::norm;
+  static Penalty& penalty_of(RegularizerOptions& o) { return o.angle.penalty; }
+  template <class S, class I, bool M>
+  static Status validate_with(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out,
+                              const RegularizerOptions& o) {
+    return validate_angle<S>(in.rotations, in.confidence, o.angle, out.rotations);
+  }
   template <class S, class I, bool M>
   static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_angle<S>(in.rotations, in.confidence, options().angle, out.rotations);
+    return validate_with(in, out, options());
   }
 };
 
-// (E21) with each other penalty (E22) of the library's list (kAccelPenalties; `squared`, the
-// default, is Accel above): the same calls with options().accel.penalty = P. Variants of the
-// term, not terms (term = nullptr): the fused-step tests find Accel by its term.
+// A term's operator (Accel, Carap, Angle) with each other penalty of the library's list
+// (kPenalties: E22 for the smoothness and the angles, E24 for the rigid energies; the default,
+// Base::default_penalty, is the operator itself): the same calls with
+// Base::penalty_of(options()) = P. Variants of a term, not terms (term = nullptr): the
+// fused-step tests find the term's operator by its term. A base provides default_penalty,
+// penalty_of(RegularizerOptions&) and validate_with(in, out, options).
 struct OperatorName {
   char text[48] = {};
 };
-constexpr OperatorName accel_operator_name(AccelPenalty p) {
+constexpr OperatorName variant_name(const char* base, const char* value) {
   OperatorName n;
   std::size_t k = 0;
-  for (const char* c = "accel_"; *c != 0; ++c) n.text[k++] = *c;
-  for (const char* c = to_string(p); *c != 0 && k + 1 < sizeof(n.text); ++c) n.text[k++] = *c;
+  for (const char* c = base; *c != 0 && k + 2 < sizeof(n.text); ++c) n.text[k++] = *c;
+  n.text[k++] = '_';
+  for (const char* c = value; *c != 0 && k + 1 < sizeof(n.text); ++c) n.text[k++] = *c;
   return n;
 }
-template <AccelPenalty P>
-struct AccelWithPenalty : Accel {
-  static constexpr AccelPenalty penalty = P;
-  // sqrt(w‖a‖² + ε) is k sqrt(ε) per term at a = 0: a still trajectory's energy is not 0.
-  static constexpr bool still_floor = P == AccelPenalty::sqrt_weighted;
-  static constexpr OperatorName name_text = accel_operator_name(P);
-  static constexpr const char* name = name_text.text;  // "accel_norm", ...
+template <class Base, Penalty P>
+struct WithPenalty : Base {
+  static constexpr Penalty penalty = P;
+  // sqrt(w‖r‖² + ε) is k sqrt(ε) per term at r = 0: a still trajectory's energy is not 0.
+  static constexpr bool still_floor = P == Penalty::sqrt_weighted;
+  static constexpr OperatorName name_text = variant_name(Base::name, to_string(P));
+  static constexpr const char* name = name_text.text;  // "accel_norm", "carap_sqrt_weighted", ...
   static constexpr const char* term = nullptr;
   static RegularizerOptions options() {
-    RegularizerOptions o = Accel::options();
-    o.accel.penalty = P;
+    RegularizerOptions o = Base::options();
+    Base::penalty_of(o) = P;
     return o;
   }
   template <class S, class I, bool M>
   static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
                     ParallelOptions parallel = {}) {
-    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
+    return Base::separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   template <class S, class I, bool M>
   static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_accel(in.positions, in.confidence, options().accel, out.positions);
+    return Base::validate_with(in, out, options());
   }
 };
 // Whether Op declares `still_floor` true: its energy on a still trajectory is a constant above 0
@@ -278,14 +303,15 @@ template <class Op>
 constexpr bool still_floor() { return StillFloor<Op>::value; }
 
 namespace detail_operators {
-template <std::size_t... K>
-auto accel_penalty_operators(std::index_sequence<K...>)
-    -> decltype(std::tuple_cat(std::conditional_t<kAccelPenalties[K] == AccelPenalty::squared, std::tuple<>,
-                                                  std::tuple<AccelWithPenalty<kAccelPenalties[K]>>>{}...));
+template <class Base, std::size_t... K>
+auto penalty_operators(std::index_sequence<K...>)
+    -> decltype(std::tuple_cat(std::conditional_t<kPenalties[K] == Base::default_penalty, std::tuple<>,
+                                                  std::tuple<WithPenalty<Base, kPenalties[K]>>>{}...));
 }  // namespace detail_operators
-// AccelWithPenalty<P> for every penalty of the list but the default.
-using AccelPenaltyOperators = decltype(detail_operators::accel_penalty_operators(
-    std::make_index_sequence<sizeof(kAccelPenalties) / sizeof(kAccelPenalties[0])>{}));
+// WithPenalty<Base, P> for every penalty of the list but the base's default.
+template <class Base>
+using PenaltyOperators = decltype(detail_operators::penalty_operators<Base>(
+    std::make_index_sequence<sizeof(kPenalties) / sizeof(kPenalties[0])>{}));
 
 // The fused step (regularizers.hpp) with every term: the confidences it computes (from the
 // visibility; the confidence input is not read), C-ARAP, ARAP, LRM and smoothness; returns their
@@ -320,7 +346,8 @@ struct Regularizers {
 // The list. A new regulariser gets a struct like the ones above and an entry here; a term of the
 // fused step that has none fails test_regularizers.cpp's "every term on the list".
 using Operators = decltype(std::tuple_cat(std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Accel, Angle>{},
-                                          AccelPenaltyOperators{}, std::tuple<Regularizers>{}));
+                                          PenaltyOperators<Accel>{}, PenaltyOperators<Carap>{},
+                                          PenaltyOperators<Angle>{}, std::tuple<Regularizers>{}));
 
 // Calls f(Op{}) for each operator of the list, in its order.
 template <class F>

@@ -77,7 +77,7 @@ def test_bench_compat_quick_runs(tmp_path):
     r = _run([os.path.join(BENCH, "bench_compat.py"), "--quick", "--json", str(out)], tmp_path)
     assert r.returncode == 0, r.stderr
     rows = json.loads(out.read_text())["rows"]
-    assert [row["peer"] for row in rows] == ["smg", "torch"] * 2
+    assert [row["peer"] for row in rows] == ["smg", "torch"] * 4
     for row in rows:
         assert row["seconds"] > 0 and row["rel_diff"] < 1e-5
     assert "| case | shape | peer |" in r.stdout

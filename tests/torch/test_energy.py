@@ -338,7 +338,9 @@ def test_regularizers_follow_the_term_list():
     assert smg.Regularizers._fields == legacy + tuple(e for e in energies if e not in legacy)
     # The C++ defaults, as the separate operators' wrappers have them.
     assert smg.REGULARIZER_DEFAULTS["carap"] == dict(alpha=0.6, lambda_c=1.0, lambda_l=1.0, gaps=(1, 2, 4),
-                                                   gap_weights=None, normalize=False, weight=1.0)
+                                                   gap_weights=None, normalize=False, weight=1.0,
+                                                   penalty="squared", stop_gradient="none", penalty_eps=1e-20)
+    assert smg.REGULARIZER_DEFAULTS["angle"]["penalty"] == "norm"
     assert smg.REGULARIZER_DEFAULTS["accel"]["form"] == "acceleration"
     assert smg.REGULARIZER_DEFAULTS["accel"]["penalty"] == "squared"
     assert smg.REGULARIZER_DEFAULTS["accel"]["penalty_eps"] == 1e-20

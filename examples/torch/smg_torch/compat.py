@@ -4,15 +4,21 @@ operators, so that a training script swaps one line (docs/compat.md).
     from smg_torch.compat import som_accel
     loss = som_accel(transls)          # Shape of Motion's compute_accel_loss(transls)
 
-Covered so far: Shape of Motion's `compute_accel_loss` (flow3d/loss_utils.py), on 3-vectors.
+Covered: Shape of Motion's `compute_accel_loss` (flow3d/loss_utils.py), on 3-vectors; MoSca's
+`MoSca.compute_arap_loss` and `MoSca.compute_vel_acc_loss` (lib_mosca/mosca.py); SC-GS's
+`cal_arap_error` (utils/deform_utils.py: per-node Procrustes rotations, then the weighted sum of
+squared stretches) as `scgs_arap`, through smg's plain ARAP (E9).
 """
 from __future__ import annotations
 
+from typing import Optional, Sequence, Tuple
+
 import torch
 
-from . import REGULARIZER_DEFAULTS, _C, _scale, has_cuda, regularizers
+from . import (_REGULARIZER_ENERGIES, REGULARIZER_DEFAULTS, REGULARIZER_TERMS, _C, _scale, _term_options,
+               arap, has_cuda, regularizers)
 
-__all__ = ["som_accel"]
+__all__ = ["som_accel", "mosca_arap", "mosca_vel_acc", "scgs_arap"]
 
 # smg's smoothness (E21) with the unsquared norm (E22) and Normalization::mean, i.e. the mean of
 # ‖a‖ over the (T − 2)·N terms: the accel term's options.
@@ -20,6 +26,18 @@ _SOM_ACCEL = dict(REGULARIZER_DEFAULTS["accel"], form="acceleration", penalty="n
                   confidence_weighted=False, normalize=True, weight=1.0)
 # On CUDA tensors: the fused step with smoothness alone (no term reads the empty graph).
 _OFF = dict(confidence=False, carap=False, arap=False, lrm=False)
+
+
+def _check_floats(name, t):
+    """A float32/float64 tensor on the CPU, or on CUDA with smg's CUDA operators: else one error
+    naming the argument."""
+    if t.dtype not in (torch.float32, torch.float64):
+        raise ValueError(f"{name}: dtype must be float32 or float64, got {t.dtype}")
+    if t.device.type not in ("cpu", "cuda"):
+        raise ValueError(f"{name}: device must be cpu or cuda, got {t.device}")
+    if t.is_cuda and not has_cuda:
+        raise NotImplementedError(f"{name}: a CUDA tensor, but smg_torch was built without its CUDA "
+                                  "operators (smg_torch.has_cuda is False)")
 
 
 class _AccelFunction(torch.autograd.Function):
@@ -71,13 +89,7 @@ def som_accel(transls: torch.Tensor) -> torch.Tensor:
     if transls.shape[-1] != 3:
         raise ValueError(f"transls: the last dim must be 3 (smg's smoothness is on 3-vectors; Shape of "
                          f"Motion's 6-D rotation bases are not covered), got shape {list(transls.shape)}")
-    if transls.dtype not in (torch.float32, torch.float64):
-        raise ValueError(f"transls: dtype must be float32 or float64, got {transls.dtype}")
-    if transls.device.type not in ("cpu", "cuda"):
-        raise ValueError(f"transls: device must be cpu or cuda, got {transls.device}")
-    if transls.is_cuda and not has_cuda:
-        raise NotImplementedError("transls: a CUDA tensor, but smg_torch was built without its CUDA "
-                                  "operators (smg_torch.has_cuda is False)")
+    _check_floats("transls", transls)
     T = transls.shape[1]
     if T < 3:
         raise ValueError(f"transls: needs T >= 3 frames on dim 1 for a second difference, got shape "
@@ -93,3 +105,415 @@ def som_accel(transls: torch.Tensor) -> torch.Tensor:
     idx = torch.empty((n, 0), dtype=torch.int32, device=transls.device)
     w = torch.empty((n, 0), dtype=transls.dtype, device=transls.device)
     return regularizers(x, None, (idx, w), accel=_SOM_ACCEL, **_OFF).total
+
+
+# ---- MoSca (JiahuiLei/MoSca, lib_mosca/mosca.py) ---------------------------------------------------
+
+# Every term of the fused step off: each call below turns on the one it needs.
+_ALL_OFF = {name: False for name in REGULARIZER_TERMS}
+
+
+def _check_nodes(node_xyz, node_quat):
+    if not isinstance(node_xyz, torch.Tensor) or node_xyz.dim() != 3 or node_xyz.shape[-1] != 3:
+        raise ValueError(f"node_xyz: expected a tensor of shape [T, M, 3], got "
+                         f"{list(node_xyz.shape) if isinstance(node_xyz, torch.Tensor) else type(node_xyz).__name__}")
+    _check_floats("node_xyz", node_xyz)
+    if not isinstance(node_quat, torch.Tensor) or tuple(node_quat.shape) != tuple(node_xyz.shape[:2]) + (4,):
+        raise ValueError(f"node_quat: expected shape {list(node_xyz.shape[:2]) + [4]} ([T, M, 4] of node_xyz), "
+                         f"got {list(node_quat.shape) if isinstance(node_quat, torch.Tensor) else type(node_quat).__name__}")
+    if node_quat.dtype != node_xyz.dtype:
+        raise ValueError(f"node_quat: dtype {node_quat.dtype} differs from node_xyz's {node_xyz.dtype}")
+    if node_quat.device != node_xyz.device:
+        raise ValueError(f"node_quat: device {node_quat.device} differs from node_xyz's {node_xyz.device}")
+
+
+def _check_reduce(reduce, square):
+    if reduce not in ("mean", "sum"):
+        raise ValueError(f"reduce: must be 'mean' or 'sum', got {reduce!r}")
+    if not isinstance(square, bool):
+        raise ValueError(f"square: must be a bool, got {type(square).__name__}")
+
+
+def _frame_owner_graph(owner, other, weight, M):
+    """smg's graph of MoSca's local coordinates ℓ = R_owner^T (x_other − x_owner): row `owner`
+    (whose rotation expresses the edge, smg's row i), neighbour `other` (smg's j), weight `weight`
+    (1-D, one per edge). Edges to itself and zero weights are left out (each adds exactly 0 to
+    the unsquared and the squared forms; smg refuses self edges); rows padded with −1 to the
+    largest in-degree. Returns (indices [M, D] int64, weights [M, D])."""
+    keep = (owner != other) & (weight != 0)
+    owner, other, weight = owner[keep], other[keep], weight[keep]
+    order = torch.argsort(owner, stable=True)
+    owner, other, weight = owner[order], other[order], weight[order]
+    counts = torch.bincount(owner, minlength=M)
+    D = int(counts.max()) if owner.numel() > 0 else 0
+    starts = torch.cumsum(counts, 0) - counts
+    slot = torch.arange(owner.numel(), device=owner.device) - starts[owner]
+    idx = torch.full((M, D), -1, dtype=torch.int64, device=owner.device)
+    w = torch.zeros((M, D), dtype=weight.dtype, device=owner.device)
+    idx[owner, slot] = other
+    w[owner, slot] = weight
+    return idx, w
+
+
+def _shift_gaps(shifts, shift_weights, T, rows, reduce):
+    """MoSca's shift loop as smg's gaps: γ_s/((T − s)·rows) for reduce="mean" (its per-shift mean
+    over (T − s)·rows), γ_s for "sum"; a shift with T − s < 1 adds nothing, as upstream skips it."""
+    gaps, weights = [], []
+    for s, g in zip(shifts, shift_weights):
+        if T - s < 1 or rows == 0:
+            continue
+        gaps.append(int(s))
+        weights.append(float(g) / ((T - s) * rows) if reduce == "mean" else float(g))
+    return gaps, weights
+
+
+def _fused(x, q, idx, w, terms, need_x, need_q):
+    """One call of smg's fused step (the raw binding): (energies by name, grad x, grad q)."""
+    on, opts = {}, {}
+    for name in REGULARIZER_TERMS:
+        on[name], opts[name] = _term_options(name, terms.get(name, False))
+    e, _, gx, gq = _C.regularizers(x, q, idx, w, None, on, opts, need_x, need_q, False)
+    return dict(zip(_REGULARIZER_ENERGIES, e.tolist())), gx, gq
+
+
+class _RigidPartsFunction(torch.autograd.Function):
+    """(coordinate part, length part) of smg's ARAP (E9, E24) on one graph, each a loss of its own.
+    Forward: one energy-only pass with both parts (C-ARAP with α = 1 and c ≡ 1 is plain ARAP:
+    its λl = 0 for the coordinates, ARAP's λc = 0 for the lengths, the fused step returns both
+    energies). Backward: the parts are linear in λ, so the gradient of g_c·coord + g_l·len is one
+    pass with λc = g_c, λl = g_l (two passes where a grad_output is negative: λ >= 0)."""
+
+    @staticmethod
+    def forward(ctx, x, q, idx, w, gaps, gap_weights, penalty, stop_gradient):
+        rigid = dict(gaps=gaps, gap_weights=gap_weights, normalize=False, weight=1.0, penalty=penalty,
+                     stop_gradient=stop_gradient)
+        e, _, _ = _fused(x.detach(), q.detach(), idx, w,
+                         dict(carap=dict(rigid, alpha=1.0, lambda_c=1.0, lambda_l=0.0),
+                              arap=dict(rigid, lambda_c=0.0, lambda_l=1.0)), False, False)
+        ctx.save_for_backward(x, q, idx, w)
+        ctx.rigid = rigid
+        return x.new_tensor(e["carap"]), x.new_tensor(e["arap"])
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g_coord, g_len):
+        x, q, idx, w = ctx.saved_tensors
+        need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
+        gc, gl = float(g_coord), float(g_len)
+        if gc >= 0 and gl >= 0:
+            _, gx, gq = _fused(x.detach(), q.detach(), idx, w, dict(arap=dict(ctx.rigid, lambda_c=gc, lambda_l=gl)),
+                               need_x, need_q)
+        else:
+            gx = gq = None
+            for lam, (lc, ll) in ((gc, (1.0, 0.0)), (gl, (0.0, 1.0))):
+                _, px, pq = _fused(x.detach(), q.detach(), idx, w, dict(arap=dict(ctx.rigid, lambda_c=lc, lambda_l=ll)),
+                                   need_x, need_q)
+                gx = None if px is None else (px * lam if gx is None else gx + px * lam)
+                gq = None if pq is None else (pq * lam if gq is None else gq + pq * lam)
+        return (gx, gq) + (None,) * 6
+
+
+def _rigid_parts(x, q, idx, w, gaps, gap_weights, penalty, stop_gradient):
+    """(coordinate part, length part) of smg's ARAP (E9, E24) on the graph, each differentiable
+    (a loss is weighted by its own λ upstream)."""
+    if not gaps or idx.shape[1] == 0:
+        zero = x.sum() * 0 + q.sum() * 0  # keeps the autograd graph, as upstream's 0-sums do
+        return zero, zero
+    return _RigidPartsFunction.apply(x, q, idx, w, tuple(gaps), tuple(gap_weights), penalty, stop_gradient)
+
+
+def mosca_arap(node_xyz: torch.Tensor, node_quat: torch.Tensor, topo_ind: torch.Tensor,
+               topo_mask: torch.Tensor, shifts: Sequence[int], shift_weights: Sequence[float], *,
+               reduce: str = "mean", square: bool = False,
+               levels: Sequence[tuple] = ()) -> Tuple[torch.Tensor, torch.Tensor]:
+    """MoSca's `MoSca.compute_arap_loss(tids, shift_weights, shifts, reduce_type=reduce,
+    square=square)` → (loss_coord, loss_len), with node_xyz = `_node_xyz[tids]` [T, M, 3],
+    node_quat = `_node_rotation[tids]` [T, M, 4] (raw, w x y z: normalised as its q2R does),
+    topo_ind = `topo_knn_ind` [M, K], topo_mask = `topo_knn_mask` [M, K] bool. The local
+    coordinate of row i and slot k is ℓ = R_j^T (x_i − x_j), j = topo_ind[i, k] (the neighbour's
+    frame), weighted by mask / (Σ_k mask + 1e-6) (computed in float32, as upstream does);
+    loss_coord = Σ_s γ_s ρ_s[Σ_k w ‖ℓ^t − ℓ^{t+s}‖], loss_len the same with |‖ℓ^t‖ − ‖ℓ^{t+s}‖|,
+    ρ_s the mean over (T − s)·M rows (reduce="mean") or the sum; square=True squares each norm.
+
+    levels: MoSca's multi-level edges, each (edges [E, 2], weight [E], mu, detach_nn,
+    detach_self) = (`multilevel_arap_edge_list[l]`, `multilevel_arap_topo_w[l]`,
+    `mlevel_w_list[l]`, `mlevel_detach_nn_flag`, `mlevel_detach_self_flag`): column 0 the node
+    expressed, column 1 the node whose frame expresses it; weights used as given; the mean over
+    (T − s)·E; mu times each loss added; detach_nn holds column 1's position, detach_self
+    column 0's (upstream refuses both).
+
+    How: smg's ARAP (E9) with the unsquared `norm` penalty (E24), or `squared`, on the graph
+    whose rows are the frame owners (MoSca's row i is smg's neighbour of row j, so smg's
+    d = R_j^T (x_i − x_j) is ℓ itself); the per-shift mean is in the gap weights; a held position
+    is smg's stop_gradient ("row" for detach_nn, "neighbor" for detach_self). Per graph, one
+    energy-only fused pass gives both losses, and backward one fused pass with λc, λl the two
+    losses' incoming gradients (the energy is linear in them). Gradients
+    reach node_xyz and the raw node_quat; torch's sub-gradient 0 where a difference is 0.
+    Returns two 0-dim tensors of node_xyz's dtype."""
+    _check_nodes(node_xyz, node_quat)
+    _check_reduce(reduce, square)
+    T, M = node_xyz.shape[:2]
+    if not isinstance(topo_ind, torch.Tensor) or topo_ind.dim() != 2 or topo_ind.shape[0] != M \
+            or topo_ind.dtype not in (torch.int32, torch.int64):
+        raise ValueError(f"topo_ind: expected an int32 or int64 tensor of shape [M, K] with M = {M}, got "
+                         f"{list(topo_ind.shape) if isinstance(topo_ind, torch.Tensor) else type(topo_ind).__name__}")
+    if not isinstance(topo_mask, torch.Tensor) or topo_mask.shape != topo_ind.shape or topo_mask.dtype != torch.bool:
+        raise ValueError(f"topo_mask: expected a bool tensor of topo_ind's shape {list(topo_ind.shape)}, got "
+                         f"{(topo_mask.dtype, list(topo_mask.shape)) if isinstance(topo_mask, torch.Tensor) else type(topo_mask).__name__}")
+    for name, t in (("topo_ind", topo_ind), ("topo_mask", topo_mask)):
+        if t.device != node_xyz.device:
+            raise ValueError(f"{name}: device {t.device} differs from node_xyz's {node_xyz.device}")
+    if topo_ind.numel() and (int(topo_ind.min()) < 0 or int(topo_ind.max()) >= M):
+        raise ValueError(f"topo_ind: entries must lie in [0, {M}), got [{int(topo_ind.min())}, {int(topo_ind.max())}]")
+    shifts, shift_weights = list(shifts), list(shift_weights)
+    if len(shifts) != len(shift_weights):
+        raise ValueError(f"shift_weights: {len(shift_weights)} weights for {len(shifts)} shifts")
+    if any(int(s) != s or s < 1 for s in shifts):
+        raise ValueError(f"shifts: must be integers >= 1, got {shifts}")
+    penalty = "squared" if square else "norm"
+    # Main graph: row i's weights as upstream forms them (float32), on smg's edge j -> i.
+    m = topo_mask.float()
+    w_rows = (m / (m.sum(dim=-1, keepdim=True) + 1e-6)).to(node_xyz.dtype)
+    K = topo_ind.shape[1]
+    rows = torch.arange(M, device=node_xyz.device).unsqueeze(1).expand(M, K)
+    idx, w = _frame_owner_graph(topo_ind.reshape(-1).long(), rows.reshape(-1), w_rows.reshape(-1), M)
+    gaps, gw = _shift_gaps(shifts, shift_weights, T, M, reduce)
+    loss_coord, loss_len = _rigid_parts(node_xyz, node_quat, idx, w, gaps, gw, penalty, "none")
+    for k, level in enumerate(levels):
+        if len(level) != 5:
+            raise ValueError(f"levels[{k}]: expected (edges, weight, mu, detach_nn, detach_self), got {len(level)} items")
+        edges, weight, mu, detach_nn, detach_self = level
+        if not isinstance(edges, torch.Tensor) or edges.dim() != 2 or edges.shape[1] != 2 \
+                or edges.dtype not in (torch.int32, torch.int64):
+            raise ValueError(f"levels[{k}]: edges must be an int32 or int64 tensor of shape [E, 2]")
+        if not isinstance(weight, torch.Tensor) or weight.shape != edges.shape[:1]:
+            raise ValueError(f"levels[{k}]: weight must be a tensor of shape [E] = [{edges.shape[0]}]")
+        if edges.numel() and (int(edges.min()) < 0 or int(edges.max()) >= M):
+            raise ValueError(f"levels[{k}]: edges must lie in [0, {M})")
+        if detach_nn and detach_self:
+            raise ValueError(f"levels[{k}]: detach_nn and detach_self are exclusive (as upstream asserts)")
+        stop = "row" if detach_nn else "neighbor" if detach_self else "none"
+        E = edges.shape[0]
+        li, lw = _frame_owner_graph(edges[:, 1].long().to(node_xyz.device), edges[:, 0].long().to(node_xyz.device),
+                                    weight.to(device=node_xyz.device, dtype=node_xyz.dtype), M)
+        lg, lgw = _shift_gaps(shifts, shift_weights, T, E, reduce)
+        c, l = _rigid_parts(node_xyz, node_quat, li, lw, lg, lgw, penalty, stop)
+        loss_coord = loss_coord + c * float(mu)
+        loss_len = loss_len + l * float(mu)
+    return loss_coord, loss_len
+
+
+def mosca_vel_acc(node_xyz: torch.Tensor, node_quat: torch.Tensor, *, reduce: str = "mean",
+                  square: bool = False) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """MoSca's `MoSca.compute_vel_acc_loss(tids, reduce_type=reduce, square=square)` →
+    (loss_p_vel, loss_q_vel, loss_p_acc, loss_q_acc), node_xyz = `_node_xyz[tids]` [T, M, 3],
+    node_quat = `_node_rotation[tids]` [T, M, 4] (raw, w x y z): ‖x^{t+1} − x^t‖,
+    θ_t = the angle of R^{t+1} R^{tT} in [0, π], ‖x^{t+2} − 2x^{t+1} + x^t‖ and |θ_{t+1} − θ_t|,
+    each squared when square=True, the mean (over (T − 1)·M or (T − 2)·M terms) or the sum.
+    How: smg's smoothness (E21) in its velocity and acceleration forms with the `norm` (or
+    `squared`) penalty (E22) and smg's rotation-angle term (E23) in both forms with the same
+    penalty, one fused call each (each loss differentiable on its own). Needs T >= 3 (upstream's
+    mean of no acceleration term is NaN). Gradients reach node_xyz and the raw node_quat."""
+    _check_nodes(node_xyz, node_quat)
+    _check_reduce(reduce, square)
+    T, M = node_xyz.shape[:2]
+    if T < 3 or M == 0:
+        raise ValueError(f"node_xyz: needs T >= 3 frames and M >= 1 nodes, got shape {list(node_xyz.shape)} "
+                         "(upstream's mean over no terms is NaN)")
+    penalty = "squared" if square else "norm"
+    normalize = reduce == "mean"
+    empty = (torch.empty((M, 0), dtype=torch.int64, device=node_xyz.device),
+             torch.empty((M, 0), dtype=node_xyz.dtype, device=node_xyz.device))
+    out = []
+    for form in ("velocity", "acceleration"):
+        accel = dict(REGULARIZER_DEFAULTS["accel"], form=form, penalty=penalty, confidence_weighted=False,
+                     normalize=normalize, weight=1.0)
+        angle = dict(REGULARIZER_DEFAULTS["angle"], form=form, penalty=penalty, confidence_weighted=False,
+                     normalize=normalize, weight=1.0)
+        out.append(regularizers(node_xyz, None, empty, **dict(_ALL_OFF, accel=accel)).total)
+        out.append(regularizers(node_xyz, node_quat, empty, **dict(_ALL_OFF, angle=angle)).total)
+    return out[0], out[1], out[2], out[3]
+
+
+# SC-GS's cal_arap_error keeps every row up to this many nodes; above it, it samples this many
+# rows with replacement (np.random.choice), which scgs_arap does not reproduce.
+_SCGS_SAMPLE_NUM = 512
+
+
+def _scgs_edges(x: torch.Tensor, ii, jj, nn, K: int) -> torch.Tensor:
+    """SC-GS's produce_edge_matrix_nfmt (utils/deform_utils.py l.35-42) on x [Nv, 3]: E [Nv, K, 3]
+    with E[i, n] = x_i − x_j for each edge (i, j, n) and 0 in the other slots. In x's dtype
+    (upstream allocates E in torch's default dtype)."""
+    E = x.new_zeros((x.shape[0], K, 3))
+    E[ii, nn] = x[ii] - x[jj]
+    return E
+
+
+def _scgs_rotations(E0: torch.Tensor, Et: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+    """SC-GS's estimate_rotation (utils/deform_utils.py l.130-166) from the edge matrices E0, Et
+    [Nv, K, 3] and the weights w [Nv, K]: R_i [Nv, 3, 3] minimising Σ_k w_ik ‖e'_ik − R e_ik‖².
+    S_i = Σ_k w_ik e_ik e'_ikᵀ (l.144-146); S_i = 0 for the rows upstream calls unchanged, i.e.
+    where for SOME coordinate c all K slots have e[.., c] == e'[.., c] exactly (l.148: .all over
+    the K dim, then any row index torch.where returns), so R_i = V Uᵀ of a zero matrix (I with
+    torch's SVD); S = U Σ Vᵀ, R = V Uᵀ (l.152-153); where det R <= 0, the column of U at the
+    smallest singular value (the first one on a tie, argmin) is negated and R recomputed
+    (l.158-163)."""
+    S = torch.bmm(E0.transpose(1, 2), w[:, :, None] * Et)  # [Nv, 3, 3]
+    unchanged = (E0 == Et).all(dim=1).any(dim=1)
+    S[unchanged] = 0
+    U, sig, Vh = torch.linalg.svd(S)
+    V = Vh.transpose(1, 2)
+    R = torch.bmm(V, U.transpose(1, 2))
+    rows = torch.nonzero(torch.det(R) <= 0, as_tuple=False).flatten()
+    if rows.numel() > 0:
+        Um = U.clone()
+        Um[rows, :, sig[rows].argmin(dim=1)] *= -1
+        R[rows] = torch.bmm(V[rows], Um[rows].transpose(1, 2))
+    return R
+
+
+def _quat_from_matrix(R: torch.Tensor) -> torch.Tensor:
+    """Unit quaternions (w, x, y, z) [..., 4] of rotation matrices R [..., 3, 3] (Shepperd's
+    method): the largest of 4w², 4x², 4y², 4z² (the diagonal combinations below, summing to 4)
+    picks the row of the symmetric table 4 q qᵀ that is divided by 4 |q_k| >= 2."""
+    m = R.reshape(R.shape[:-2] + (9,)).unbind(-1)
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m
+    d = torch.stack([1 + m00 + m11 + m22, 1 + m00 - m11 - m22,
+                     1 - m00 + m11 - m22, 1 - m00 - m11 + m22], -1)  # 4w², 4x², 4y², 4z²
+    a, b, c = m21 - m12, m02 - m20, m10 - m01  # 4wx, 4wy, 4wz
+    p, q, r = m01 + m10, m02 + m20, m12 + m21  # 4xy, 4xz, 4yz
+    table = torch.stack([torch.stack([d[..., 0], a, b, c], -1),
+                         torch.stack([a, d[..., 1], p, q], -1),
+                         torch.stack([b, p, d[..., 2], r], -1),
+                         torch.stack([c, q, r, d[..., 3]], -1)], -2)  # [..., 4, 4] = 4 q qᵀ
+    k = d.argmax(-1, keepdim=True)  # [..., 1]
+    row = table.gather(-2, k[..., None].expand(k.shape + (4,))).squeeze(-2)
+    return row / (2 * d.gather(-1, k).sqrt())
+
+
+def _scgs_index(name: str, t, n_edges: Optional[int], hi: int, hi_name: str, device) -> torch.Tensor:
+    if not isinstance(t, torch.Tensor):
+        raise ValueError(f"{name}: expected a torch.Tensor, got {type(t).__name__}")
+    if t.dim() != 1:
+        raise ValueError(f"{name}: expected shape [Ne], got {list(t.shape)}")
+    if t.dtype not in (torch.int32, torch.int64):
+        raise ValueError(f"{name}: dtype must be int32 or int64, got {t.dtype}")
+    if n_edges is not None and t.shape[0] != n_edges:
+        raise ValueError(f"{name}: expected {n_edges} entries (as ii), got {t.shape[0]}")
+    t = t.detach().to(device=device, dtype=torch.int64)
+    if t.numel() > 0:
+        lo, top = int(t.min()), int(t.max())
+        if lo < 0 or top >= hi:
+            bad = lo if lo < 0 else top
+            raise ValueError(f"{name}: entry {bad} is out of range [0, {hi_name} = {hi})")
+    return t
+
+
+def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, nn: torch.Tensor,
+              K: int = 10, weight: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """SC-GS's `cal_arap_error(nodes_sequence, ii, jj, nn, K, weight)` (yihua7/SC-GS,
+    utils/deform_utils.py l.177-205), the ARAP loss of its control nodes
+    (ControlNodeWarp.arap_loss in utils/time_utils.py calls it with the ii, jj, nn of
+    cal_connectivity_from_points, l.58-110, and weight=None), as the SUM
+
+        Σ_{t=1}^{Nt−1} Σ_i Σ_{(i, j, n)} w_in ‖e^t_in − R_i^t e^0_in‖²,   e^t_in = x^t_i − x^t_j,
+
+    over the edges (i, j, n): node i's n-th neighbour is j (edge slot n of row i, as
+    produce_edge_matrix_nfmt places it, l.35-42). R_i^t is the Procrustes rotation of row i's
+    edges from frame 0 to frame t (estimate_rotation, l.130-166, with its rules: weighted SVD;
+    S zeroed for the rows l.148 calls unchanged, i.e. where some coordinate of all K slots is
+    exactly equal in both frames; the U column at the smallest singular value flipped where
+    det R <= 0), computed without gradient as upstream does (torch.no_grad, l.196-197): the
+    result is differentiable w.r.t. nodes_sequence with the rotations held constant. weight=None
+    is upstream's: 1 on every (ii, nn) slot, 0 elsewhere (l.184-186).
+
+    nodes_sequence: [Nt, Nv, 3], float32 or float64, CPU (or CUDA with a CUDA build), finite;
+    Nt >= 2 (upstream returns the Python int 0 for Nt = 1) and 1 <= Nv <= 512 (above its
+    sample_num = 512 upstream samples 512 rows with replacement, np.random.choice, l.189-190: not
+    reproduced, refused). ii, jj, nn: [Ne] int32/int64 (any device), ii, jj in [0, Nv), nn in
+    [0, K), each slot (ii, nn) at most once (upstream's scatter would keep one of the duplicates).
+    K: int >= 1, the slots per row. weight: None or [Nv, K] float32/float64, finite (upstream: a
+    NaN or inf weight, even in a slot without an edge, makes S NaN and its SVD fails on CPU;
+    cal_connectivity_from_points' adaptive weights are NaN in the rows with a neighbour beyond
+    the radius), >= 0 on the edges; a constant here (no gradient to it, where upstream would
+    differentiate a weight that requires grad).
+    Returns a 0-dim tensor of nodes_sequence's dtype and device.
+
+    How: the rotations are computed here in torch, in nodes_sequence's dtype, exactly as above;
+    the energy and its gradient come from smg's plain ARAP (E9) with d^t = R_iᵀ(x_j − x_i),
+    positions [x^0, x^t] (T = 2), quaternions [identity, quat(R_i^t)], gap 1 of weight 1,
+    lambda_c = 1, lambda_l = 0, squared, normalize=False, since ‖R_iᵀ e^t − e^0‖ = ‖e^t − R_i e^0‖
+    (the sign of e does not matter). The Nt − 1 frame pairs go into one call as Nt − 1 copies of
+    the graph side by side ([2, (Nt − 1)·Nv, 3]). smg's graph: row i lists the j of its edges in
+    slot order with the weights w_in, padded with −1 / 0; self edges (ii = jj) are dropped (their
+    edge is 0 in both frames: they add nothing to S or to the energy)."""
+    x = nodes_sequence
+    if not isinstance(x, torch.Tensor):
+        raise ValueError(f"nodes_sequence: expected a torch.Tensor, got {type(x).__name__}")
+    if x.dim() != 3 or x.shape[-1] != 3:
+        raise ValueError(f"nodes_sequence: expected shape [Nt, Nv, 3], got {list(x.shape)}")
+    _check_floats("nodes_sequence", x)
+    Nt, Nv = int(x.shape[0]), int(x.shape[1])
+    if Nt < 2:
+        raise ValueError(f"nodes_sequence: needs Nt >= 2 frames, got shape {list(x.shape)} (SC-GS "
+                         "returns the Python int 0 for a single frame)")
+    if Nv < 1:
+        raise ValueError(f"nodes_sequence: has no nodes, shape {list(x.shape)}")
+    if Nv > _SCGS_SAMPLE_NUM:
+        raise ValueError(f"nodes_sequence: Nv = {Nv} nodes > {_SCGS_SAMPLE_NUM} (SC-GS's sample_num): "
+                         "SC-GS then sums over a random sample of rows drawn with replacement "
+                         "(np.random.choice), which scgs_arap does not reproduce")
+    if not bool(torch.isfinite(x.detach()).all()):
+        raise ValueError("nodes_sequence: has a NaN or infinite coordinate")
+    if isinstance(K, bool) or not isinstance(K, int) or K < 1:
+        raise ValueError(f"K: expected an int >= 1 (the neighbour slots per node), got {K!r}")
+    dev, dt = x.device, x.dtype
+    ii = _scgs_index("ii", ii, None, Nv, "Nv", dev)
+    jj = _scgs_index("jj", jj, ii.shape[0], Nv, "Nv", dev)
+    nn = _scgs_index("nn", nn, ii.shape[0], K, "K", dev)
+    slot_key = ii * K + nn
+    if torch.unique(slot_key).numel() != slot_key.numel():
+        raise ValueError("nn: a slot (ii[e], nn[e]) appears more than once (SC-GS's edge matrix "
+                         "would keep one of the edges written there)")
+    with torch.no_grad():
+        if weight is None:
+            w = torch.zeros((Nv, K), dtype=dt, device=dev)
+            w[ii, nn] = 1
+        else:
+            if not isinstance(weight, torch.Tensor):
+                raise ValueError(f"weight: expected a torch.Tensor or None, got {type(weight).__name__}")
+            if tuple(weight.shape) != (Nv, K):
+                raise ValueError(f"weight: expected shape [Nv, K] = [{Nv}, {K}], got {list(weight.shape)}")
+            if weight.dtype not in (torch.float32, torch.float64):
+                raise ValueError(f"weight: dtype must be float32 or float64, got {weight.dtype}")
+            w = weight.detach().to(device=dev, dtype=dt)
+            if not bool(torch.isfinite(w).all()):
+                raise ValueError("weight: has a NaN or infinite entry (in SC-GS it reaches the "
+                                 "covariance S, whose SVD then fails on CPU; cal_connectivity_from_points' "
+                                 "adaptive weights are NaN in the rows with a neighbour beyond the radius)")
+        # smg's neighbour table: row i's edges in slot order, self edges dropped, -1 / 0 after.
+        slot = torch.full((Nv, K), -1, dtype=torch.int64, device=dev)
+        slot[ii, nn] = jj
+        keep = (slot >= 0) & (slot != torch.arange(Nv, device=dev)[:, None])
+        if bool((w[keep] < 0).any()):
+            raise ValueError("weight: negative on an edge (smg's ARAP takes weights >= 0)")
+        order = torch.sort((~keep).to(torch.int32), dim=1, stable=True).indices
+        g_idx = slot.masked_fill(~keep, -1).gather(1, order)
+        g_w = w.masked_fill(~keep, 0).gather(1, order)
+        # The rotations of every frame pair, as upstream computes them.
+        xd = x.detach()
+        E0 = _scgs_edges(xd[0], ii, jj, nn, K)
+        P = Nt - 1
+        R = torch.stack([_scgs_rotations(E0, _scgs_edges(xd[t], ii, jj, nn, K), w)
+                         for t in range(1, Nt)])  # [P, Nv, 3, 3]
+        q1 = _quat_from_matrix(R).reshape(P * Nv, 4)
+        q0 = torch.zeros_like(q1)
+        q0[:, 0] = 1
+        quats = torch.stack([q0, q1])  # [2, P·Nv, 4]: constants (no gradient, as upstream)
+        # Pair p uses nodes p·Nv … p·Nv + Nv − 1.
+        off = (torch.arange(P, device=dev, dtype=torch.int64) * Nv)[:, None, None]
+        g_idx = torch.where(g_idx >= 0, g_idx + off, g_idx).reshape(P * Nv, K)
+        g_w = g_w.expand(P, Nv, K).reshape(P * Nv, K)
+    positions = torch.stack([x[0].expand(P, Nv, 3).reshape(P * Nv, 3), x[1:].reshape(P * Nv, 3)])
+    return arap(positions, quats, (g_idx, g_w), lambda_c=1.0, lambda_l=0.0, gaps=(1,),
+                gap_weights=(1.0,), normalize=False)

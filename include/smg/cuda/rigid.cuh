@@ -36,6 +36,10 @@ struct FusedRigidConstants {
   Literal<S> alpha = Literal<S>(1);  // C-ARAP's α (E7); ARAP's is 1 with c ≡ 1
   Literal<S> lambda_c[2] = {Literal<S>(0), Literal<S>(0)};
   Literal<S> lambda_l[2] = {Literal<S>(0), Literal<S>(0)};
+  Penalty penalty[2] = {Penalty::squared, Penalty::squared};  // per energy (E24)
+  double eps[2] = {0.0, 0.0};                                 // penalty_eps per energy
+  StopGradient stop = StopGradient::none;  // one for both (validate_options(RegularizerOptions))
+  bool keep_zero = false;  // sqrt_weighted: a zero-weight edge still adds m λ sqrt(ε)
   int n_gaps = 0;
   int delta[2 * GapList::kCapacity] = {};
   double gap_weight[2][2 * GapList::kCapacity] = {};
@@ -105,6 +109,15 @@ SMG_HOST_DEVICE inline void fused_rigid_edge(const FusedRigidConstants<S>& c,
     return en == 0 ? confidence_edge_weight(w, c.alpha, conf ? conf[u * N + j] : S(1))
                    : confidence_edge_weight(w, L(1), S(1));
   };
+  // The pair term of energy en (E9) under its penalty (E24): squared through carap_term with
+  // k = γ w̃ (the CPU's arithmetic), the others with γ and w̃ apart.
+  auto term = [&](int en, L gm, S wt, S ax, S ay, S az, S al, S& px, S& py, S& pz, S& pq) {
+    if (c.penalty[en] == Penalty::squared)
+      return carap_term(S(gm * wt), ax, ay, az, al, c.lambda_c[en], c.lambda_l[en], px, py, pz,
+                        pq);
+    return carap_term_penalty(c.penalty[en], S(gm), wt, S(c.eps[en]), ax, ay, az, al,
+                              c.lambda_c[en], c.lambda_l[en], px, py, pz, pq);
+  };
   S gx(0), gy(0), gz(0), h(0);
   for (int g = 0; g < c.n_gaps; ++g) {
     const Index delta = c.delta[g];
@@ -115,9 +128,8 @@ SMG_HOST_DEVICE inline void fused_rigid_edge(const FusedRigidConstants<S>& c,
       for (int en = 0; en < 2; ++en) {
         const L gm = gamma.v[en][g];
         if (gm == L(0)) continue;
-        const S ev = carap_term(S(gm * weight(t, en)), es.dx - e0.dx, es.dy - e0.dy,
-                                es.dz - e0.dz, es.len - e0.len, c.lambda_c[en], c.lambda_l[en],
-                                px, py, pz, pq);  // (E9)
+        const S ev = term(en, gm, weight(t, en), es.dx - e0.dx, es.dy - e0.dy, es.dz - e0.dz,
+                          es.len - e0.len, px, py, pz, pq);  // (E9, E24)
         if (energy != nullptr) energy[en] += ev;
         gx -= px;
         gy -= py;
@@ -131,8 +143,8 @@ SMG_HOST_DEVICE inline void fused_rigid_edge(const FusedRigidConstants<S>& c,
       for (int en = 0; en < 2; ++en) {
         const L gm = gamma.v[en][g];
         if (gm == L(0)) continue;
-        carap_term(S(gm * weight(t - delta, en)), e0.dx - ep.dx, e0.dy - ep.dy, e0.dz - ep.dz,
-                   e0.len - ep.len, c.lambda_c[en], c.lambda_l[en], px, py, pz, pq);
+        term(en, gm, weight(t - delta, en), e0.dx - ep.dx, e0.dy - ep.dy, e0.dz - ep.dz,
+             e0.len - ep.len, px, py, pz, pq);
         gx += px;
         gy += py;
         gz += pz;
@@ -166,20 +178,23 @@ SMG_HOST_DEVICE inline void fused_rigid_node_at(
     const Index j = graph.indices(n, k);
     if (j < 0) break;
     const S w = graph.weights(n, k);
-    if (!(w > S(0))) continue;  // a zero weight contributes exactly nothing
+    // A zero weight contributes exactly nothing, except sqrt_weighted's m λ sqrt(ε) (E24).
+    if (!(w > S(0)) && !(c.keep_zero && w == S(0))) continue;
     S F[3], Rg[3];
     fused_rigid_edge(c, gamma, x, q, conf, t, n, j, w, grad, energy, F, Rg);
     if (!grad) continue;
     for (int a = 0; a < 3; ++a) {
-      g[a] -= F[a];
+      if (c.stop != StopGradient::row) g[a] -= F[a];  // a held row gets no position gradient
       r[a] += Rg[a];
     }
   }
   if (grad_x != nullptr) {
-    for (std::int32_t a = rev_offsets[n]; a < rev_offsets[n + 1]; ++a) {
+    // As a neighbour (a held neighbour gets none).
+    const std::int32_t in_end = c.stop != StopGradient::neighbor ? rev_offsets[n + 1] : rev_offsets[n];
+    for (std::int32_t a = rev_offsets[n]; a < in_end; ++a) {
       const Index slot = rev_entries[a], i = slot / K, k = slot - i * K;
       const S w = graph.weights(i, k);
-      if (!(w > S(0))) continue;
+      if (!(w > S(0)) && !(c.keep_zero && w == S(0))) continue;
       S F[3], Rg[3];
       fused_rigid_edge(c, gamma, x, q, conf, t, i, n, w, true, static_cast<S*>(nullptr), F, Rg);
       for (int b = 0; b < 3; ++b) g[b] += F[b];
@@ -210,8 +225,14 @@ FusedRigidConstants<S> fused_rigid_constants(const RegularizerOptions& o, Index 
   c.lambda_l[0] = L(o.carap.lambda_l);
   c.lambda_c[1] = L(o.arap.lambda_c);
   c.lambda_l[1] = L(o.arap.lambda_l);
+  c.penalty[0] = o.carap.penalty;
+  c.penalty[1] = o.arap.penalty;
+  c.eps[0] = o.carap.penalty_eps;
+  c.eps[1] = o.arap.penalty_eps;
+  c.stop = o.terms.carap ? o.carap.stop_gradient : o.arap.stop_gradient;
   for (int en = 0; en < 2; ++en) {
     if (!on[en]) continue;
+    if (c.penalty[en] == Penalty::sqrt_weighted) c.keep_zero = true;
     c.mean[en] = norms[en] == Normalization::mean;
     for (const Gap& g : *lists[en]) c.pairs[en] += std::max<Index>(0, T - g.delta);
     for (const Gap& g : *lists[en]) {

@@ -93,6 +93,30 @@ enum class Normalization {
   mean,  // the sum divided by the number of terms (each energy documents its count)
 };
 
+// The penalty on a term's difference a with factor k and weight w (E22): squared k w ‖a‖² (the
+// default), norm k w ‖a‖ (sub-gradient 0 at a = 0, as torch's norm), sqrt_weighted
+// k sqrt(w ‖a‖² + ε) (the weight inside the root, as Dynamic 3D Gaussians writes its losses).
+// Read by the smoothness term (E22) and by each part of the rigid energies (E24).
+enum class Penalty { squared, norm, sqrt_weighted };
+// The penalties and their names ("squared", "norm", "sqrt_weighted"), as the bindings spell them.
+inline constexpr Penalty kPenalties[] = {Penalty::squared, Penalty::norm, Penalty::sqrt_weighted};
+constexpr const char* to_string(Penalty p) {
+  return p == Penalty::norm ? "norm" : p == Penalty::sqrt_weighted ? "sqrt_weighted" : "squared";
+}
+using AccelPenalty = Penalty;  // its first name, when only the smoothness term had it
+
+// The rigid energies' stop-gradient (E24): the position of which endpoint of an edge i -> j gets
+// no gradient from the energy (the rotations always do), as MoSca's multi-level ARAP detaches
+// one end (`detach_nn`: the node whose frame expresses the edge, smg's row i; `detach_self`: the
+// other, smg's neighbour j).
+enum class StopGradient { none, row, neighbor };
+// The values and their names ("none", "row", "neighbor"), as the bindings spell them.
+inline constexpr StopGradient kStopGradients[] = {StopGradient::none, StopGradient::row,
+                                                  StopGradient::neighbor};
+constexpr const char* to_string(StopGradient g) {
+  return g == StopGradient::row ? "row" : g == StopGradient::neighbor ? "neighbor" : "none";
+}
+
 // C-ARAP, equation (E9). Weights w̃_ij^t = w_ij (α + (1 − α) c_{t,j}) (E7).
 struct CarapOptions {
   double alpha = 0.6;     // α in [0, 1]: lower bound of the confidence factor
@@ -101,6 +125,9 @@ struct CarapOptions {
   GapList gaps = default_gaps();
   Normalization normalization = Normalization::sum;
   double weight = 1.0;    // overall factor on the energy and its gradient
+  Penalty penalty = Penalty::squared;                // (E24): each part of (E9) under (E22)
+  StopGradient stop_gradient = StopGradient::none;   // (E24): an endpoint's position held
+  double penalty_eps = 1e-20;  // ε of sqrt_weighted (length²), finite and > 0; read by it only
 };
 
 // Plain ARAP (ablations): C-ARAP with every confidence 1 and α = 1, i.e. w̃_ij^t = w_ij.
@@ -110,6 +137,9 @@ struct ArapOptions {
   GapList gaps = default_gaps();
   Normalization normalization = Normalization::sum;
   double weight = 1.0;
+  Penalty penalty = Penalty::squared;
+  StopGradient stop_gradient = StopGradient::none;
+  double penalty_eps = 1e-20;
 };
 
 // LRM, equations (E11)-(E16).
@@ -131,21 +161,9 @@ inline constexpr AccelForm kAccelForms[] = {AccelForm::acceleration, AccelForm::
 constexpr const char* to_string(AccelForm f) {
   return f == AccelForm::velocity ? "velocity" : "acceleration";
 }
-// The penalty on a term's difference a with factor k and weight w (E22): squared k w ‖a‖² (the
-// default), norm k w ‖a‖ (sub-gradient 0 at a = 0, as torch's norm), sqrt_weighted
-// k sqrt(w ‖a‖² + ε) (the weight inside the root, as Dynamic 3D Gaussians writes its losses).
-enum class AccelPenalty { squared, norm, sqrt_weighted };
-// The penalties and their names ("squared", "norm", "sqrt_weighted"), as the bindings spell them.
-inline constexpr AccelPenalty kAccelPenalties[] = {AccelPenalty::squared, AccelPenalty::norm,
-                                                   AccelPenalty::sqrt_weighted};
-constexpr const char* to_string(AccelPenalty p) {
-  return p == AccelPenalty::norm            ? "norm"
-         : p == AccelPenalty::sqrt_weighted ? "sqrt_weighted"
-                                            : "squared";
-}
 struct AccelOptions {
   AccelForm form = AccelForm::acceleration;
-  AccelPenalty penalty = AccelPenalty::squared;  // (E22)
+  Penalty penalty = Penalty::squared;  // (E22)
   bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
   Normalization normalization = Normalization::sum;  // mean: over (T − 2) · N terms (or T − 1)
   double weight = 1.0;  // overall factor (units: 1 / length² squared, 1 / length otherwise)
@@ -160,7 +178,11 @@ struct AngleOptions {
   AccelForm form = AccelForm::acceleration;
   bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
   Normalization normalization = Normalization::sum;  // mean: over (T − 2) · N terms (or T − 1)
-  double weight = 1.0;                               // overall factor (units: 1 / radian)
+  double weight = 1.0;  // overall factor (units: 1 / radian, or 1 / radian² squared)
+  // (E22) on the scalar θ (or Δθ): norm |·| (MoSca's, the default), squared (MoSca's
+  // square=True), sqrt_weighted sqrt(w·² + ε).
+  Penalty penalty = Penalty::norm;
+  double penalty_eps = 1e-20;  // ε of sqrt_weighted (radian²), finite and > 0; read by it only
 };
 
 // The named enums of the options: enum_values(E{}) is the list of E's values, each with its
@@ -168,7 +190,8 @@ struct AngleOptions {
 // (smg_torch's string, smg_cli's choice flag) and validate_options refuses a value not listed,
 // so an enum added here (its list, to_string and this overload) needs no code in them.
 constexpr const auto& enum_values(AccelForm) { return kAccelForms; }
-constexpr const auto& enum_values(AccelPenalty) { return kAccelPenalties; }
+constexpr const auto& enum_values(Penalty) { return kPenalties; }
+constexpr const auto& enum_values(StopGradient) { return kStopGradients; }
 
 // The fused step (regularizers.hpp): which terms it computes. Confidences off: C-ARAP and LRM
 // use c ≡ 1 (as carap() and lrm() do with an empty confidence view).
@@ -205,7 +228,8 @@ using IfOptions = std::enable_if_t<std::is_same<std::remove_const_t<O>, T>::valu
 // declaration order, by the field's name; `options` const or mutable. Why: the bindings
 // (smg_torch.regularizers, smg_cli regularizers) read, default and print every option through
 // these lists, so an option is declared in its struct and named once, here. Field types: double,
-// bool, GapList, Normalization and the named enums (enum_values: AccelForm, AccelPenalty).
+// bool, GapList, Normalization and the named enums (enum_values: AccelForm, Penalty,
+// StopGradient).
 template <class O, class F, detail::IfOptions<O, ConfidenceOptions> = 0>
 void for_each_option(O& o, F&& f) {
   f("kappa_m", o.kappa_m);
@@ -228,6 +252,9 @@ void for_each_rigidity_option(O& o, F&& f) {
   f("lambda_l", o.lambda_l);
   f("gaps", o.gaps);
   for_each_scaling_option(o, f);
+  f("penalty", o.penalty);
+  f("stop_gradient", o.stop_gradient);
+  f("penalty_eps", o.penalty_eps);
 }
 }  // namespace detail
 template <class O, class F, detail::IfOptions<O, CarapOptions> = 0>
@@ -259,6 +286,8 @@ void for_each_option(O& o, F&& f) {
   f("form", o.form);
   f("confidence_weighted", o.confidence_weighted);
   detail::for_each_scaling_option(o, f);
+  f("penalty", o.penalty);
+  f("penalty_eps", o.penalty_eps);
 }
 
 // The term list of the fused step: f(name, on, options) for every term of RegularizerOptions, in
@@ -378,7 +407,10 @@ template <class Options>
 inline Status check_rigidity_options(const char* what, const Options& o) {
   return first_error({check_nonneg(what, "lambda_c", o.lambda_c),
                       check_nonneg(what, "lambda_l", o.lambda_l), check_gaps(what, o.gaps),
-                      check_nonneg(what, "weight", o.weight)});
+                      check_nonneg(what, "weight", o.weight),
+                      check_enum(what, "penalty", o.penalty),
+                      check_enum(what, "stop_gradient", o.stop_gradient),
+                      check_positive(what, "penalty_eps", o.penalty_eps)});
 }
 }  // namespace detail
 
@@ -414,7 +446,9 @@ inline Status validate_options(const AccelOptions& o) {
 
 inline Status validate_options(const AngleOptions& o) {
   return detail::first_error({detail::check_enum("AngleOptions", "form", o.form),
-                              detail::check_nonneg("AngleOptions", "weight", o.weight)});
+                              detail::check_nonneg("AngleOptions", "weight", o.weight),
+                              detail::check_enum("AngleOptions", "penalty", o.penalty),
+                              detail::check_positive("AngleOptions", "penalty_eps", o.penalty_eps)});
 }
 
 // Plain ARAP is C-ARAP with α = 1 and no confidences (the caller passes none).
@@ -426,6 +460,9 @@ inline CarapOptions carap_options_for_arap(const ArapOptions& o) {
   c.gaps = o.gaps;
   c.normalization = o.normalization;
   c.weight = o.weight;
+  c.penalty = o.penalty;
+  c.stop_gradient = o.stop_gradient;
+  c.penalty_eps = o.penalty_eps;
   return c;
 }
 
@@ -436,6 +473,14 @@ inline Status validate_options(const RegularizerOptions& o) {
   for_each_term(o, [&](const char*, bool on, const auto& term) {
     if (on && first) first = validate_options(term);
   });
+  // The rigid term back-propagates C-ARAP's and ARAP's d-gradients together (E10), so one
+  // call holds the same endpoint for both.
+  if (first && o.terms.carap && o.terms.arap && o.carap.stop_gradient != o.arap.stop_gradient)
+    return Status::error(std::string("RegularizerOptions: carap.stop_gradient (") +
+                         to_string(o.carap.stop_gradient) + ") and arap.stop_gradient (" +
+                         to_string(o.arap.stop_gradient) +
+                         ") differ; one fused call back-propagates both rigid energies together: "
+                         "call them separately");
   return first;
 }
 

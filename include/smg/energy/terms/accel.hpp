@@ -31,16 +31,16 @@ namespace smg {
 // The frames' gradients are g·(1, −2, 1) (acceleration) or g·(−1, 1) (velocity). CPU
 // (AccelTerm::node) and CUDA (AccelElement::at) both evaluate the term through this function.
 template <class S, class L>
-SMG_FORCE_INLINE SMG_HOST_DEVICE S accel_penalty(AccelPenalty p, S k, S w, S eps, S ax, S ay,
+SMG_FORCE_INLINE SMG_HOST_DEVICE S accel_penalty(Penalty p, S k, S w, S eps, S ax, S ay,
                                                  S az, S& gx, S& gy, S& gz) {
   using std::sqrt;
   const S aa = ax * ax + ay * ay + az * az;
   S h, e;
-  if (p == AccelPenalty::norm) {
+  if (p == Penalty::norm) {
     const S f = k * w, n = sqrt(aa);
     h = n > S(0) ? S(f / n) : S(0);
     e = f * n;
-  } else if (p == AccelPenalty::sqrt_weighted) {
+  } else if (p == Penalty::sqrt_weighted) {
     const S r = sqrt(w * aa + eps);  // >= sqrt(ε) > 0
     h = k * w / r;
     e = k * r;
@@ -90,7 +90,7 @@ struct AccelElement {
   Literal<S> eps = Literal<S>(0);  // ε of sqrt_weighted
   bool weighted = false;
   int order = 2;  // 2: acceleration, 1: velocity
-  AccelPenalty penalty = AccelPenalty::squared;
+  Penalty penalty = Penalty::squared;
 
   // The difference a of the term with earliest frame u.
   SMG_HOST_DEVICE void difference(PositionsView<const S> x, Index u, Index i, S* a) const {
@@ -133,7 +133,7 @@ struct AccelTerm : TermDefaults {
 
   bool enabled = false, weighted = false;
   Index order = 2;  // 2: acceleration, 1: velocity
-  AccelPenalty penalty = AccelPenalty::squared;
+  Penalty penalty = Penalty::squared;
   double scale_d = 0, eps_d = 0;
   Index T = 0;
 
@@ -173,14 +173,14 @@ struct AccelTerm : TermDefaults {
   template <class E>
   void node(const BlockView<S, I>& v, Block& b, Index i, E& energy) const {
     switch (penalty) {
-      case AccelPenalty::norm: return node_with<AccelPenalty::norm>(v, b, i, energy);
-      case AccelPenalty::sqrt_weighted: return node_with<AccelPenalty::sqrt_weighted>(v, b, i, energy);
-      case AccelPenalty::squared: break;
+      case Penalty::norm: return node_with<Penalty::norm>(v, b, i, energy);
+      case Penalty::sqrt_weighted: return node_with<Penalty::sqrt_weighted>(v, b, i, energy);
+      case Penalty::squared: break;
     }
-    node_with<AccelPenalty::squared>(v, b, i, energy);
+    node_with<Penalty::squared>(v, b, i, energy);
   }
 
-  template <AccelPenalty P, class E>
+  template <Penalty P, class E>
   void node_with(const BlockView<S, I>& v, Block&, Index i, E& energy) const {
     const Index ne = v.ne, last = std::min(v.nown, T - order - v.t0);
     const S* X = v.Xb + i * v.n4();

@@ -4,6 +4,7 @@
 //   θ_i^t = the angle of R_i^{t+1} R_i^{tT} = 2 atan2(‖v‖, |w|), (w, v) = q_i^{t*} ⊗ q_i^{t+1}
 //   velocity form      Θ = k Σ_i Σ_{t=0}^{T−2} w_i^t θ_i^t
 //   acceleration form  Θ = k Σ_i Σ_{t=0}^{T−3} w_i^t |θ_i^{t+1} − θ_i^t|
+// as written with penalty=norm (the default); squared and sqrt_weighted as (E22) on the scalar.
 // with w_i^t = c_{t,i} (confidence-weighted, at the earliest frame) or 1, and k the weight
 // (divided by the term count with Normalization::mean). Unsquared, as MoSca's defaults. The
 // gradient goes to the rotations only (right tangent, or raw quaternions through (Q5)): with u
@@ -50,20 +51,37 @@ SMG_FORCE_INLINE SMG_HOST_DEVICE S rotation_angle(const S* qa, const S* qb, S* u
   return L(2) * atan2(n, aw_abs);
 }
 
-// One term of (E23) from its angles θ0 = θ^t and (acceleration) θ1 = θ^{t+1}, with factor
-// f = k w: returns f θ0 (order 1) or f |θ1 − θ0| (order 2), and g0 = ∂/∂θ0, g1 = ∂/∂θ1.
+// One term of (E23) from its angles θ0 = θ^t and (acceleration) θ1 = θ^{t+1}, with factor k
+// and weight w, under the penalty p (E22 on the scalar r = θ0, order 1, or θ1 − θ0, order 2):
+// norm (the default, MoSca's) k w |r|, squared k w r², sqrt_weighted k sqrt(w r² + ε); returns
+// it, and g0 = ∂/∂θ0, g1 = ∂/∂θ1 (norm: sub-gradient 0 at r = 0, torch's abs).
 template <class S>
-SMG_FORCE_INLINE SMG_HOST_DEVICE S angle_term(int order, S f, S th0, S th1, S& g0, S& g1) {
-  if (order == 1) {
-    g0 = f;
-    g1 = S(0);
-    return f * th0;
+SMG_FORCE_INLINE SMG_HOST_DEVICE S angle_term(int order, Penalty p, S k, S w, S eps, S th0,
+                                              S th1, S& g0, S& g1) {
+  using std::sqrt;
+  const S r = order == 1 ? th0 : S(th1 - th0);
+  S e, h;  // the penalty and its derivative in r
+  if (p == Penalty::squared) {
+    const S f = k * w;
+    e = f * r * r;
+    h = S(2) * f * r;
+  } else if (p == Penalty::sqrt_weighted) {
+    const S q = sqrt(w * r * r + eps);  // >= sqrt(ε) > 0
+    e = k * q;
+    h = k * w * r / q;
+  } else {
+    const S f = k * w;
+    h = r > S(0) ? f : (r < S(0) ? S(-f) : S(0));
+    e = r < S(0) ? S(-f * r) : S(f * r);
   }
-  const S d = th1 - th0;
-  const S s = d > S(0) ? f : (d < S(0) ? S(-f) : S(0));
-  g0 = -s;
-  g1 = s;
-  return d < S(0) ? S(-f * d) : S(f * d);
+  if (order == 1) {
+    g0 = h;
+    g1 = S(0);
+  } else {
+    g0 = -h;
+    g1 = h;
+  }
+  return e;
 }
 
 // The number of terms of (E23) over T frames and N nodes (Normalization::mean divides by it).
@@ -86,9 +104,9 @@ inline double angle_scale(const AngleOptions& o, Index frames, Index nodes) {
 // frames; the GPU: all), added to g[3]. q [T][N][4]; weight(u): w_i^u.
 template <class S, class W>
 SMG_FORCE_INLINE SMG_HOST_DEVICE void angle_at(Index t, Index i, QuaternionsView<const S> q,
-                                               int order, Literal<S> k, const W& weight,
-                                               Index u_lo, Index u_hi, bool own_energy, S* g,
-                                               S& energy) {
+                                               int order, Penalty penalty, Literal<S> k,
+                                               Literal<S> eps, const W& weight, Index u_lo,
+                                               Index u_hi, bool own_energy, S* g, S& energy) {
   using L = Literal<S>;
   const Index T = q.frames();
   for (Index u = t - order; u <= t; ++u) {
@@ -97,7 +115,7 @@ SMG_FORCE_INLINE SMG_HOST_DEVICE void angle_at(Index t, Index i, QuaternionsView
     const S th0 = rotation_angle<S, L>(q.ptr(u, i), q.ptr(u + 1, i), a0);
     const S th1 = order == 2 ? rotation_angle<S, L>(q.ptr(u + 1, i), q.ptr(u + 2, i), a1) : S(0);
     S g0, g1;
-    const S e = angle_term<S>(order, S(S(k) * weight(u)), th0, th1, g0, g1);
+    const S e = angle_term<S>(order, penalty, S(k), weight(u), S(eps), th0, th1, g0, g1);
     if (u == t && own_energy) energy += e;
     // θ^u = θ(u, u+1): −u_0 on frame u, +u_0 on u+1; θ^{u+1} = θ(u+1, u+2): −u_1 on u+1, +u_1 on
     // u+2.
@@ -116,8 +134,10 @@ template <class S>
 struct AngleElement {
   static constexpr bool kReadsRotations = true;
   Literal<S> k = Literal<S>(0);
+  Literal<S> eps = Literal<S>(0);  // ε of sqrt_weighted
   bool weighted = false;
   int order = 2;  // 2: acceleration, 1: velocity
+  Penalty penalty = Penalty::norm;
 
   struct Weight {
     const S* conf;
@@ -131,8 +151,8 @@ struct AngleElement {
                           const S* conf, S*, S* grad_tangent, S* grad_raw, S& energy) const {
     const Index T = q.frames(), N = q.nodes();
     S g[3] = {S(0), S(0), S(0)};
-    angle_at<S>(t, i, q, order, k, Weight{weighted ? conf : nullptr, N, i}, Index(0), T, true, g,
-                energy);
+    angle_at<S>(t, i, q, order, penalty, k, eps, Weight{weighted ? conf : nullptr, N, i},
+                Index(0), T, true, g, energy);
     if (grad_tangent != nullptr)
       for (int d = 0; d < 3; ++d) grad_tangent[(t * N + i) * 3 + d] += g[d];
     if (grad_raw != nullptr)
@@ -149,11 +169,14 @@ struct AngleTerm : TermDefaults {
 
   bool enabled = false, weighted = false, want_rotations = false;
   Index order = 2;  // 2: acceleration, 1: velocity
-  double scale_d = 0;
+  Penalty penalty = Penalty::norm;
+  double scale_d = 0, eps_d = 0;
   Index T = 0;
 
   void configure(const AngleOptions& o, Index frames, Index nodes) {
     T = frames;
+    penalty = o.penalty;
+    eps_d = o.penalty_eps;
     order = o.form == AccelForm::acceleration ? 2 : 1;
     weighted = o.confidence_weighted;
     scale_d = angle_scale(o, frames, nodes);
@@ -170,6 +193,8 @@ struct AngleTerm : TermDefaults {
   Element element() const {
     Element e;
     e.k = L(scale_d);
+    e.eps = L(eps_d);
+    e.penalty = penalty;
     e.weighted = weighted;
     e.order = static_cast<int>(order);
     return e;
@@ -204,7 +229,8 @@ struct AngleTerm : TermDefaults {
     for (Index l = 0; l < frames; ++l) {
       S g[3] = {S(0), S(0), S(0)};
       S el(0);
-      angle_at<S>(t0 + l, i, v.q, ord, L(scale_d), w, t0, u_hi, l < v.nown, g, el);
+      angle_at<S>(t0 + l, i, v.q, ord, penalty, L(scale_d), L(eps_d), w, t0, u_hi, l < v.nown,
+                  g, el);
       e += Acc(el);
       if (!v.want_r) continue;
       if (l < v.nown) {

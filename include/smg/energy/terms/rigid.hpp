@@ -1,5 +1,5 @@
-// smg/energy/terms/rigid.hpp — C-ARAP (E7)-(E10) and plain ARAP ((E9) with c ≡ 1, α = 1) as one
-// term of the regulariser driver (energy/block.hpp has the concept). One term for both because
+// smg/energy/terms/rigid.hpp — C-ARAP (E7)-(E10) and plain ARAP ((E9) with c ≡ 1, α = 1), each
+// under its penalty and stop-gradient (E24), as one term of the regulariser driver (energy/block.hpp has the concept). One term for both because
 // they share the expensive part: d_ij^t = R_i^tᵀ (x_j^t − x_i^t) (E8) is computed once per
 // (frame, edge) and reused by every gap of both energies, and their d-gradients are summed
 // before one back-propagation (E10). The per-element maths is carap_term.hpp's; the vectorised
@@ -9,6 +9,7 @@
 #include "smg/core/config.hpp"
 
 #include <algorithm>
+#include <type_traits>
 #include <vector>
 
 #include "smg/core/quaternion.hpp"
@@ -82,33 +83,48 @@ inline void lengths(Index n, const S* SMG_RESTRICT ex, const S* SMG_RESTRICT ey,
   }
 }
 
-// Energy of the pairs (a, a + δ) of one gap (E9), added to eacc[a].
-template <class S>
-inline void pair_energy(Index n, Index d, const S* SMG_RESTRICT mk, const S* SMG_RESTRICT wb,
-                        const S* SMG_RESTRICT dx, const S* SMG_RESTRICT dy,
-                        const S* SMG_RESTRICT dz, const S* SMG_RESTRICT len, Literal<S> lam_c,
-                        Literal<S> lam_l, S* SMG_RESTRICT eacc) {
-  for (Index a = 0; a < n; ++a) {
-    const S c = mk[a] * wb[a];
-    const S ax = dx[a + d] - dx[a], ay = dy[a + d] - dy[a], az = dz[a + d] - dz[a];
-    const S dl = len[a + d] - len[a];
-    eacc[a] += carap_term_energy(c, ax, ay, az, dl, lam_c, lam_l);
-  }
-}
-
-// Energy as pair_energy, and P = ∂/∂d^{t+δ} (= −∂/∂d^t) of the vector term, Q the same for
-// ‖d‖ of the length term.
-template <class S>
-inline void pair_gradient(Index n, Index d, const S* SMG_RESTRICT mk, const S* SMG_RESTRICT wb,
-                          const S* SMG_RESTRICT dx, const S* SMG_RESTRICT dy,
-                          const S* SMG_RESTRICT dz, const S* SMG_RESTRICT len, Literal<S> lam_c,
-                          Literal<S> lam_l, S* SMG_RESTRICT eacc, S* SMG_RESTRICT px,
-                          S* SMG_RESTRICT py, S* SMG_RESTRICT pz, S* SMG_RESTRICT q) {
-  for (Index a = 0; a < n; ++a) {
-    const S c = mk[a] * wb[a];
-    const S ax = dx[a + d] - dx[a], ay = dy[a + d] - dy[a], az = dz[a + d] - dz[a];
-    const S dl = len[a + d] - len[a];
-    eacc[a] += carap_term(c, ax, ay, az, dl, lam_c, lam_l, px[a], py[a], pz[a], q[a]);
+// Energy of the pairs (a, a + δ) of one gap (E9) under penalty P (E24), added to eacc[a]; and,
+// with Grad, P = ∂/∂d^{t+δ} (= −∂/∂d^t) of the vector term, Q the same for ‖d‖ of the length
+// term. P != squared: the roots of the n terms first (their arguments into ac, al, then one
+// vectorised sqrt each into rc, rl: four scratch arrays of n), then the terms.
+template <Penalty P, bool Grad, class S>
+inline void pair_terms(Index n, Index d, const S* SMG_RESTRICT mk, const S* SMG_RESTRICT wb,
+                       const S* SMG_RESTRICT dx, const S* SMG_RESTRICT dy,
+                       const S* SMG_RESTRICT dz, const S* SMG_RESTRICT len, Literal<S> lam_c,
+                       Literal<S> lam_l, S eps, S* SMG_RESTRICT eacc, S* SMG_RESTRICT px,
+                       S* SMG_RESTRICT py, S* SMG_RESTRICT pz, S* SMG_RESTRICT q,
+                       S* SMG_RESTRICT ac, S* SMG_RESTRICT al, S* SMG_RESTRICT rc,
+                       S* SMG_RESTRICT rl) {
+  if constexpr (P == Penalty::squared) {
+    for (Index a = 0; a < n; ++a) {
+      const S ax = dx[a + d] - dx[a], ay = dy[a + d] - dy[a], az = dz[a + d] - dz[a];
+      const S dl = len[a + d] - len[a];
+      const S c = mk[a] * wb[a];
+      if constexpr (Grad)
+        eacc[a] += carap_term(c, ax, ay, az, dl, lam_c, lam_l, px[a], py[a], pz[a], q[a]);
+      else
+        eacc[a] += carap_term_energy(c, ax, ay, az, dl, lam_c, lam_l);
+    }
+  } else {
+    for (Index a = 0; a < n; ++a)
+      carap_penalty_root_args(P, wb[a], eps, S(dx[a + d] - dx[a]), S(dy[a + d] - dy[a]),
+                              S(dz[a + d] - dz[a]), S(len[a + d] - len[a]), ac[a], al[a]);
+    sqrt_array(ac, rc, n);
+    if constexpr (P == Penalty::sqrt_weighted) sqrt_array(al, rl, n);
+    for (Index a = 0; a < n; ++a) {
+      const S ax = dx[a + d] - dx[a], ay = dy[a + d] - dy[a], az = dz[a + d] - dz[a];
+      const S dl = len[a + d] - len[a];
+      S qx, qy, qz, qq;
+      const S r_l = P == Penalty::sqrt_weighted ? rl[a] : S(0);  // norm reads none (nor fills rl)
+      eacc[a] += carap_term_penalty_roots(P, mk[a], wb[a], ax, ay, az, dl, rc[a], r_l, lam_c,
+                                          lam_l, qx, qy, qz, qq);
+      if constexpr (Grad) {
+        px[a] = qx;
+        py[a] = qy;
+        pz[a] = qz;
+        q[a] = qq;
+      }
+    }
   }
 }
 
@@ -181,6 +197,10 @@ struct RigidTerm : TermDefaults {
   bool has_energy[2] = {false, false};
   L alpha_c = L(0), lambda_c_c = L(0), lambda_l_c = L(0);
   L lambda_c_a = L(0), lambda_l_a = L(0);
+  Penalty penalty[2] = {Penalty::squared, Penalty::squared};  // per energy (E24)
+  S eps[2] = {S(0), S(0)};                                    // penalty_eps per energy
+  StopGradient stop = StopGradient::none;  // one for both (validate_options(RegularizerOptions))
+  bool keep_zero = false;  // sqrt_weighted: a zero-weight edge still adds m λ sqrt(ε)
   Index max_delta = 0;
   bool want_rotations = false;  // the caller wants the rotation gradient
 
@@ -203,16 +223,24 @@ struct RigidTerm : TermDefaults {
           has_energy[energy] = true;
         }
     };
+    auto penalties = [&](const auto& o, int energy) {
+      penalty[energy] = o.penalty;
+      eps[energy] = S(o.penalty_eps);
+      stop = o.stop_gradient;
+      keep_zero = keep_zero || (has_energy[energy] && o.penalty == Penalty::sqrt_weighted);
+    };
     if (carap) {
       add(carap->gaps, carap->weight, carap->normalization, 0);
       alpha_c = L(carap->alpha);
       lambda_c_c = L(carap->lambda_c);
       lambda_l_c = L(carap->lambda_l);
+      penalties(*carap, 0);
     }
     if (arap) {
       add(arap->gaps, arap->weight, arap->normalization, 1);
       lambda_c_a = L(arap->lambda_c);
       lambda_l_a = L(arap->lambda_l);
+      penalties(*arap, 1);
     }
   }
 
@@ -289,13 +317,15 @@ struct RigidTerm : TermDefaults {
     S* const* Eacc = k.Eacc;
     const S* Xb = v.Xb;
     S* GBx = v.GBx;
-    // Active edges: positive weight (a zero weight contributes exactly nothing).
+    // Active edges: positive weight (a zero weight contributes exactly nothing, except
+    // sqrt_weighted's m λ sqrt(ε), E24).
     Index m_e = 0;
+    const bool zero_ok = keep_zero;
     for (Index kk = 0; kk < K; ++kk) {
       const Index j = v.graph.indices(i, kk);
       if (j < 0) break;
       const S w = v.graph.weights(i, kk);
-      if (!(w > S(0))) continue;
+      if (!(w > S(0)) && !(zero_ok && w == S(0))) continue;
       k.nbr[static_cast<std::size_t>(m_e)] = j;
       k.wgt[static_cast<std::size_t>(m_e)] = w;
       ++m_e;
@@ -338,12 +368,29 @@ struct RigidTerm : TermDefaults {
       const int en = gaps[static_cast<std::size_t>(g)].energy;
       const S* mk = k.masks + g * k.M;
       const L lc = en == 0 ? lc_c : lc_a, ll = en == 0 ? ll_c : ll_a;
+      const S ep = eps[en];
+      // The penalty is a template argument of the loops (one branch per gap, not per term).
+      // Gx, Gy, Gz and H are free until the gather below: the roots' scratch.
+      const Penalty pen = penalty[en];
+      auto run = [&](auto pc, auto gc) {
+        constexpr Penalty Pp = decltype(pc)::value;
+        constexpr bool Gg = decltype(gc)::value;
+        carap_loops::pair_terms<Pp, Gg>(n, d, mk, Wb[en], Dx, Dy, Dz, Len, lc, ll, ep, Eacc[en],
+                                        k.P(g, 0), k.P(g, 1), k.P(g, 2), k.P(g, 3), Gx, Gy, Gz, H);
+      };
+      auto by_penalty = [&](auto gc) {
+        if (pen == Penalty::norm)
+          run(std::integral_constant<Penalty, Penalty::norm>{}, gc);
+        else if (pen == Penalty::sqrt_weighted)
+          run(std::integral_constant<Penalty, Penalty::sqrt_weighted>{}, gc);
+        else
+          run(std::integral_constant<Penalty, Penalty::squared>{}, gc);
+      };
       if (!grad) {
-        carap_loops::pair_energy(n, d, mk, Wb[en], Dx, Dy, Dz, Len, lc, ll, Eacc[en]);
+        by_penalty(std::false_type{});
         continue;
       }
-      carap_loops::pair_gradient(n, d, mk, Wb[en], Dx, Dy, Dz, Len, lc, ll, Eacc[en], k.P(g, 0),
-                                 k.P(g, 1), k.P(g, 2), k.P(g, 3));
+      by_penalty(std::true_type{});
       for (int c = 0; c < 4; ++c) std::fill(k.P(g, c) + n, k.P(g, c) + m, S(0));
       k.active[static_cast<std::size_t>(n_active++)] = g;
     }
@@ -372,17 +419,20 @@ struct RigidTerm : TermDefaults {
       }
       for (; a < n_active; ++a) carap_loops::gather_pairs_add(m, Gc[c], Pa(a, c), d_of(a));
     }
-    // Back to the variables (E10), once for both energies.
+    // Back to the variables (E10), once for both energies; a held endpoint (stop_gradient,
+    // E24) gets no position gradient, the rotation still does.
+    const bool x_nbr = want_x && stop != StopGradient::neighbor;
+    const bool x_row = want_x && stop != StopGradient::row;
     for (Index l = 0; l < 3 * ne; ++l) Fi[l] = Ri[l] = S(0);
     for (Index e = 0; e < m_e; ++e) {
       const Index o = e * ne;
       carap_loops::backprop(ne, R, Gx + o, Gy + o, Gz + o, H + o, InvLen + o, Ex + o, Ey + o,
                             Ez + o, Dx + o, Dy + o, Dz + o, Fi, Ri);
-      if (want_x)
+      if (x_nbr)
         carap_loops::add3(ne, GBx + k.nbr[static_cast<std::size_t>(e)] * n3, Gx + o, Gy + o,
                           Gz + o);
     }
-    if (want_x) carap_loops::sub(n3, GBx + i * n3, Fi);
+    if (x_row) carap_loops::sub(n3, GBx + i * n3, Fi);
     // The rotation gradient of node i reaches only node i's rows: owned frames straight into
     // the caller's rows (no other block writes them), the overlap into the spill.
     if (want_r)
