@@ -9,6 +9,7 @@
 #include <atomic>
 #include <cstdint>
 #include <stdexcept>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -50,7 +51,8 @@ void run_operators(const smg::test::OperatorInputs<double, I>& in, smg::EnergyWo
                    smg::ParallelOptions po, std::vector<double>& out) {
   const Index T = in.positions.frames(), N = in.positions.nodes();
   smg::test::for_each_operator([&](auto op) {
-    CAPTURE(op.name);
+    const std::string op_name = op.name;  // doctest CAPTUREs a const char* as a pointer
+    CAPTURE(op_name);
     std::vector<double> gx(T * N * 3, 0.0), gr(T * N * 3, 0.0), c(T * N, 0.0);
     out.push_back(op.run(in, {{gx.data(), T, N}, {gr.data(), T, N}, {c.data(), T, N}}, ws, po));
     out.insert(out.end(), gx.begin(), gx.end());

@@ -100,7 +100,8 @@ TEST_CASE("every operator with an exact gradient matches central differences") {
   smg::test::for_each_operator([&](auto op) {
     using Op = decltype(op);
     if constexpr (Op::exact_gradient) {
-      CAPTURE(Op::name);
+      const std::string op_name = Op::name;  // doctest CAPTUREs a const char* as a pointer
+      CAPTURE(op_name);
       const Outputs<double> a = run_op<Op>(s, 1);
       CHECK(a.energy > 0);
       const std::vector<double> fx =
@@ -149,7 +150,8 @@ TEST_CASE("every operator with an exact gradient equals AutoDiffScalar through i
   smg::test::for_each_operator([&](auto op) {
     using Op = decltype(op);
     if constexpr (Op::exact_gradient) {
-      CAPTURE(Op::name);
+      const std::string op_name = Op::name;
+      CAPTURE(op_name);
       const AD e = Op::run(in, smg::test::OperatorOutputs<AD>{},
                            static_cast<smg::EnergyWorkspace<AD>*>(nullptr), par);
       const Outputs<double> a = run_op<Op>(s, 1);
@@ -171,7 +173,8 @@ TEST_CASE("every operator in float agrees with double") {
   const Scene<float> sf = sd.cast<float>();
   smg::test::for_each_operator([&](auto op) {
     using Op = decltype(op);
-    CAPTURE(Op::name);
+    const std::string op_name = Op::name;
+    CAPTURE(op_name);
     const Outputs<double> d = run_op<Op>(sd, 2);
     const Outputs<float> f = run_op<Op>(sf, 2);
     CHECK(all_finite(f));
@@ -191,7 +194,8 @@ TEST_CASE("every operator is bit-identical for 1, 2 and 3 threads") {
   const Scene<float> sf = sd.cast<float>();
   smg::test::for_each_operator([&](auto op) {
     using Op = decltype(op);
-    CAPTURE(Op::name);
+    const std::string op_name = Op::name;
+    CAPTURE(op_name);
     const Outputs<double> d1 = run_op<Op>(sd, 1);
     const Outputs<float> f1 = run_op<Op>(sf, 1);
     for (int threads : {2, 3}) {
@@ -230,7 +234,8 @@ TEST_CASE("every operator stays finite on the hard cases") {
   add("two frames", 2, 3509, [](Scene<double>&) {});
   smg::test::for_each_operator([&](auto op) {
     using Op = decltype(op);
-    CAPTURE(Op::name);
+    const std::string op_name = Op::name;
+    CAPTURE(op_name);
     for (const Case& c : cases) {
       CAPTURE(c.name);
       const Outputs<double> d = run_op<Op>(c.s, 2);
@@ -279,7 +284,8 @@ TEST_CASE("every operator's validator takes good arguments and names a bad one")
   };
   t::for_each_operator([&](auto op) {
     using Op = decltype(op);
-    CAPTURE(Op::name);
+    const std::string op_name = Op::name;
+    CAPTURE(op_name);
     const smg::Status ok = Op::validate(good, out);
     CHECK_MESSAGE(ok, ok.message());
     t::OperatorInputs<double> in = good;
