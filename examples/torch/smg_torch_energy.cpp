@@ -65,6 +65,17 @@ F& cuda(F& f) {
   return f;
 }
 
+// This thread's workspace of S, kept between calls (one per thread and dtype, as a trainer keeps
+// one: smg/energy/workspace.hpp), for every CPU operator of the binding: without it each call
+// allocates and zero-fills the driver's scratch anew (at Shape of Motion's T = 3, N = 320 000 about
+// 7 times the input, 75 % of the call). It only grows; ops run one at a time per thread (the GIL
+// is released only inside the call).
+template <class S>
+smg::EnergyWorkspace<S>* thread_workspace() {
+  thread_local smg::EnergyWorkspace<S> workspace;
+  return &workspace;
+}
+
 // node_confidences(positions, indices, weights, visibility, kappa_m, kappa_r, lambda_m,
 // lambda_r, eps, validate) -> [T, N]
 at::Tensor node_confidences(const at::Tensor& positions, const at::Tensor& indices,
@@ -91,7 +102,7 @@ at::Tensor node_confidences(const at::Tensor& positions, const at::Tensor& indic
     const smg::FrameScalarsView<S> cv(mptr<S>(out), in.T, in.N);
     ok(smg::validate_confidence<S>(xv, vv, gv, o, cv), kEnergyNames);
     py::gil_scoped_release release;
-    smg::node_confidences<S>(xv, vv, gv, o, cv, {}, {}, nullptr, parallel_options());
+    smg::node_confidences<S>(xv, vv, gv, o, cv, {}, {}, thread_workspace<S>(), parallel_options());
     return 0;
   });
   return out;
@@ -119,12 +130,12 @@ py::tuple carap_impl(const CarapCall& call, const at::Tensor& positions, const a
     if (call.plain) {
       ok(smg::validate_arap<S>(xv, qv, gv, call.arap, gxv, gqv), kEnergyNames);
       py::gil_scoped_release release;
-      return double(smg::arap<S>(xv, qv, gv, call.arap, gxv, gqv, nullptr, parallel_options()));
+      return double(smg::arap<S>(xv, qv, gv, call.arap, gxv, gqv, thread_workspace<S>(), parallel_options()));
     }
     const auto cv = conf_view<S>(in.c);
     ok(smg::validate_carap<S>(xv, qv, cv, gv, call.carap, gxv, gqv), kEnergyNames);
     py::gil_scoped_release release;
-    return double(smg::carap<S>(xv, qv, cv, gv, call.carap, gxv, gqv, nullptr, parallel_options()));
+    return double(smg::carap<S>(xv, qv, cv, gv, call.carap, gxv, gqv, thread_workspace<S>(), parallel_options()));
   });
   return py::make_tuple(at::scalar_tensor(e, in.ref.options()), opt(gx), opt(gq));
 }
@@ -135,9 +146,8 @@ double accel_call(const at::Tensor& x, const smg::AccelOptions& o, const at::Ten
   const smg::PositionsView<const S> xv(cptr<S>(x), T, N);
   const smg::PositionsView<S> gxv = gx.defined() ? smg::PositionsView<S>(mptr<S>(gx), T, N) : smg::PositionsView<S>();
   ok(smg::validate_accel<S>(xv, {}, o, gxv), kEnergyNames);
-  thread_local smg::EnergyWorkspace<S> workspace;
   py::gil_scoped_release release;
-  return double(smg::accel<S>(xv, {}, o, gxv, &workspace, parallel_options()));
+  return double(smg::accel<S>(xv, {}, o, gxv, thread_workspace<S>(), parallel_options()));
 }
 
 py::tuple lrm_impl(const at::Tensor& positions, const at::Tensor& indices, const at::Tensor& weights,
@@ -157,7 +167,7 @@ py::tuple lrm_impl(const at::Tensor& positions, const at::Tensor& indices, const
                                              : smg::PositionsView<S>();
     ok(smg::validate_lrm<S>(xv, cv, gv, o, gxv), kEnergyNames);
     py::gil_scoped_release release;
-    return double(smg::lrm<S>(xv, cv, gv, o, gxv, nullptr, parallel_options()));
+    return double(smg::lrm<S>(xv, cv, gv, o, gxv, thread_workspace<S>(), parallel_options()));
   });
   return py::make_tuple(at::scalar_tensor(e, in.ref.options()), opt(gx));
 }
@@ -215,7 +225,7 @@ py::tuple regularizers_impl(const at::Tensor& positions, const OptTensor& quats,
     smg::RegularizerResult<S> r;
     {
       py::gil_scoped_release release;
-      r = smg::regularizers<S>(xv, qv, vv, gv, o, cv, gxv, gqv, nullptr, parallel_options());
+      r = smg::regularizers<S>(xv, qv, vv, gv, o, cv, gxv, gqv, thread_workspace<S>(), parallel_options());
     }
     double* e = energies.data_ptr<double>();
     smg::RegularizerResult<S>::each_energy([&](const char*, const auto& v) { *e++ = double(v); }, r);
@@ -252,7 +262,7 @@ py::tuple accel_impl(const at::Tensor& positions, const py::dict& options, bool 
 // make it: zero the gradient buffers, then op "carap" = smg::carap (energy + gradients w.r.t.
 // positions and raw quaternions) or "lrm" = smg::lrm (energy + position gradient), with the
 // Python wrappers' defaults (alpha 0.6, gaps 1, 2, 4, lambda_c = lambda_l = 1, huber 0.01, sum)
-// and no workspace (as the binding calls it), on torch's intra-op thread count.
+// and this thread's workspace (as the binding calls it), on torch's intra-op thread count.
 double library_seconds(const std::string& op, const at::Tensor& positions, const OptTensor& quats,
                        const at::Tensor& indices, const at::Tensor& weights, const OptTensor& confidence,
                        const py::int_& repeat_arg) {
@@ -300,9 +310,9 @@ double library_seconds(const std::string& op, const at::Tensor& positions, const
       std::fill(gxp, gxp + nx, S(0));
       if (carap_op) {
         std::fill(gqp, gqp + nq, S(0));
-        sink += smg::carap<S>(xv, quat_view<S>(in.q), cv, gv, co, gxv, gqv, nullptr, par);
+        sink += smg::carap<S>(xv, quat_view<S>(in.q), cv, gv, co, gxv, gqv, thread_workspace<S>(), par);
       } else {
-        sink += smg::lrm<S>(xv, cv, gv, lo, gxv, nullptr, par);
+        sink += smg::lrm<S>(xv, cv, gv, lo, gxv, thread_workspace<S>(), par);
       }
       best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     }
