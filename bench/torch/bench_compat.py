@@ -3,7 +3,7 @@
 best of --repeat runs, and peak memory.
 
 usage: PYTHONPATH=<build>/python /usr/bin/python3 bench/torch/bench_compat.py [--repeat 10]
-           [--threads 2] [--json FILE] [--quick]
+           [--threads 2] [--json FILE] [--quick] [--device cuda]
 
 Shape of Motion's track smoothness (flow3d/trainer.py): means [G, 3, B, 3] (the Gaussians'
 positions at t − 1, t, t + 1 for B batch frames), loss = mean ‖2 x_t − x_{t−1} − x_{t+1}‖ over
@@ -23,6 +23,10 @@ torch.set_num_threads(--threads), the peers by turns in each round. Peak: reside
 (bench_torch.RssPeak: pages touched, the inputs excluded, the gradient included; smg's
 workspace, kept between calls, is not counted once warm).
 --quick: G = 4 000, M = 1 000, 3 repeats (a smoke run). Prints a markdown table; --json writes the rows.
+--device cuda (smg_torch built with its CUDA operators, docs/torch.md): the same cases on the GPU, time by
+CUDA events (best of --repeat after two warm-ups), peak = torch.cuda.max_memory_allocated growth over one
+call (the inputs excluded), and a third peer, torch.compile of the upstream expression (timed after its first
+call, whose seconds are reported as compile_s).
 """
 import argparse
 import gc
@@ -84,9 +88,43 @@ def peak(fn, xs):
     return p
 
 
-def mosca_cases(M, g):
+def cuda_best(fn, xs, repeat):
+    """Best seconds of fn(*xs).backward() by CUDA events over `repeat` runs, after two warm-ups."""
+    call(fn, xs)
+    call(fn, xs)
+    times = []
+    for _ in range(repeat):
+        a, b = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
+        a.record()
+        call(fn, xs)
+        b.record()
+        torch.cuda.synchronize()
+        times.append(a.elapsed_time(b) * 1e-3)
+    for x in xs:
+        x.grad = None
+    return min(times)
+
+
+def cuda_peak(fn, xs):
+    """Growth of torch.cuda.max_memory_allocated over one call (the gradients included)."""
+    for x in xs:
+        x.grad = None
+    torch.cuda.synchronize()
+    base = torch.cuda.memory_allocated()
+    torch.cuda.reset_peak_memory_stats()
+    call(fn, xs)
+    torch.cuda.synchronize()
+    p = torch.cuda.max_memory_allocated() - base
+    for x in xs:
+        x.grad = None
+    return p
+
+
+def mosca_cases(M, g, device="cpu"):
     """MoSca's photometric window: (name, shape, inputs, smg loss, torch loss)."""
     xyz, q, ti, mask, lv = mosca_scene(T=25, M=M, K=16, seed=0, dtype=torch.float32)
+    xyz, q, ti, mask = (t.to(device) for t in (xyz, q, ti, mask))
+    lv = tuple((e.to(device), w.to(device), mu, dn, ds) for e, w, mu, dn, ds in lv)
     x, r = xyz.requires_grad_(), q.requires_grad_()
 
     def arap_smg(x, r):
@@ -108,7 +146,13 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--json", default=None)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     a = ap.parse_args()
+    if a.device == "cuda":
+        import smg_torch
+        if not (torch.cuda.is_available() and smg_torch.has_cuda):
+            sys.exit("bench_compat: error: --device cuda needs a GPU and smg_torch built with CUDA (docs/torch.md)")
+        return main_cuda(a)
     repeat = 3 if a.quick else a.repeat
     G = 4000 if a.quick else 40000
     torch.set_num_threads(a.threads)
@@ -136,6 +180,51 @@ def main():
     if a.json:
         with open(a.json, "w") as f:
             json.dump(dict(threads=a.threads, repeat=repeat, torch=torch.__version__, rows=rows), f, indent=1)
+
+
+def main_cuda(a):
+    """The cases on the GPU: smg, eager torch and torch.compile of the upstream expression."""
+    repeat = 3 if a.quick else a.repeat
+    G = 4000 if a.quick else 40000
+    g = torch.Generator().manual_seed(0)
+    cases = []
+    for name, shape in [("SoM tracks [G, 3, B, 3]", (G, 3, 8, 3)), ("SoM init tracks [G, T, 3]", (G, 30, 3))]:
+        x = (torch.randn(shape, generator=g).cumsum(1) * 0.1).float().cuda().requires_grad_()
+        cases.append((name, list(shape), [x], som_accel, som_accel_torch))
+    cases += mosca_cases(1000 if a.quick else 10000, g, "cuda")
+    rows = []
+    for name, shape, xs, f_smg, f_ref in cases:
+        e_smg, e_ref = float(f_smg(*xs)), float(f_ref(*xs))
+        row = dict(case=name, shape=shape, input_bytes=sum(x.numel() * x.element_size() for x in xs),
+                   rel_diff=abs(e_smg - e_ref) / abs(e_ref))
+        for peer, fn in (("smg", f_smg), ("torch", f_ref)):
+            rows.append(dict(row, peer=peer, seconds=cuda_best(fn, xs, repeat), peak_bytes=cuda_peak(fn, xs)))
+        try:
+            torch._dynamo.reset()
+            fc = torch.compile(f_ref)
+            torch.cuda.synchronize()
+            t0 = time.perf_counter()
+            call(fc, xs)
+            torch.cuda.synchronize()
+            compile_s = time.perf_counter() - t0
+            rows.append(dict(row, peer="torch.compile", seconds=cuda_best(fc, xs, repeat),
+                             peak_bytes=cuda_peak(fc, xs), compile_s=compile_s,
+                             rel_diff=abs(e_smg - float(fc(*xs))) / abs(e_ref)))
+        except Exception as e:  # noqa: BLE001  (a compile failure is reported as a row, not a crash)
+            rows.append(dict(row, peer="torch.compile", seconds=float("nan"), peak_bytes=0,
+                             note=f"{type(e).__name__}: {str(e).splitlines()[0][:200]}"))
+    print(f"{torch.cuda.get_device_name()}, torch {torch.__version__}, float32, best of {repeat} (CUDA events), "
+          "forward + backward; peak = max_memory_allocated growth of one call")
+    print("| case | shape | peer | ms | peak MiB | input MiB | energy rel. diff to smg | note |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        note = r.get("note", f"compile {r['compile_s']:.1f} s" if "compile_s" in r else "")
+        print(f"| {r['case']} | {r['shape']} | {r['peer']} | {r['seconds'] * 1e3:.3f} | "
+              f"{r['peak_bytes'] / 2**20:.1f} | {r['input_bytes'] / 2**20:.1f} | {r['rel_diff']:.1e} | {note} |")
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(dict(device=torch.cuda.get_device_name(), repeat=repeat, torch=torch.__version__,
+                           rows=rows), f, indent=1)
 
 
 if __name__ == "__main__":
