@@ -22,7 +22,10 @@ losses) against compute_vel_acc_loss's reading; backward to the positions and ra
 torch.set_num_threads(--threads), the peers by turns in each round. Peak: resident-set growth over one call
 (bench_torch.RssPeak: pages touched, the inputs excluded, the gradient included; smg's
 workspace, kept between calls, is not counted once warm).
---quick: G = 4 000, M = 1 000, 3 repeats (a smoke run). Prints a markdown table; --json writes the rows.
+Dynamic 3D Gaussians (train.py get_loss, t >= 1): N = 100 000 foreground Gaussians, K = 20,
+loss = 4 rigid + 4 rot + 2 iso: smg_torch.compat.d3dgs_losses against the upstream expressions
+(tests/torch/test_compat_d3dgs.py's d3dgs_torch, eager).
+--quick: G = 4 000, M = 1 000, N = 10 000, 3 repeats (a smoke run). Prints a markdown table; --json writes the rows.
 --device cuda (smg_torch built with its CUDA operators, docs/torch.md): the same cases on the GPU, time by
 CUDA events (best of --repeat after two warm-ups), peak = torch.cuda.max_memory_allocated growth over one
 call (the inputs excluded), and a third peer, torch.compile of the upstream expression (timed after its first
@@ -45,8 +48,9 @@ sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "tests", "torch"))
 
 import bench_torch  # noqa: E402  (RssPeak)
-from smg_torch.compat import mosca_arap, mosca_vel_acc, som_accel  # noqa: E402
+from smg_torch.compat import d3dgs_losses, mosca_arap, mosca_vel_acc, som_accel  # noqa: E402
 from test_compat import GAMMAS, SHIFTS, mosca_arap_torch, mosca_scene, mosca_vel_acc_torch  # noqa: E402
+from test_compat_d3dgs import d3dgs_torch  # noqa: E402
 
 
 def som_accel_torch(m):
@@ -140,6 +144,34 @@ def mosca_cases(M, g, device="cpu"):
              lambda x, r: sum(mosca_vel_acc_torch(x, r)))]
 
 
+def d3dgs_cases(N, device="cpu"):
+    """Dynamic 3D Gaussians' timestep t >= 1: N foreground Gaussians, K = 20 neighbours (here the 20
+    nearest in a sorted order along x, i ± 1 .. 10: a KNN-like graph without an O(N²) search),
+    weights exp(−2000 d²), loss = 4 rigid + 4 rot + 2 iso; backward to fg_pts and fg_rot."""
+    g = torch.Generator().manual_seed(1)
+    pts = torch.rand(N, 3, generator=g)
+    pts = pts[pts[:, 0].argsort()]
+    off = torch.tensor([o for o in range(-10, 11) if o != 0])
+    i = torch.arange(N)[:, None]
+    idx = (i + off[None, :])
+    idx = torch.where(idx < 0, idx + 21, idx)
+    idx = torch.where(idx >= N, idx - 21, idx)
+    d0 = (pts[idx] - pts[:, None]).norm(dim=-1)
+    w = torch.exp(-2000 * d0 ** 2)
+    prev_rot = torch.nn.functional.normalize(torch.randn(N, 4, generator=g), dim=-1)
+    fg_rot = torch.nn.functional.normalize(prev_rot + 0.05 * torch.randn(N, 4, generator=g), dim=-1)
+    prev_pts = pts + 0.01 * torch.randn(N, 3, generator=g)
+    fg_pts = prev_pts + 0.01 * torch.randn(N, 3, generator=g)
+    dev = lambda t: t.to(device)  # noqa: E731
+    prev_pts, prev_rot, idx, w, d0 = map(dev, (prev_pts, prev_rot, idx, w, d0))
+    x, r = dev(fg_pts).requires_grad_(), dev(fg_rot).requires_grad_()
+
+    def loss(fn):
+        return lambda x, r: sum(c * l for c, l in zip((4.0, 4.0, 2.0), fn(x, r, prev_pts, prev_rot, idx, w, d0)))
+
+    return [("D3DGS rigid + rot + iso", [N, 20], [x, r], loss(d3dgs_losses), loss(d3dgs_torch))]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeat", type=int, default=10)
@@ -162,6 +194,7 @@ def main():
         x = (torch.randn(shape, generator=g).cumsum(1) * 0.1).float().requires_grad_()
         cases.append((name, list(shape), [x], som_accel, som_accel_torch))
     cases += mosca_cases(1000 if a.quick else 10000, g)
+    cases += d3dgs_cases(10000 if a.quick else 100000)
     rows = []
     for name, shape, xs, f_smg, f_ref in cases:
         e_smg, e_ref = float(f_smg(*xs)), float(f_ref(*xs))
@@ -192,6 +225,7 @@ def main_cuda(a):
         x = (torch.randn(shape, generator=g).cumsum(1) * 0.1).float().cuda().requires_grad_()
         cases.append((name, list(shape), [x], som_accel, som_accel_torch))
     cases += mosca_cases(1000 if a.quick else 10000, g, "cuda")
+    cases += d3dgs_cases(10000 if a.quick else 100000, "cuda")
     rows = []
     for name, shape, xs, f_smg, f_ref in cases:
         e_smg, e_ref = float(f_smg(*xs)), float(f_ref(*xs))

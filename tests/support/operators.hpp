@@ -253,6 +253,39 @@ struct Angle {
   }
 };
 
+// Relative-rotation consistency (E25) with its default penalty, sqrt_weighted: k sqrt(ε) per
+// term where the relative rotations agree (a still trajectory's energy is above 0).
+struct Relrot {
+  static constexpr const char* name = "relrot";
+  static constexpr const char* term = "relrot";
+  static constexpr bool exact_gradient = true;
+  static constexpr bool still_floor = true;
+  static RegularizerOptions options() { return {}; }
+  template <class S, class I, bool M>
+  static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S>,
+                                 detail::NonDeducedT<RotationGradientView<S>> gr, FrameScalarsView<S>,
+                                 EnergyWorkspace<S>* workspace, ParallelOptions parallel) {
+    return relrot(in.rotations, in.graph, o.relrot, gr, workspace, parallel);
+  }
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
+                    ParallelOptions parallel = {}) {
+    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
+  }
+  static constexpr unsigned reads = kReadsGraph | kReadsRotations | kNoPositions;
+  static constexpr Penalty default_penalty = Penalty::sqrt_weighted;
+  static Penalty& penalty_of(RegularizerOptions& o) { return o.relrot.penalty; }
+  template <class S, class I, bool M>
+  static Status validate_with(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out,
+                              const RegularizerOptions& o) {
+    return validate_relrot<S>(in.rotations, in.graph, o.relrot, out.rotations);
+  }
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
+    return validate_with(in, out, options());
+  }
+};
+
 // A term's operator (Accel, Carap, Angle) with each other penalty of the library's list
 // (kPenalties: E22 for the smoothness and the angles, E24 for the rigid energies; the default,
 // Base::default_penalty, is the operator itself): the same calls with
@@ -345,9 +378,10 @@ struct Regularizers {
 
 // The list. A new regulariser gets a struct like the ones above and an entry here; a term of the
 // fused step that has none fails test_regularizers.cpp's "every term on the list".
-using Operators = decltype(std::tuple_cat(std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Accel, Angle>{},
+using Operators = decltype(std::tuple_cat(std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Accel, Angle, Relrot>{},
                                           PenaltyOperators<Accel>{}, PenaltyOperators<Carap>{},
-                                          PenaltyOperators<Angle>{}, std::tuple<Regularizers>{}));
+                                          PenaltyOperators<Angle>{}, PenaltyOperators<Relrot>{},
+                                          std::tuple<Regularizers>{}));
 
 // Calls f(Op{}) for each operator of the list, in its order.
 template <class F>

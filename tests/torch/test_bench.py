@@ -65,7 +65,10 @@ def test_scaling_quick_runs(tmp_path):
         assert b["pytorch_ms"] != b["pytorch_ms"]  # NaN
     for b in rows:
         if hasattr(torch, "compile"):
-            assert b["compile_ms"] > 0 and b["compile_time_s"] > 0
+            # the first size runs; later ones are predicted over the limit as the eager peer's
+            # (torch 2.x on a GPU machine, 2026-11-28: compile_ms NaN there, with the note)
+            assert (b["compile_ms"] > 0 and b["compile_time_s"] > 0) if b is first else \
+                (b["compile_ms"] > 0 or b["compile_note"].startswith("skipped: predicted"))
         else:
             assert b["compile_note"] == f"torch.compile: not available in torch {torch.__version__}"
             assert b["compile_ms"] != b["compile_ms"]
@@ -77,7 +80,7 @@ def test_bench_compat_quick_runs(tmp_path):
     r = _run([os.path.join(BENCH, "bench_compat.py"), "--quick", "--json", str(out)], tmp_path)
     assert r.returncode == 0, r.stderr
     rows = json.loads(out.read_text())["rows"]
-    assert [row["peer"] for row in rows] == ["smg", "torch"] * 4
+    assert [row["peer"] for row in rows] == ["smg", "torch"] * 5
     for row in rows:
         assert row["seconds"] > 0 and row["rel_diff"] < 1e-5
     assert "| case | shape | peer |" in r.stdout

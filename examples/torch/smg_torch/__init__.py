@@ -309,8 +309,10 @@ def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: Grap
     REGULARIZER_TERMS says. The terms today, for example: the confidences (confidence, E2-E6;
     visibility [T, N] or None = all visible), C-ARAP (carap, E7-E10), plain ARAP (arap), LRM
     (lrm, E11-E16), trajectory smoothness (accel, E21: squared accelerations or velocities of
-    the node trajectories, as MoSca and Shape-of-Motion regularise) and the rotation-angle term
-    (angle, E23: MoSca's rotation velocity / acceleration, the angles of R^{t+1} R^{tT}). With
+    the node trajectories, as MoSca and Shape-of-Motion regularise), the rotation-angle term
+    (angle, E23: MoSca's rotation velocity / acceleration, the angles of R^{t+1} R^{tT}) and
+    relative-rotation consistency (relrot, E25: Dynamic 3D Gaussians' "rot", the relative
+    rotations R^{t+1} R^{tT} of neighbours compared as 4-vectors). With
     confidence off, C-ARAP and LRM use c = 1. quats [T, N, 4] may be None when no term on uses
     them. Returns
     Regularizers(total, carap, arap, lrm, confidence, ...the other energies): `total` is

@@ -7,7 +7,9 @@ operators, so that a training script swaps one line (docs/compat.md).
 Covered: Shape of Motion's `compute_accel_loss` (flow3d/loss_utils.py), on 3-vectors; MoSca's
 `MoSca.compute_arap_loss` and `MoSca.compute_vel_acc_loss` (lib_mosca/mosca.py); SC-GS's
 `cal_arap_error` (utils/deform_utils.py: per-node Procrustes rotations, then the weighted sum of
-squared stretches) as `scgs_arap`, through smg's plain ARAP (E9).
+squared stretches) as `scgs_arap`, through smg's plain ARAP (E9); Dynamic 3D Gaussians' rigid,
+rot and iso losses (train.py get_loss) as `d3dgs_losses`, through smg's plain ARAP under the
+sqrt_weighted penalty (E24) and the relative-rotation term (E25).
 """
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ import torch
 from . import (_REGULARIZER_ENERGIES, REGULARIZER_DEFAULTS, REGULARIZER_TERMS, _C, _scale, _term_options,
                arap, has_cuda, regularizers)
 
-__all__ = ["som_accel", "mosca_arap", "mosca_vel_acc", "scgs_arap"]
+__all__ = ["som_accel", "mosca_arap", "mosca_vel_acc", "scgs_arap", "d3dgs_losses"]
 
 # smg's smoothness (E21) with the unsquared norm (E22) and Normalization::mean, i.e. the mean of
 # ‖a‖ over the (T − 2)·N terms: the accel term's options.
@@ -517,3 +519,155 @@ def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, 
     positions = torch.stack([x[0].expand(P, Nv, 3).reshape(P * Nv, 3), x[1:].reshape(P * Nv, 3)])
     return arap(positions, quats, (g_idx, g_w), lambda_c=1.0, lambda_l=0.0, gaps=(1,),
                 gap_weights=(1.0,), normalize=False)
+
+
+# Dynamic 3D Gaussians' floor inside every square root (helpers.py weighted_l2_loss_v1/_v2 and
+# train.py's curr_offset_mag).
+_D3DGS_EPS = 1e-20
+# Rows per chunk of the isometry loss: a [rows, K, 3] gather at a time (about 4 MiB in float32 at
+# K = 20), not the whole [N, K, 3].
+_D3DGS_ISO_ROWS = 16384
+
+
+class _D3dgsPartsFunction(torch.autograd.Function):
+    """(rigid, rot) of Dynamic 3D Gaussians from smg's fused step on the two-frame window
+    x = [prev_pts, fg_pts], q = [prev_rot, fg_rot]: rigid is plain ARAP's coordinate part (E9)
+    under sqrt_weighted (E24), rot the relative-rotation term (E25), both with the mean over
+    N·K. Forward: where a gradient is wanted, one pass per loss with its gradient (each loss
+    has its own weight upstream, and the two passes cost less than an energy pass and a
+    gradient pass of both: 281 against 385 ms at N = 100 000, K = 20, 2 threads); else one
+    energy-only pass with both. Backward: g_r·∇rigid + g_q·∇rot of the frame-1 rows (fg's; the
+    previous state gets none)."""
+
+    @staticmethod
+    def forward(ctx, fg_pts, fg_rot, prev_pts, prev_rot, idx, w):
+        x = torch.stack((prev_pts.detach(), fg_pts.detach()))
+        q = torch.stack((prev_rot.detach(), fg_rot.detach()))
+        need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
+        if not (need_x or need_q):
+            e, _, _ = _fused(x, q, idx, w, _d3dgs_terms(1.0, 1.0), False, False)
+            return fg_pts.new_tensor(e["arap"]), fg_pts.new_tensor(e["relrot"])
+        er, gxr, gqr = _fused(x, q, idx, w, _d3dgs_terms(1.0, 0.0), need_x, need_q)
+        eq, gxq, gqq = _fused(x, q, idx, w, _d3dgs_terms(0.0, 1.0), need_x, need_q)
+        ctx.grads = tuple(None if g is None else g[1] for g in (gxr, gqr, gxq, gqq))
+        return fg_pts.new_tensor(er["arap"]), fg_pts.new_tensor(eq["relrot"])
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g_rigid, g_rot):
+        gxr, gqr, gxq, gqq = ctx.grads
+        gx = None if gxr is None else gxr * g_rigid + gxq * g_rot
+        gq = None if gqr is None else gqr * g_rigid + gqq * g_rot
+        return gx, gq, None, None, None, None
+
+
+def _d3dgs_terms(w_rigid, w_rot):
+    """The fused step's terms for D3DGS's rigid and rot losses, with these weights (0 turns one
+    off)."""
+    sq = dict(penalty="sqrt_weighted", penalty_eps=_D3DGS_EPS, normalize=True)
+    terms = {}
+    if w_rigid != 0:
+        terms["arap"] = dict(REGULARIZER_DEFAULTS["arap"], lambda_c=1.0, lambda_l=0.0, gaps=[1], gap_weights=[1.0],
+                             weight=w_rigid, stop_gradient="none", **sq)
+    if w_rot != 0:
+        terms["relrot"] = dict(REGULARIZER_DEFAULTS["relrot"], weight=w_rot, **sq)
+    return terms
+
+
+class _D3dgsIsoFunction(torch.autograd.Function):
+    """D3DGS's isometry loss, mean over N·K of sqrt(w (sqrt(‖x_j − x_i‖² + 1e-20) − d0)² + 1e-20),
+    by chunks of rows (smg has no rest-length input: this loss alone is plain torch, with the
+    gradient written out and formed in the forward pass when wanted): dL/dx_j = c e / ℓ and
+    dL/dx_i = −Σ_j c e / ℓ with e = x_j − x_i, ℓ = sqrt(‖e‖² + 1e-20),
+    c = w (ℓ − d0) / (N K sqrt(w (ℓ − d0)² + 1e-20)); the x_j part by scatter_add_ on the flat
+    gradient (a third of index_add_'s time on a CPU)."""
+
+    @staticmethod
+    def forward(ctx, fg_pts, idx, w, d0):
+        x = fg_pts.detach()
+        N, K = idx.shape
+        grad = ctx.needs_input_grad[0]
+        total = x.new_zeros(())
+        g = torch.zeros(N * 3, dtype=x.dtype, device=x.device) if grad else None
+        xyz = torch.arange(3, device=x.device)
+        for a in range(0, N, _D3DGS_ISO_ROWS):
+            b = min(N, a + _D3DGS_ISO_ROWS)
+            nb = idx[a:b]
+            e = x[nb] - x[a:b, None]
+            ell = torch.sqrt((e * e).sum(-1) + _D3DGS_EPS)
+            r = ell - d0[a:b]
+            root = torch.sqrt(r * r * w[a:b] + _D3DGS_EPS)
+            total = total + root.sum()
+            if grad:
+                ge = (w[a:b] * r / (root * ell))[..., None] * e
+                g.scatter_add_(0, (nb[..., None] * 3 + xyz).reshape(-1), ge.reshape(-1))
+                g[3 * a:3 * b] -= ge.sum(1).reshape(-1)
+        ctx.grad = None if g is None else g.view(N, 3) / (N * K)
+        return total / (N * K)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g):
+        return ctx.grad * g, None, None, None
+
+
+def d3dgs_losses(fg_pts: torch.Tensor, fg_rot: torch.Tensor, prev_pts: torch.Tensor, prev_rot: torch.Tensor,
+                 neighbor_indices: torch.Tensor, neighbor_weight: torch.Tensor,
+                 neighbor_dist: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Dynamic 3D Gaussians' rigidity, rotation and isometry losses (train.py get_loss, timesteps
+    after the first) → (rigid, rot, iso): fg_pts [N, 3] and fg_rot [N, 4] the foreground means
+    and normalised rotations (w x y z) being optimised; prev_pts, prev_rot the same at the end
+    of the previous timestep (variables["prev_pts"][is_fg] and variables["prev_rot"][is_fg]: the
+    state D3DGS's prev_offset and prev_inv_rot_fg are made from); neighbor_indices [N, K] (int64
+    or int32, every slot a node: Open3D's KNN), neighbor_weight [N, K] ≥ 0, neighbor_dist [N, K]
+    (variables["neighbor_*"], from the first timestep).
+
+        rigid = mean sqrt(w ‖R(rel_i)ᵀ(x_j − x_i) − (p_j − p_i)‖² + 1e-20),  rel = fg_rot ⊗ prev_rot*
+        rot   = mean sqrt(w ‖rel_j − rel_i‖² + 1e-20)
+        iso   = mean sqrt(w (sqrt(‖x_j − x_i‖² + 1e-20) − d0_ij)² + 1e-20)
+
+    How: rigid is smg's plain ARAP coordinate part (E9) with the sqrt_weighted penalty (E24) on the
+    window [prev, fg] (the same norm: R(rel)ᵀ e = R_prev R_fgᵀ e, and R_prev is orthonormal), rot
+    smg's relative-rotation term (E25); both from one fused pass forward and one backward. iso is
+    plain torch by chunks of rows with its gradient written out (smg has no rest-length input).
+    Gradients reach fg_pts and fg_rot (the previous state is a constant). fg_rot's gradient is
+    that of the rotation: its radial part, which D3DGS's raw 4-vector "rot" has and
+    F.normalize's backward then removes, is 0 here, so the gradient of the optimised
+    unnorm_rotations is D3DGS's (docs/math/terms/relrot.md). CPU and CUDA tensors."""
+    for name, t in (("fg_pts", fg_pts), ("fg_rot", fg_rot), ("prev_pts", prev_pts), ("prev_rot", prev_rot),
+                    ("neighbor_indices", neighbor_indices), ("neighbor_weight", neighbor_weight),
+                    ("neighbor_dist", neighbor_dist)):
+        if not isinstance(t, torch.Tensor):
+            raise ValueError(f"{name}: expected a torch.Tensor, got {type(t).__name__}")
+    if fg_pts.dim() != 2 or fg_pts.shape[1] != 3 or fg_pts.shape[0] == 0:
+        raise ValueError(f"fg_pts: expected shape [N, 3] with N >= 1, got {list(fg_pts.shape)}")
+    _check_floats("fg_pts", fg_pts)
+    N = fg_pts.shape[0]
+    for name, t, shape in (("fg_rot", fg_rot, [N, 4]), ("prev_pts", prev_pts, [N, 3]), ("prev_rot", prev_rot, [N, 4])):
+        if list(t.shape) != shape:
+            raise ValueError(f"{name}: expected shape {shape} (N of fg_pts), got {list(t.shape)}")
+    if neighbor_indices.dim() != 2 or neighbor_indices.shape[0] != N or neighbor_indices.shape[1] == 0:
+        raise ValueError(f"neighbor_indices: expected shape [N, K] with N = {N}, K >= 1, got "
+                         f"{list(neighbor_indices.shape)}")
+    if neighbor_indices.dtype not in (torch.int64, torch.int32):
+        raise ValueError(f"neighbor_indices: dtype must be int64 or int32, got {neighbor_indices.dtype}")
+    for name, t in (("neighbor_weight", neighbor_weight), ("neighbor_dist", neighbor_dist)):
+        if list(t.shape) != list(neighbor_indices.shape):
+            raise ValueError(f"{name}: expected shape {list(neighbor_indices.shape)} (neighbor_indices'), "
+                             f"got {list(t.shape)}")
+    for name, t in (("fg_rot", fg_rot), ("prev_pts", prev_pts), ("prev_rot", prev_rot),
+                    ("neighbor_weight", neighbor_weight), ("neighbor_dist", neighbor_dist)):
+        if t.dtype != fg_pts.dtype:
+            raise ValueError(f"{name}: dtype {t.dtype} differs from fg_pts' {fg_pts.dtype}")
+    for name, t in (("fg_rot", fg_rot), ("prev_pts", prev_pts), ("prev_rot", prev_rot),
+                    ("neighbor_indices", neighbor_indices), ("neighbor_weight", neighbor_weight),
+                    ("neighbor_dist", neighbor_dist)):
+        if t.device != fg_pts.device:
+            raise ValueError(f"{name}: device {t.device} differs from fg_pts' {fg_pts.device}")
+    if bool((neighbor_indices < 0).any()) or bool((neighbor_indices >= N).any()):
+        raise ValueError(f"neighbor_indices: every entry must be a node in [0, {N}) (Open3D's KNN fills every slot)")
+    idx = neighbor_indices.contiguous()
+    w = neighbor_weight.contiguous()
+    rigid, rot = _D3dgsPartsFunction.apply(fg_pts, fg_rot, prev_pts, prev_rot, idx, w)
+    iso = _D3dgsIsoFunction.apply(fg_pts, idx.long(), w, neighbor_dist.contiguous())
+    return rigid, rot, iso

@@ -73,13 +73,21 @@ struct ElementReadsRotations : std::false_type {};
 template <class E>
 struct ElementReadsRotations<E, std::void_t<decltype(E::kReadsRotations)>>
     : std::integral_constant<bool, E::kReadsRotations> {};
+// An Element along the edges (`static constexpr bool kReadsGraph = true`, RelrotElement) reads
+// the graph and its in-edges (ElementGraph: the gradient of its node from the terms of the edges
+// into it, no atomics) and the rotations: at(t, n, q, graph, grad_tangent, grad_raw, energy).
+template <class E, class = void>
+struct ElementReadsGraph : std::false_type {};
+template <class E>
+struct ElementReadsGraph<E, std::void_t<decltype(E::kReadsGraph)>>
+    : std::integral_constant<bool, E::kReadsGraph> {};
 
 template <class... Es>
 struct ElementPack {
   static constexpr int size = 0;
-  template <class S>
+  template <class S, class I>
   SMG_HOST_DEVICE void at(Index, Index, PositionsView<const S>, QuaternionsView<const S>, const S*,
-                          S*, S*, S*, S*) const {}
+                          const smg::detail::ElementGraph<S, I>&, S*, S*, S*, S*) const {}
   bool any_on() const { return false; }
   bool reads_confidence() const { return false; }
   bool reads_rotations() const { return false; }
@@ -90,20 +98,24 @@ struct ElementPack<E, Es...> {
   bool on = false;
   E step;
   ElementPack<Es...> rest;
-  template <class S>
+  template <class S, class I>
   SMG_HOST_DEVICE void at(Index t, Index n, PositionsView<const S> x, QuaternionsView<const S> q,
-                          const S* conf, S* grad_x, S* grad_tangent, S* grad_raw, S* e) const {
-    if constexpr (ElementReadsRotations<E>::value) {
+                          const S* conf, const smg::detail::ElementGraph<S, I>& eg, S* grad_x, S* grad_tangent,
+                          S* grad_raw, S* e) const {
+    if constexpr (ElementReadsGraph<E>::value) {
+      if (on) step.at(t, n, q, eg, grad_tangent, grad_raw, e[0]);
+    } else if constexpr (ElementReadsRotations<E>::value) {
       if (on) step.at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, e[0]);
     } else {
       if (on) step.at(t, n, x, conf, grad_x, e[0]);
     }
-    rest.at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, e + 1);
+    rest.at(t, n, x, q, conf, eg, grad_x, grad_tangent, grad_raw, e + 1);
   }
   bool any_on() const { return on || rest.any_on(); }
   bool reads_confidence() const { return (on && step.reads_confidence()) || rest.reads_confidence(); }
   bool reads_rotations() const {
-    return (on && ElementReadsRotations<E>::value) || rest.reads_rotations();
+    return (on && (ElementReadsRotations<E>::value || ElementReadsGraph<E>::value)) ||
+           rest.reads_rotations();
   }
 };
 
@@ -343,7 +355,8 @@ struct ElementTerms {
     if (rigid)
       fused_rigid_node_at(t, n, rigid_constants, x, q, conf, graph, rev_offsets, rev_entries,
                           grad_x, grad_tangent, grad_raw, e);
-    elements.at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, e + 2);
+    elements.at(t, n, x, q, conf, smg::detail::ElementGraph<S, I>{graph, rev_offsets, rev_entries}, grad_x,
+                grad_tangent, grad_raw, e + 2);
   }
 };
 

@@ -100,6 +100,17 @@ std::size_t regularizer_input_bytes(Index T, Index N, Index K, bool rotations, b
   return b;
 }
 
+// The graph with its in-edges, for an element of the CUDA pass that reads its neighbours' terms
+// (cuda/driver.cuh, kReadsGraph): graph [N][K], offsets
+// [N + 1] and entries (slot i·K + k of each edge into node n, in offsets[n] .. offsets[n + 1]),
+// the CUDA driver's ReverseGraph; edge_count = &offsets[N] (the valid edges).
+template <class S, class I>
+struct ElementGraph {
+  NeighborsView<S, I> graph;
+  const std::int32_t* in_offsets = nullptr;
+  const std::int64_t* in_entries = nullptr;
+};
+
 // Frames per block: a function of T and the largest reach only (determinism). A block
 // recomputes max δ frames past its end, so longer blocks waste less; about 6 blocks (8 to 32
 // frames each) still give the threads of a small machine fair shares. Rounded down so that

@@ -185,6 +185,17 @@ struct AngleOptions {
   double penalty_eps = 1e-20;  // ε of sqrt_weighted (radian²), finite and > 0; read by it only
 };
 
+// Relative-rotation consistency (E25, docs/math/terms/relrot.md), Dynamic 3D Gaussians' "rot"
+// loss: along every edge (i, j) of the graph and every pair of consecutive frames, the relative
+// rotations r^t = q̂^{t+1} ⊗ q̂^{t*} of the two nodes compared as raw 4-vectors, ‖r_j^t − r_i^t‖,
+// under a penalty (E22) with the edge weight w_ij. The default is D3DGS's: sqrt(w ‖·‖² + ε).
+struct RelrotOptions {
+  Normalization normalization = Normalization::sum;  // mean: over (T − 1) · edges terms
+  double weight = 1.0;  // overall factor (dimensionless, r is a unit quaternion's difference)
+  Penalty penalty = Penalty::sqrt_weighted;  // (E22); D3DGS's weighted_l2_loss_v2
+  double penalty_eps = 1e-20;  // ε of sqrt_weighted, finite and > 0; read by it only
+};
+
 // The named enums of the options: enum_values(E{}) is the list of E's values, each with its
 // name to_string(e). The bindings read and write an option of such a type by its name
 // (smg_torch's string, smg_cli's choice flag) and validate_options refuses a value not listed,
@@ -202,10 +213,13 @@ struct RegularizerTerms {
   bool lrm = true;         // (E14), weights (E7) with the confidences
   bool accel = false;      // (E21), trajectory smoothness
   bool angle = false;      // (E23), rotation-angle velocity / acceleration
+  bool relrot = false;     // (E25), relative-rotation consistency along the edges
 };
 
 // Whether a term that is on reads the rotations (so the caller must give them).
-inline bool reads_rotations(const RegularizerTerms& t) { return t.carap || t.arap || t.angle; }
+inline bool reads_rotations(const RegularizerTerms& t) {
+  return t.carap || t.arap || t.angle || t.relrot;
+}
 
 // The options of the fused step: the terms, and each term's own options (plain values).
 struct RegularizerOptions {
@@ -216,6 +230,7 @@ struct RegularizerOptions {
   LrmOptions lrm;
   AccelOptions accel;
   AngleOptions angle;
+  RelrotOptions relrot;
 };
 
 namespace detail {
@@ -290,6 +305,13 @@ void for_each_option(O& o, F&& f) {
   f("penalty_eps", o.penalty_eps);
 }
 
+template <class O, class F, detail::IfOptions<O, RelrotOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  detail::for_each_scaling_option(o, f);
+  f("penalty", o.penalty);
+  f("penalty_eps", o.penalty_eps);
+}
+
 // The term list of the fused step: f(name, on, options) for every term of RegularizerOptions, in
 // the driver's order, with on = o.terms.<name> (bool& or const bool&). validate_options below,
 // smg_torch.regularizers (its options, defaults and argument names) and smg_cli regularizers
@@ -302,6 +324,7 @@ void for_each_term(RO& o, F&& f) {
   f("lrm", o.terms.lrm, o.lrm);
   f("accel", o.terms.accel, o.accel);
   f("angle", o.terms.angle, o.angle);
+  f("relrot", o.terms.relrot, o.relrot);
 }
 
 // The energies of one fused step, each as the separate operator returns it (0 for a term that
@@ -314,6 +337,7 @@ struct RegularizerResult {
   Accumulator<S> lrm = Accumulator<S>(0);
   Accumulator<S> accel = Accumulator<S>(0);
   Accumulator<S> angle = Accumulator<S>(0);
+  Accumulator<S> relrot = Accumulator<S>(0);
 
   // f(name, r.<energy>...) for each energy, in the order above, of one or more results. The list
   // of energies: total(), +=, the torch glue's energies tensor and smg_torch.Regularizers' names,
@@ -325,6 +349,7 @@ struct RegularizerResult {
     f("lrm", r.lrm...);
     f("accel", r.accel...);
     f("angle", r.angle...);
+    f("relrot", r.relrot...);
   }
   Accumulator<S> total() const {
     Accumulator<S> t(0);
@@ -449,6 +474,12 @@ inline Status validate_options(const AngleOptions& o) {
                               detail::check_nonneg("AngleOptions", "weight", o.weight),
                               detail::check_enum("AngleOptions", "penalty", o.penalty),
                               detail::check_positive("AngleOptions", "penalty_eps", o.penalty_eps)});
+}
+
+inline Status validate_options(const RelrotOptions& o) {
+  return detail::first_error({detail::check_nonneg("RelrotOptions", "weight", o.weight),
+                              detail::check_enum("RelrotOptions", "penalty", o.penalty),
+                              detail::check_positive("RelrotOptions", "penalty_eps", o.penalty_eps)});
 }
 
 // Plain ARAP is C-ARAP with α = 1 and no confidences (the caller passes none).

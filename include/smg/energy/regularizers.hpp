@@ -44,6 +44,7 @@
 // where it joins RegularizerTermSet, and nowhere else.
 #include "smg/energy/accel.hpp"
 #include "smg/energy/angle.hpp"
+#include "smg/energy/relrot.hpp"
 #include "smg/energy/arap.hpp"
 #include "smg/energy/carap.hpp"
 #include "smg/energy/confidence.hpp"
@@ -74,11 +75,12 @@ std::size_t regularizers_extra_bytes(Index frames, Index nodes, Index k,
 }
 
 // The fused regulariser step: any subset of confidences (E6), C-ARAP (E9), ARAP, LRM (E14),
-// trajectory smoothness (E21) and the rotation-angle term (E23) (options.terms) in one pass over the graph; returns the energies,
+// trajectory smoothness (E21), the rotation-angle term (E23) and relative-rotation consistency
+// (E25) (options.terms) in one pass over the graph; returns the energies,
 // each equal to what node_confidences + carap()/arap()/lrm() give on the same inputs (to
 // rounding: the sums are associated differently, see tests/energy/test_regularizers.cpp).
 //   positions [T][N][3]; rotations [T][N][4] (w, x, y, z; normalised on entry), may be empty
-//   without C-ARAP, ARAP and angle (reads_rotations); visibility [T][N] (0/1) multiplies the
+//   without C-ARAP, ARAP, angle and relrot (reads_rotations); visibility [T][N] (0/1) multiplies the
 //   confidences (E6), empty = all visible. confidence [T][N]: with options.terms.confidence an
 //   output, receiving c_{t,i}; without, an input when given: the caller's c (in [0, 1];
 //   visibility not applied), which C-ARAP, LRM, confidence-weighted smoothness and angle read as

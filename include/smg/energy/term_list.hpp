@@ -16,6 +16,7 @@
 #include "smg/energy/terms/angle.hpp"
 #include "smg/energy/terms/confidence.hpp"
 #include "smg/energy/terms/lrm.hpp"
+#include "smg/energy/terms/relrot.hpp"
 #include "smg/energy/terms/rigid.hpp"
 
 namespace smg {
@@ -36,6 +37,7 @@ struct RegularizerTermSet {
   LrmTerm<S, I> lrm;
   AccelTerm<S, I> accel;
   AngleTerm<S, I> angle;
+  RelrotTerm<S, I> relrot;
 
   RegularizerTermSet(Index T, Index N, Index K, Index edges, const RegularizerOptions& o,
                      bool want_x, bool want_r) {
@@ -49,13 +51,15 @@ struct RegularizerTermSet {
     if (on.accel) accel.configure(o.accel, T, N);
     if (on.angle) angle.configure(o.angle, T, N);
     angle.want_rotations = want_r;
+    if (on.relrot && K > 0) relrot.configure(o.relrot, T, edges);
+    relrot.want_rotations = want_r;
   }
-  bool any_energy() const { return rigid.on() || lrm.on() || accel.on() || angle.on(); }
+  bool any_energy() const { return rigid.on() || lrm.on() || accel.on() || angle.on() || relrot.on(); }
   // f(terms...) over the list, each checked against the term concept (energy/block.hpp) first:
   // both drivers (the CPU's drive(), the CUDA element pass's ListElements) take the list here.
   template <class F>
   decltype(auto) apply(F&& f) {
-    return checked(f, confidence, rigid, lrm, accel, angle);
+    return checked(f, confidence, rigid, lrm, accel, angle, relrot);
   }
 
  private:

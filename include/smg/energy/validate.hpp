@@ -1,6 +1,6 @@
 // smg/energy/validate.hpp — the argument checks of the separate energy operators:
 // validate_confidence (node_confidences), validate_carap, validate_arap, validate_lrm,
-// validate_accel and validate_angle, and the fused step's validate_regularizers; one line naming the bad argument.
+// validate_accel, validate_angle and validate_relrot, and the fused step's validate_regularizers; one line naming the bad argument.
 //
 // Why a header of their own: the CUDA launchers' device-memory validators (cuda/validate.cuh)
 // call these on host copies, so that the messages are exactly the CPU's, and device headers
@@ -124,8 +124,24 @@ Status validate_angle(detail::NonDeducedT<QuaternionsView<const S>> rotations,
   return detail::validate_gradient_outputs<S>(PositionsView<S>(), grad_rotations, T, N);
 }
 
+// Checks the inputs and outputs of relrot(): rotations [T][N][4], graph [N][K]; the gradient may
+// be empty (not computed).
+template <class S, class I>
+Status validate_relrot(detail::NonDeducedT<QuaternionsView<const S>> rotations,
+                       const NeighborsView<S, I>& graph, const RelrotOptions& options,
+                       detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
+  const Index T = rotations.frames(), N = rotations.nodes();
+  if (Status s = validate_quaternions<S>(rotations, -1, -1, QuaternionNorm::normalize_on_entry,
+                                         "rotations");
+      !s)
+    return s;
+  if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
+  if (Status s = validate_options(options); !s) return s;
+  return detail::validate_gradient_outputs<S>(PositionsView<S>(), grad_rotations, T, N);
+}
+
 // Checks the arguments of regularizers(); one line naming the bad argument. `rotations` may be
-// empty when no term that reads them is on (C-ARAP, ARAP, angle: reads_rotations); `visibility`
+// empty when no term that reads them is on (C-ARAP, ARAP, angle, relrot: reads_rotations); `visibility`
 // [T][N] (0/1) may be empty (all visible); `confidence` [T][N] is the output with
 // terms.confidence, else the caller's confidences (finite, in [0, 1]) or empty; the gradients
 // may be empty (not computed).

@@ -19,6 +19,7 @@
 #include "smg/core/views.hpp"
 #include "smg/energy/block.hpp"
 #include "smg/energy/options.hpp"
+#include "smg/energy/penalty.hpp"
 
 namespace smg {
 
@@ -33,22 +34,8 @@ namespace smg {
 template <class S, class L>
 SMG_FORCE_INLINE SMG_HOST_DEVICE S accel_penalty(Penalty p, S k, S w, S eps, S ax, S ay,
                                                  S az, S& gx, S& gy, S& gz) {
-  using std::sqrt;
-  const S aa = ax * ax + ay * ay + az * az;
-  S h, e;
-  if (p == Penalty::norm) {
-    const S f = k * w, n = sqrt(aa);
-    h = n > S(0) ? S(f / n) : S(0);
-    e = f * n;
-  } else if (p == Penalty::sqrt_weighted) {
-    const S r = sqrt(w * aa + eps);  // >= sqrt(ε) > 0
-    h = k * w / r;
-    e = k * r;
-  } else {
-    const S f = k * w;
-    h = L(2) * f;
-    e = f * aa;
-  }
+  S h;
+  const S e = penalty_of_square<S, L>(p, k, w, eps, ax * ax + ay * ay + az * az, h);
   gx = h * ax;
   gy = h * ay;
   gz = h * az;

@@ -1,0 +1,40 @@
+// smg/energy/penalty.hpp — the penalties (E22) of a residual vector a, from its squared norm:
+// the one place their arithmetic is written, for every term that puts a Penalty on a vector
+// (the smoothness (E21) on 3-vectors, the relative-rotation term (E25) on 4-vectors). Host and
+// device; no loops, no thread pool.
+#pragma once
+
+#include "smg/core/config.hpp"
+
+#include <cmath>
+
+#include "smg/core/scalar.hpp"
+#include "smg/energy/options.hpp"  // Penalty
+
+namespace smg {
+
+// P(a) of (E22) from aa = ‖a‖² ≥ 0, the factor k (the term's weight, / the term count with
+// Normalization::mean), the residual's weight w ≥ 0 and ε (the option's penalty_eps > 0); returns
+// P and writes h with ∂P/∂a = h a:
+//   squared        k w ‖a‖²             h = 2 k w
+//   norm           k w ‖a‖              h = k w / ‖a‖, and 0 at a = 0 (torch's norm backward)
+//   sqrt_weighted  k sqrt(w ‖a‖² + ε)   h = k w / sqrt(w ‖a‖² + ε)   (the weight inside the root)
+template <class S, class L>
+SMG_FORCE_INLINE SMG_HOST_DEVICE S penalty_of_square(Penalty p, S k, S w, S eps, S aa, S& h) {
+  using std::sqrt;
+  if (p == Penalty::norm) {
+    const S f = k * w, n = sqrt(aa);
+    h = n > S(0) ? S(f / n) : S(0);
+    return f * n;
+  }
+  if (p == Penalty::sqrt_weighted) {
+    const S r = sqrt(w * aa + eps);  // >= sqrt(ε) > 0
+    h = k * w / r;
+    return k * r;
+  }
+  const S f = k * w;
+  h = L(2) * f;
+  return f * aa;
+}
+
+}  // namespace smg
