@@ -11,6 +11,8 @@
 #   4. bench/torch/bench_compat.py --device cuda (smg, eager torch, torch.compile);
 #   5. bench/torch/bench_cuda.py (the fused step and the operators against autograd).
 # Usage (device tool): bash scripts/device_check.sh     with carry [".dev"]
+#   SMG_DEVICE_PYTEST="tests/torch/test_x.py ..."  the pytest files (default: all of tests/torch)
+#   SMG_DEVICE_COMPAT_ARGS="--cases D3DGS"         bench_compat's case filter; SMG_DEVICE_BENCH_CUDA=0 skips 5
 #        here, once:   bash scripts/device_check.sh --prepare
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -55,12 +57,13 @@ stamp "waiting for smg_torch"
 wait $bpid; tail -3 "$OUT/torch_build.log"
 export PYTHONPATH=$PWD/examples/torch
 stamp "3. tests/torch"
-LD_PRELOAD=$pre timeout 150 python3 -m pytest -q -p no:cacheprovider -rs tests/torch > "$OUT/pytest.log" 2>&1
+LD_PRELOAD=$pre timeout 150 python3 -m pytest -q -p no:cacheprovider -rs ${SMG_DEVICE_PYTEST:-tests/torch} > "$OUT/pytest.log" 2>&1
 echo "rc=$?" >> "$OUT/pytest.log"; tail -15 "$OUT/pytest.log"
 
 stamp "4. bench_compat --device cuda"
-LD_PRELOAD=$pre timeout 150 python3 bench/torch/bench_compat.py --device cuda --repeat 20 --json "$OUT/compat_cuda.json" 2>&1 | tee "$OUT/bench_compat.log"
+LD_PRELOAD=$pre timeout 150 python3 bench/torch/bench_compat.py --device cuda --repeat 20 ${SMG_DEVICE_COMPAT_ARGS:-} \
+  --json "$OUT/compat_cuda.json" 2>&1 | tee "$OUT/bench_compat.log"
 
 stamp "5. bench_cuda"
-LD_PRELOAD=$pre timeout 120 python3 bench/torch/bench_cuda.py --repeat 20 --json "$OUT/torch_cuda.json" 2>&1 | tee "$OUT/bench_cuda.log"
+[ "${SMG_DEVICE_BENCH_CUDA:-1}" = 1 ] && LD_PRELOAD=$pre timeout 120 python3 bench/torch/bench_cuda.py --repeat 20 --json "$OUT/torch_cuda.json" 2>&1 | tee "$OUT/bench_cuda.log"
 stamp done

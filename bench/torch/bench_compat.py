@@ -3,7 +3,7 @@
 best of --repeat runs, and peak memory.
 
 usage: PYTHONPATH=<build>/python /usr/bin/python3 bench/torch/bench_compat.py [--repeat 10]
-           [--threads 2] [--json FILE] [--quick] [--device cuda]
+           [--threads 2] [--json FILE] [--quick] [--device cuda] [--cases TEXT]
 
 Shape of Motion's track smoothness (flow3d/trainer.py): means [G, 3, B, 3] (the Gaussians'
 positions at t − 1, t, t + 1 for B batch frames), loss = mean ‖2 x_t − x_{t−1} − x_{t+1}‖ over
@@ -179,6 +179,7 @@ def main():
     ap.add_argument("--json", default=None)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
+    ap.add_argument("--cases", default="", help="run only the cases whose name contains this text")
     a = ap.parse_args()
     if a.device == "cuda":
         import smg_torch
@@ -195,6 +196,7 @@ def main():
         cases.append((name, list(shape), [x], som_accel, som_accel_torch))
     cases += mosca_cases(1000 if a.quick else 10000, g)
     cases += d3dgs_cases(10000 if a.quick else 100000)
+    cases = [c for c in cases if a.cases in c[0]]
     rows = []
     for name, shape, xs, f_smg, f_ref in cases:
         e_smg, e_ref = float(f_smg(*xs)), float(f_ref(*xs))
@@ -226,6 +228,7 @@ def main_cuda(a):
         cases.append((name, list(shape), [x], som_accel, som_accel_torch))
     cases += mosca_cases(1000 if a.quick else 10000, g, "cuda")
     cases += d3dgs_cases(10000 if a.quick else 100000, "cuda")
+    cases = [c for c in cases if a.cases in c[0]]
     rows = []
     for name, shape, xs, f_smg, f_ref in cases:
         e_smg, e_ref = float(f_smg(*xs)), float(f_ref(*xs))
