@@ -146,9 +146,12 @@ constexpr double tol() {
   return sizeof(S) == 8 ? 1e-11 : 1e-5;
 }
 
+// conf_bitwise: the host scheme computes the confidences with the CPU's arithmetic, bit for bit;
+// on a GPU nvcc contracts a·b + c into FMAs (its default), so there they agree to rounding only
+// (an H200, 2026-11-28: every seed, mask and precision differed in bits; within tol()).
 template <class S>
 void check_same(const Out<S>& a, const Out<S>& b, const smg::RegularizerOptions& o,
-                const Flags& f, const std::string& what) {
+                const Flags& f, const std::string& what, bool conf_bitwise = true) {
   INFO(what);
   smg::RegularizerResult<S>::each_energy(
       [](const char* name, const smg::Accumulator<S>& x, const smg::Accumulator<S>& y) {
@@ -156,8 +159,12 @@ void check_same(const Out<S>& a, const Out<S>& b, const smg::RegularizerOptions&
         CHECK(rel(double(x), double(y)) <= tol<S>());
       },
       a.e, b.e);
-  if (f.conf_out && o.terms.confidence)
-    CHECK(std::memcmp(a.conf.data(), b.conf.data(), a.conf.size() * sizeof(S)) == 0);
+  if (f.conf_out && o.terms.confidence) {
+    if (conf_bitwise)
+      CHECK(std::memcmp(a.conf.data(), b.conf.data(), a.conf.size() * sizeof(S)) == 0);
+    else
+      CHECK(rel(a.conf, b.conf) <= tol<S>());
+  }
   CHECK(rel(a.gx, b.gx) <= tol<S>());
   CHECK(rel(a.gr, b.gr) <= tol<S>());
 }
@@ -455,7 +462,7 @@ void gpu_case(std::uint64_t seed, Index T, Index N, Index K) {
       Flags f;
       f.raw = raw;
       const Out<S> a = gpu(s, o, f);
-      check_same(a, cpu(s, o, f), o, f, "gpu vs cpu");
+      check_same(a, cpu(s, o, f), o, f, "gpu vs cpu", /*conf_bitwise=*/false);
       const Out<S> b = gpu(s, o, f);
       CHECK(std::memcmp(&a.e, &b.e, sizeof(a.e)) == 0);
       CHECK(std::memcmp(a.gx.data(), b.gx.data(), a.gx.size() * sizeof(S)) == 0);
