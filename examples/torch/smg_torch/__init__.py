@@ -320,7 +320,7 @@ def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: Grap
     the separate operators); the per-term energies are detached. The same values as the separate
     operators (node_confidences + carap + arap + lrm) to rounding (1e-12 relative in float64,
     tests/torch/test_energy.py). On CUDA tensors smg::cuda::regularizers runs on the current
-    stream (tests/torch/test_cuda.py; not yet run on a GPU).
+    stream (tests/torch/test_cuda.py; passed on an H200, docs/cuda.md).
     Devices: CPU and CUDA tensors."""
     for key in terms:
         if key not in REGULARIZER_TERMS:
