@@ -147,8 +147,9 @@ constexpr double tol() {
 }
 
 // conf_bitwise: the host scheme computes the confidences with the CPU's arithmetic, bit for bit;
-// on a GPU nvcc contracts a·b + c into FMAs (its default), so there they agree to rounding only
-// (an H200, 2026-11-28: every seed, mask and precision differed in bits; within tol()).
+// a GPU's differs in the last bits (its maths library's exp, nvcc's FMA contraction; which of
+// them was not isolated), so there they agree to rounding only (an H200, 2026-11-28: every seed,
+// mask and precision differed in bits; within tol()).
 template <class S>
 void check_same(const Out<S>& a, const Out<S>& b, const smg::RegularizerOptions& o,
                 const Flags& f, const std::string& what, bool conf_bitwise = true) {
