@@ -1059,7 +1059,8 @@ for f in CMD_PAGES:
 # (m) every regulariser term has its pieces (docs/contributing.md section 3): a header in
 # include/smg/energy/terms/ is reached from the fused step's header (regularizers.hpp includes
 # it, or the one-term operator that includes it; the umbrella energy.hpp includes
-# regularizers.hpp), its term struct is a member of the fused step's RegularizerTermSet (term_list.hpp), its
+# regularizers.hpp), its term struct is on the fused step's list (term_list.hpp's SMG_REGULARIZER_TERMS, or
+# the confidences' member of RegularizerTermSet), its
 # header is named in docs/math/energy.md or on its own page docs/math/terms/<name>.md, and (for an energy, not the confidences) its one-term
 # operator has an entry in the operator list of the cross-cutting tests.
 TERMS_DIR = "include/smg/energy/terms"
@@ -1072,8 +1073,13 @@ for inc in list(reached):
     reached |= set(INCLUDE_RE.findall(read_text("include/" + inc) or ""))
 if '#include "smg/energy/regularizers.hpp"' not in umbrella:
     problem("include/smg/energy.hpp", 1, "does not include smg/energy/regularizers.hpp (the term list)")
-term_set = term_list_hpp[term_list_hpp.find("struct RegularizerTermSet"):]
-term_set = term_set[:term_set.find("\n};")]
+# The list: the confidences (the member ConfidenceTerm<S, I> of RegularizerTermSet) and one line
+# X(name, Options, Term, on, rot) of SMG_REGULARIZER_TERMS per energy term.
+term_set = term_list_hpp[term_list_hpp.find("#define SMG_REGULARIZER_TERMS(X)"):]
+term_set = term_set[:term_set.find("\n\n")]
+term_set += "".join(re.findall(r"\n  \w+Term<S, I> \w+;", term_list_hpp))
+listed_terms = set(re.findall(r"^\s*X\(\w+,\s*\w+,\s*(\w+),", term_set, re.M))
+listed_terms |= set(re.findall(r"\b(\w+Term)<S, I> \w+;", term_set))
 operators = read_text("tests/support/operators.hpp") or ""
 # The list: a std::tuple of operators, or one joined with generated variants (std::tuple_cat).
 op_list = re.search(r"using Operators = (?:decltype\(std::tuple_cat\()?std::tuple<([^>]*)>", operators)
@@ -1089,9 +1095,9 @@ for rel in sorted(f for f in tracked_files() if f.startswith(TERMS_DIR + "/") an
     if not structs:
         problem(rel, 1, "no term struct (struct FooTerm : TermDefaults, energy/block.hpp's concept)")
     for st in structs:
-        if not re.search(r"\b%s<S, I> \w+;" % st, term_set):
+        if st not in listed_terms:
             problem("include/smg/energy/term_list.hpp", 1,
-                    "%s (%s) is not a member of RegularizerTermSet" % (st, rel))
+                    "%s (%s) is on neither SMG_REGULARIZER_TERMS nor RegularizerTermSet" % (st, rel))
     own_page = "docs/math/terms/%s.md" % name
     if "terms/%s.hpp" % name not in energy_md and "terms/%s.hpp" % name not in TEXT.get(own_page, ""):
         problem("docs/math/energy.md", 1, "does not name %s (nor does %s)" % (rel, own_page))
@@ -1118,7 +1124,7 @@ try:
         problem("docs/api.md", 1, "the terms' table is out of date: run scripts/terms_table.py --write docs/api.md")
     for flag, r in terms_table.rows():
         if r is None:
-            problem("include/smg/energy/term_list.hpp", 1, "no term of RegularizerTermSet configures RegularizerTerms::%s" % flag)
+            problem("include/smg/energy/term_list.hpp", 1, "the term of RegularizerTerms::%s has no header in energy/terms/" % flag)
             continue
         for col in ("options", "call", "torch", "bench", "cuda", "tests"):
             if r[col] == "—":

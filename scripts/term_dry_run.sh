@@ -201,6 +201,40 @@ cat > include/smg/energy/terms/dryrun.hpp <<'EOF'
 
 namespace smg {
 
+// The form of (@LABEL@): a named enum (enum_values), so the bindings spell it by name.
+enum class DryrunForm { squared, quartic };
+inline constexpr DryrunForm kDryrunForms[] = {DryrunForm::squared, DryrunForm::quartic};
+constexpr const char* to_string(DryrunForm f) {
+  return f == DryrunForm::quartic ? "quartic" : "squared";
+}
+constexpr const auto& enum_values(DryrunForm) { return kDryrunForms; }
+
+struct DryrunOptions {
+  DryrunForm form = DryrunForm::squared;
+  double weight = 1.0;  // k
+};
+
+template <class O, class F, detail::IfOptions<O, DryrunOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("form", o.form);
+  f("weight", o.weight);
+}
+
+inline Status validate_options(const DryrunOptions& o) {
+  return detail::first_error({detail::check_enum("DryrunOptions", "form", o.form),
+                              detail::check_nonneg("DryrunOptions", "weight", o.weight)});
+}
+
+// Checks the arguments of dryrun(): positions [T][N][3]; the gradient may be empty.
+template <class S>
+Status validate_dryrun(detail::NonDeducedT<PositionsView<const S>> positions,
+                       const DryrunOptions& options, PositionsView<S> grad_positions = {}) {
+  const Index T = positions.frames(), N = positions.nodes();
+  return detail::first_error({validate_positions<S>(positions, -1, -1, "positions"),
+                              validate_options(options),
+                              validate_optional_output(grad_positions, T, N, "grad_positions")});
+}
+
 // P(v) of (@LABEL@) for the difference v (3 values) and factor k; writes g = ∂P/∂v:
 //   squared  k ‖v‖²   g = 2 k v;   quartic  k ‖v‖⁴   g = 4 k ‖v‖² v.
 template <class S, class L>
@@ -258,6 +292,12 @@ struct DryrunTerm : TermDefaults {
     enabled = frames > 1 && nodes > 0 && o.weight != 0.0;
   }
 
+  // The list's entry "dryrun".
+  template <class RO>
+  void setup(const RO& o, const TermShape& s) {
+    if (o.terms.dryrun) configure(o.dryrun, s.T, s.N);
+  }
+
   bool on() const { return enabled; }
   Index reach() const { return 1; }
 
@@ -301,7 +341,7 @@ EOF
 
 cat > include/smg/energy/dryrun.hpp <<'EOF'
 // smg/energy/dryrun.hpp — THROWAWAY (scripts/term_dry_run.sh): the term (@LABEL@) as a separate
-// operator, a one-term call of the driver, and its argument check.
+// operator, a one-term call of the driver (its argument check is in terms/dryrun.hpp).
 #pragma once
 
 #include "smg/core/config.hpp"
@@ -320,16 +360,6 @@ cat > include/smg/energy/dryrun.hpp <<'EOF'
 #include "smg/energy/workspace.hpp"
 
 namespace smg {
-
-// Checks the arguments of dryrun(): positions [T][N][3]; the gradient may be empty.
-template <class S>
-Status validate_dryrun(detail::NonDeducedT<PositionsView<const S>> positions,
-                       const DryrunOptions& options, PositionsView<S> grad_positions = {}) {
-  const Index T = positions.frames(), N = positions.nodes();
-  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  return validate_optional_output(grad_positions, T, N, "grad_positions");
-}
 
 inline namespace SMG_ISA_NAMESPACE {
 
@@ -401,49 +431,9 @@ def edit(path, anchor, text, where="after", old=None):
         f.write(src.replace("@LABEL@", LABEL))
 
 
-O = "include/smg/energy/options.hpp"
-edit(O, "// The named enums of the options: enum_values(E{})", """\
-// THROWAWAY (scripts/term_dry_run.sh): the dry-run term (@LABEL@) and its enum.
-enum class DryrunForm { squared, quartic };
-inline constexpr DryrunForm kDryrunForms[] = {DryrunForm::squared, DryrunForm::quartic};
-constexpr const char* to_string(DryrunForm f) {
-  return f == DryrunForm::quartic ? "quartic" : "squared";
-}
-struct DryrunOptions {
-  DryrunForm form = DryrunForm::squared;
-  double weight = 1.0;
-};
-
-""", "before")
-edit(O, "constexpr const auto& enum_values(StopGradient) { return kStopGradients; }",
-     "constexpr const auto& enum_values(DryrunForm) { return kDryrunForms; }\n")
-edit(O, "  bool angle = false; ", "  bool dryrun = false;       // (@LABEL@), throwaway\n")
-edit(O, "  AngleOptions angle;", "  DryrunOptions dryrun;\n")
-edit(O, "// The term list of the fused step: f(name, on, options)", """\
-template <class O, class F, detail::IfOptions<O, DryrunOptions> = 0>
-void for_each_option(O& o, F&& f) {
-  f("form", o.form);
-  f("weight", o.weight);
-}
-
-""", "before")
-edit(O, '  f("angle", o.terms.angle, o.angle);', '  f("dryrun", o.terms.dryrun, o.dryrun);\n')
-edit(O, "  Accumulator<S> angle = Accumulator<S>(0);", "  Accumulator<S> dryrun = Accumulator<S>(0);\n")
-edit(O, '    f("angle", r.angle...);', '    f("dryrun", r.dryrun...);\n')
-edit(O, "// Plain ARAP is C-ARAP with α = 1", """\
-inline Status validate_options(const DryrunOptions& o) {
-  return detail::first_error({detail::check_enum("DryrunOptions", "form", o.form),
-                              detail::check_nonneg("DryrunOptions", "weight", o.weight)});
-}
-
-""", "before")
-
 L = "include/smg/energy/term_list.hpp"
 edit(L, '#include "smg/energy/terms/confidence.hpp"', '#include "smg/energy/terms/dryrun.hpp"\n')
-edit(L, "  AngleTerm<S, I> angle;", "  DryrunTerm<S, I> dryrun;\n")
-edit(L, "    if (on.angle) angle.configure(o.angle, T, N);", "    if (on.dryrun) dryrun.configure(o.dryrun, T, N);\n")
-edit(L, "|| angle.on(); }", "|| angle.on() || dryrun.on(); }", "replace")
-edit(L, "checked(f, confidence, rigid, lrm, accel, angle);", "checked(f, confidence, rigid, lrm, accel, angle, dryrun);", "replace")
+edit(L, "  X(relrot,", "  X(dryrun, DryrunOptions, DryrunTerm, false, false) /* (@LABEL@), throwaway */ \\\n", "before")
 
 edit("include/smg/energy/regularizers.hpp", '#include "smg/energy/confidence.hpp"', '#include "smg/energy/dryrun.hpp"\n')
 

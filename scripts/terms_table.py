@@ -2,13 +2,13 @@
 """The regulariser terms' table of docs/api.md, generated from the code (issue 35: the term list
 drives the docs' API table): one row per flag of RegularizerTerms, read from
 
-  - the fused step's list, RegularizerTermSet (include/smg/energy/term_list.hpp): the term
-    struct that each flag configures, and so its header in include/smg/energy/terms/;
+  - the fused step's list, SMG_REGULARIZER_TERMS (include/smg/energy/term_list.hpp, the
+    confidences before it): each flag's options struct and term struct, and so its header in
+    include/smg/energy/terms/;
   - that header's top comment: the equation labels (E..);
-  - RegularizerOptions (include/smg/energy/options.hpp): the flag's options struct;
   - the energy headers: the separate C++ call (a function named for the flag, or node_<flag>s);
-  - the term list smg::for_each_term (include/smg/energy/options.hpp), from which smg_torch's
-    options and smg_cli regularizers' flags are generated, and so the keyword of
+  - the same list, from which smg::for_each_term, smg_torch's options and smg_cli regularizers'
+    flags are generated, and so the keyword of
     smg_torch.regularizers (examples/torch/smg_torch/__init__.py, which takes its keywords from
     that list: `**terms` checked against REGULARIZER_TERMS);
   - bench/bench_energy.cpp: its BM_<flag> row, or else the row list/<name> that BM_listed gives
@@ -63,15 +63,25 @@ def labels(comment):
     return "E%s–E%s" % (m.group(1), m.group(2)) if m.group(2) else "E" + m.group(1)
 
 
+def member(struct):
+    """The name the CUDA driver gives a term's pass: RigidTerm -> rigid (its ElementTerms flag,
+    its phase p.rigid)."""
+    return struct[:-len("Term")].lower()
+
+
+def entries():
+    """The term list: (flag, options struct, term struct) per entry, the confidences first
+    (written by hand in term_list.hpp: ConfidenceOptions, ConfidenceTerm), then one per line of
+    SMG_REGULARIZER_TERMS, X(name, Options, Term, on, rot)."""
+    lst = block(read("include/smg/energy/term_list.hpp"), "#define SMG_REGULARIZER_TERMS(X)", "\n\n")
+    return [("confidence", "ConfidenceOptions", "ConfidenceTerm")] + re.findall(
+        r"^\s*X\((\w+),\s*(\w+),\s*(\w+),", lst, re.M)
+
+
 def rows():
-    regs = read("include/smg/energy/term_list.hpp")
-    term_set = block(regs, "struct RegularizerTermSet")
-    members = re.findall(r"(\w+Term)<S, I> (\w+);", term_set)
-    ctor = block(term_set, "RegularizerTermSet(", "\n  }")
-    options = block(read("include/smg/energy/options.hpp"), "struct RegularizerOptions")
-    option_type = dict((f, t) for t, f in re.findall(r"(\w+Options) (\w+);", options))
-    flags_struct = block(read("include/smg/energy/options.hpp"), "struct RegularizerTerms")
-    flags = re.findall(r"bool (\w+) = ", flags_struct)
+    listed = entries()
+    option_type = dict((f, o) for f, o, _ in listed)
+    term_list = set(f for f, _, _ in listed)
     headers = {}
     for path in sorted(glob.glob(os.path.join(ROOT, "include/smg/energy/terms/*.hpp"))):
         text = open(path, encoding="utf-8").read()
@@ -80,8 +90,6 @@ def rows():
     energy_src = "".join(open(p, encoding="utf-8").read()
                          for p in sorted(glob.glob(os.path.join(ROOT, "include/smg/energy/*.hpp"))))
     torch_init = read("examples/torch/smg_torch/__init__.py")
-    term_list = set(re.findall(r'f\("(\w+)", o\.terms\.\w+, o\.\w+\);',
-                               block(read("include/smg/energy/options.hpp"), "void for_each_term(", "\n}")))
     # smg_torch.regularizers takes its term keywords from the list (`**terms`, checked against
     # REGULARIZER_TERMS, which _C reads from smg::for_each_term): then every term on the list has
     # its keyword. Otherwise (keywords written by hand) the ones its signature names.
@@ -97,7 +105,7 @@ def rows():
     # and every term of the list whose struct names an Element (driver.cuh's ListElements).
     element_members = re.findall(r"bool (\w+) = false", element)
     if "ListElements" in element:
-        element_members += [m for s, m in members
+        element_members += [member(s) for _, _, s in listed
                             if "using Element = " in block(headers.get(s, ("", ""))[1], "struct %s " % s)]
     drive = block(driver, "Status drive(", "\n}\n")
     operators = read("tests/support/operators.hpp")
@@ -109,20 +117,16 @@ def rows():
         operators))
 
     out = []
-    for flag in flags:
-        member, struct = next(((m, s) for s, m in members
-                               if re.search(r"on\.%s\b" % flag, "\n".join(
-                                   l for l in ctor.splitlines() if re.search(r"\b%s\." % m, l)))),
-                              (None, None))
-        if member is None:
+    for flag, _, struct in listed:
+        if struct not in headers:
             out.append((flag, None))
             continue
         header, htext = headers.get(struct, ("?", ""))
         call = next((c for c in (flag, "node_%ss" % flag)
                      if re.search(r"[\w>]\s+%s\(" % c, energy_src)), "—")
-        if member in element_members:
+        if member(struct) in element_members:
             cuda = "element pass"
-        elif re.search(r"\bp\.%s\b" % member, drive):
+        elif re.search(r"\bp\.%s\b" % member(struct), drive):
             cuda = "own phase"
         else:
             cuda = "—"

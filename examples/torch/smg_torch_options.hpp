@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "smg/energy/block.hpp"
-#include "smg/energy/options.hpp"
+#include "smg/energy/term_list.hpp"
 #include "smg/skin/skin_views.hpp"
 #include "smg_torch_checks.hpp"
 

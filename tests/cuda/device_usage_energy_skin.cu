@@ -1,5 +1,5 @@
 // Compile-only: a kernel that calls every device-callable function of the LRM neighbourhood
-// solve (smg/energy/lrm_term.hpp, the scalar lane helpers of smg/energy/lanes.hpp), of the dual
+// solve (smg/energy/elements/lrm.hpp, the scalar lane helpers of smg/energy/lanes.hpp), of the dual
 // quaternions (smg/core/dual_quaternion.hpp) and of the per-point skinning (smg/skin/
 // blend_point.hpp, weights_point.hpp), in float and double. A function that loses
 // SMG_HOST_DEVICE (or gains a host-only call) stops this file from compiling.
@@ -8,7 +8,7 @@
 #include "smg/core/dual_quaternion.hpp"
 #include "smg/energy/common.hpp"
 #include "smg/energy/lanes.hpp"
-#include "smg/energy/lrm_term.hpp"
+#include "smg/energy/elements/lrm.hpp"
 #include "smg/skin/blend_point.hpp"
 #include "smg/skin/weights_point.hpp"
 

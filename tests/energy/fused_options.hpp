@@ -10,7 +10,7 @@
 #include <type_traits>
 #include <utility>
 
-#include "smg/energy/options.hpp"
+#include "smg/energy/term_list.hpp"
 
 namespace smg::test {
 

@@ -21,6 +21,8 @@ struct Element {
 };
 struct Term : smg::detail::TermDefaults {
   struct Block {};
+  template <class RO>
+  void setup(const RO&, const smg::detail::TermShape&) {}
   bool on() const { return true; }
   Index reach() const { return 0; }
   Index slot_scalars(const smg::detail::BlockPlan&) const { return 0; }

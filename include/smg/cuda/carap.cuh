@@ -1,5 +1,5 @@
 // smg/cuda/carap.cuh — C-ARAP and plain ARAP energies with their exact gradients on the GPU
-// (docs/math/energy.md (E7)-(E10)), from the per-element functions of smg/energy/carap_term.hpp
+// (docs/math/energy.md (E7)-(E10)), from the per-element functions of smg/energy/elements/carap.hpp
 // that the CPU kernel (smg/energy/carap.hpp) calls too.
 //
 // Three kernels over the edge slots (t, i, k) and nodes (t, n):
@@ -20,7 +20,7 @@
 #include "smg/core/rotation_gradient.hpp"
 #include "smg/core/views.hpp"
 #include "smg/cuda/common.cuh"
-#include "smg/energy/carap_term.hpp"
+#include "smg/energy/elements/carap.hpp"
 #include "smg/energy/common.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/graph/neighbors.hpp"

@@ -22,6 +22,7 @@
 
 #include "smg/core/status.hpp"
 #include "smg/core/types.hpp"
+#include "smg/energy/common.hpp"  // detail::scale_over_count, Normalization::mean
 
 namespace smg::cuda {
 
@@ -189,13 +190,6 @@ struct alignas(4 * sizeof(S)) Vec4 {
 };
 
 namespace detail {
-// scale / (factor · *count), 0 when there are no terms: Normalization::mean over a number of terms
-// known only where the edge count lives (device memory in kernels, host memory in host loops).
-SMG_HOST_DEVICE inline double scale_over_count(double scale, Index factor, const std::int32_t* count) {
-  const Index terms = factor * static_cast<Index>(*count);
-  return terms > 0 ? scale / static_cast<double>(terms) : 0.0;
-}
-
 // Fixed decomposition of the deterministic sum: kSumBlocks blocks of kThreads threads, each
 // thread summing a fixed strided subset, then a fixed tree in shared memory; a second launch
 // sums the kSumBlocks partials the same way. The order depends on n only.

@@ -9,7 +9,7 @@
 
 #include "smg/cuda/common.cuh"
 #include "smg/core/views.hpp"
-#include "smg/energy/confidence_term.hpp"
+#include "smg/energy/elements/confidence.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/velocity.hpp"
 #include "smg/graph/neighbors.hpp"

@@ -53,7 +53,7 @@
 #include "smg/cuda/lrm.cuh"
 #include "smg/cuda/rigid.cuh"
 #include "smg/energy/block.hpp"
-#include "smg/energy/confidence_term.hpp"
+#include "smg/energy/elements/confidence.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/term_list.hpp"
 #include "smg/graph/neighbors.hpp"

@@ -4,7 +4,7 @@
 // Scheme (deterministic: no atomics, every sum in a fixed order):
 //   1. one thread per (t, i) gathers its K neighbours' positions, velocities (E1) and edge
 //      weights w̃ (E7) into local arrays and calls detail::lrm_neighborhood<S, S>
-//      (smg/energy/lrm_term.hpp) — the very function the CPU kernel runs lane-wise; it writes
+//      (smg/energy/elements/lrm.hpp) — the very function the CPU kernel runs lane-wise; it writes
 //      L_{t,i} (Accumulator<S>) to a buffer, ω_i^t to `omega`, and the scaled per-edge ∂L/∂x_k,
 //      ∂L/∂u_k to scratch [T][N·K][3];
 //   2. one thread per (t, j) gathers the edges into node j (ReverseGraph, increasing i·K + k: the
@@ -23,7 +23,7 @@
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
 #include "smg/energy/common.hpp"
-#include "smg/energy/lrm_term.hpp"
+#include "smg/energy/elements/lrm.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/velocity.hpp"
 #include "smg/graph/neighbors.hpp"

@@ -6,7 +6,7 @@
 // increasing slot order) for its +F into x_n^t's gradient. Every (frame, edge) is evaluated
 // twice, by its tail and by its head, instead of keeping the 11·T·N·K scalars of per-slot
 // scratch the separate carap kernels keep: on a GPU the arithmetic is cheap and the scratch
-// traffic is not. Every equation is the CPU's element functions' (carap_term.hpp, common.hpp's
+// traffic is not. Every equation is the CPU's element functions' (elements/carap.hpp, common.hpp's
 // confidence_edge_weight). Host-device: a host loop runs the same steps (the CUDA host suite).
 #pragma once
 
@@ -18,7 +18,7 @@
 #include "smg/core/quaternion.hpp"
 #include "smg/core/rotation_gradient.hpp"
 #include "smg/core/views.hpp"
-#include "smg/energy/carap_term.hpp"
+#include "smg/energy/elements/carap.hpp"
 #include "smg/energy/common.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/graph/neighbors.hpp"

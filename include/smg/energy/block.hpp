@@ -10,6 +10,8 @@
 // TermDefaults below gives the ones marked *). detail::check_term<Term, S, I>() states it for the
 // compiler: the drivers call it first, so a term that lacks a member, or has it with another
 // signature, stops the build at one static_assert naming the member ("smg term concept: ...").
+//   void setup(const RegularizerOptions&, const TermShape&)   reads its options (a template on the
+//                                           options type: the list defines it after the terms)
 //   bool on() const                         computes anything at all (an off term costs nothing)
 //   Index reach() const                     frames past a block's end it reads or writes (max δ)
 //   Index lanes() const *                   block lengths must be a multiple of this (SIMD lanes)
@@ -51,6 +53,13 @@
 
 namespace smg {
 
+// The fused step's options and energies, defined by energy/term_list.hpp from its list of terms
+// (which includes every term's header, so it cannot come first): the concept names them, and a
+// term reads them only in member templates, which a driver instantiates after the list.
+struct RegularizerOptions;
+template <class S>
+struct RegularizerResult;
+
 namespace detail {
 
 // The debug assertions' test of an optional per-(frame, node) view: absent, or [T][N] (an
@@ -87,6 +96,22 @@ Status validate_gradient_outputs(PositionsView<S> grad_positions,
   if (grad_rotations.is_raw())
     if (Status s = validate_output(grad_rotations.raw(), T, N, "grad_rotations"); !s) return s;
   return validate_optional_output(grad_rotations.tangent(), T, N, "grad_rotations");
+}
+
+// The checks of a rotation term's one-term call (angle(), relrot()), in the order of their
+// messages: rotations [T][N][4] (nonzero, normalised on entry), the term's own input check and
+// its options' (the caller's Status), the rotation gradient (may be empty).
+template <class S>
+Status validate_rotation_term(QuaternionsView<const S> rotations, const Status& input,
+                              const Status& options, const RotationGradientView<S>& grad_rotations) {
+  if (Status s = validate_quaternions<S>(rotations, -1, -1, QuaternionNorm::normalize_on_entry,
+                                         "rotations");
+      !s)
+    return s;
+  if (!input) return input;
+  if (!options) return options;
+  return validate_gradient_outputs<S>(PositionsView<S>(), grad_rotations, rotations.frames(),
+                                      rotations.nodes());
 }
 
 // The bytes of the inputs positions [T][N][3], rotations [T][N][4] and visibility [T][N] (each
@@ -197,6 +222,14 @@ struct BlockView {
   bool grad() const { return want_x || want_r; }
 };
 
+// What a term is set up for (setup(), called by RegularizerTermSet): T frames, N nodes, K
+// neighbours, the graph's valid edges (the count Normalization::mean divides by), and whether
+// the caller wants the position and rotation gradients.
+struct TermShape {
+  Index T = 0, N = 0, K = 0, edges = 0;
+  bool want_x = false, want_r = false;
+};
+
 // The defaults of the term concept, for terms to inherit and override.
 struct TermDefaults {
   Index lanes() const { return 1; }
@@ -231,6 +264,9 @@ constexpr bool detected_as() {
 }
 
 namespace term_members {
+template <class T>
+using setup = decltype(std::declval<T&>().setup(std::declval<const RegularizerOptions&>(),
+                                                std::declval<const TermShape&>()));
 template <class T> using on = decltype(std::declval<const T&>().on());
 template <class T> using reach = decltype(std::declval<const T&>().reach());
 template <class T> using lanes = decltype(std::declval<const T&>().lanes());
@@ -306,6 +342,8 @@ constexpr bool check_element_members() {
 template <class Term, class S, class I>
 constexpr bool check_term() {
   namespace m = term_members;
+  constexpr bool setup = detected_v<m::setup, Term>;
+  static_assert(setup, "smg term concept: void setup(const RegularizerOptions&, const TermShape&) is missing");
   constexpr bool on = detected_as<bool, m::on, Term>();
   static_assert(on, "smg term concept: bool on() const is missing");
   constexpr bool reach = detected_as<Index, m::reach, Term>();
@@ -336,7 +374,7 @@ constexpr bool check_term() {
   static_assert(fin, "smg term concept: void finish(RegularizerResult<S>&) const is missing (derive from detail::TermDefaults)");
   constexpr bool blk = check_block_members<Term, S, I>();
   constexpr bool elem = check_element_members<Term, S>();
-  return on && reach && lanes && pref && stored && rrot && gx && gr && slot && fixed && bind && block &&
+  return setup && on && reach && lanes && pref && stored && rrot && gx && gr && slot && fixed && bind && block &&
          frame && fin && blk && elem;
 }
 

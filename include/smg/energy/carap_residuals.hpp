@@ -24,7 +24,7 @@
 #include "smg/core/quaternion.hpp"
 #include "smg/core/so3.hpp"
 #include "smg/energy/carap.hpp"
-#include "smg/energy/carap_term.hpp"
+#include "smg/energy/elements/carap.hpp"
 
 namespace smg {
 

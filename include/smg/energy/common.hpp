@@ -1,10 +1,11 @@
 // smg/energy/common.hpp — small pieces shared by the energies: the accumulator type of energy
-// sums, the confidence-aware edge weight (E7) and the validation of their optional confidence
-// input.
+// sums, the factor of Normalization::mean, the confidence-aware edge weight (E7) and the
+// validation of their optional confidence input.
 #pragma once
 
 #include "smg/core/config.hpp"
 
+#include <cstdint>
 #include <type_traits>
 
 #include "smg/core/types.hpp"
@@ -17,6 +18,19 @@ namespace smg {
 // otherwise lose ~1e-4 relative); for double (and AutoDiffScalar) in the Scalar itself.
 template <class S>
 using Accumulator = std::conditional_t<std::is_same_v<S, float>, double, S>;
+
+namespace detail {
+// scale / terms, 0 when there are none: an energy's factor under Normalization::mean. Host and
+// device: the CPU terms divide by counts known on the host, the CUDA kernels and elements by the
+// edge count read from device memory (scale_over_count); one formula, so both round alike.
+SMG_HOST_DEVICE inline double scale_over_terms(double scale, Index terms) {
+  return terms > 0 ? scale / static_cast<double>(terms) : 0.0;
+}
+// scale / (factor · *count): the same, with the count where the edge count lives.
+SMG_HOST_DEVICE inline double scale_over_count(double scale, Index factor, const std::int32_t* count) {
+  return scale_over_terms(scale, factor * static_cast<Index>(*count));
+}
+}  // namespace detail
 
 // w̃_ij^t = w_ij (α + (1 − α) c_{t,j}): the asymmetric, confidence-aware weight of edge i -> j
 // at frame t (the confidence of the *neighbour* j). The one definition of (E7), called by the

@@ -17,7 +17,7 @@
 // [T][N] array to carap()/lrm().
 //
 // This file holds the checks and the CPU loops; the per-node maths they run is
-// confidence_term.hpp, shared with the CUDA kernels (cuda/confidence.cuh).
+// elements/confidence.hpp, shared with the CUDA kernels (cuda/confidence.cuh).
 #pragma once
 
 #include "smg/core/config.hpp"
@@ -27,7 +27,7 @@
 #include "smg/core/parallel.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
-#include "smg/energy/confidence_term.hpp"
+#include "smg/energy/elements/confidence.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/validate.hpp"
 #include "smg/energy/velocities.hpp"

@@ -32,6 +32,7 @@
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
 #include "smg/energy/block.hpp"
+#include "smg/energy/term_list.hpp"  // RegularizerResult
 #include "smg/energy/terms/confidence.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"

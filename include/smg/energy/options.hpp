@@ -1,11 +1,16 @@
-// smg/energy/options.hpp — parameters of the confidence, C-ARAP, LRM, plain ARAP and smoothness
-// equations with their validation, and the term list of the fused step: which terms it has
-// (RegularizerTerms), their options (RegularizerOptions), for_each_term and the energies it returns
-// (RegularizerResult::each_energy) (docs/design.md "Confidence", "C-ARAP", "LRM", "Plain ARAP";
-// docs/math/energy.md). Defaults are the paper's (section 4.1) and docs/interop.md's flag
-// defaults. Why one file: a new term is declared here once (its options struct, for_each_option
-// and validate_options overloads, and one entry in each of the four lists), and the bindings,
-// smg_cli and the tests read it from the lists (docs/contributing.md).
+// smg/energy/options.hpp — the options' vocabulary and the paper's four: gaps (GapList),
+// Normalization, the penalties (E22), the stop-gradient (E24), AccelForm, the named-enum codec
+// (enum_values), the checks every validate_options is written with, and the parameters of the
+// confidence, C-ARAP, plain ARAP and LRM equations with their visitors and validation
+// (docs/design.md "Confidence", "C-ARAP", "LRM", "Plain ARAP"; docs/math/energy.md). Defaults are
+// the paper's (section 4.1) and docs/interop.md's flag defaults.
+//
+// Where the rest lives: a term's own options (AccelOptions, AngleOptions, RelrotOptions, and a new
+// term's) sit in its header under energy/terms/, beside the equations they parameterise; the
+// list of the fused step's terms, RegularizerOptions, RegularizerResult and for_each_term, is
+// energy/term_list.hpp, written once from SMG_REGULARIZER_TERMS. The four here stay in one file
+// because the separate operators (node_confidences, carap, arap, lrm) and their CUDA kernels take
+// them without the fused step.
 //
 // Parameters are plain doubles whatever the Scalar of the computation: they are converted once
 // per call. Every energy is a sum over terms "as in the paper"; Normalization::mean divides the
@@ -22,7 +27,6 @@
 #include <type_traits>
 
 #include "smg/core/status.hpp"
-#include "smg/energy/common.hpp"  // Accumulator<S>, the type of the energies
 
 namespace smg {
 
@@ -151,87 +155,23 @@ struct LrmOptions {
   double weight = 1.0;         // overall factor on the energy and its gradient
 };
 
-// Smoothness of node trajectories (E21), as MoSca and Shape-of-Motion regularise their motion:
-// the second differences x^{t+2} − 2x^{t+1} + x^t (acceleration) or first differences
-// (velocity) of every node, weighted by c_{t,i} at the earliest frame or by 1, under a penalty
-// (E22): squared by default, or the unsquared norm, or D3DGS's sqrt(w‖a‖² + ε).
+// The forms of the trajectory terms (E21, E23): second differences (acceleration) or first
+// differences (velocity), read by the smoothness and the rotation-angle terms.
 enum class AccelForm { acceleration, velocity };
 // The forms and their names ("acceleration", "velocity"), as the bindings spell them.
 inline constexpr AccelForm kAccelForms[] = {AccelForm::acceleration, AccelForm::velocity};
 constexpr const char* to_string(AccelForm f) {
   return f == AccelForm::velocity ? "velocity" : "acceleration";
 }
-struct AccelOptions {
-  AccelForm form = AccelForm::acceleration;
-  Penalty penalty = Penalty::squared;  // (E22)
-  bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
-  Normalization normalization = Normalization::sum;  // mean: over (T − 2) · N terms (or T − 1)
-  double weight = 1.0;  // overall factor (units: 1 / length² squared, 1 / length otherwise)
-  double penalty_eps = 1e-20;  // ε of sqrt_weighted (length²), finite and > 0; read by it only
-};
-
-// Rotation-angle velocity or acceleration of node rotations (E23, docs/math/terms/angle.md), as
-// MoSca regularises its motion bases' rotations: θ_i^t, the angle of R_i^{t+1} R_i^{tT}, summed
-// (velocity) or |θ_i^{t+1} − θ_i^t| summed (acceleration), unsquared, weighted by c_{t,i} at the
-// earliest frame or by 1. The forms are AccelForm's.
-struct AngleOptions {
-  AccelForm form = AccelForm::acceleration;
-  bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
-  Normalization normalization = Normalization::sum;  // mean: over (T − 2) · N terms (or T − 1)
-  double weight = 1.0;  // overall factor (units: 1 / radian, or 1 / radian² squared)
-  // (E22) on the scalar θ (or Δθ): norm |·| (MoSca's, the default), squared (MoSca's
-  // square=True), sqrt_weighted sqrt(w·² + ε).
-  Penalty penalty = Penalty::norm;
-  double penalty_eps = 1e-20;  // ε of sqrt_weighted (radian²), finite and > 0; read by it only
-};
-
-// Relative-rotation consistency (E25, docs/math/terms/relrot.md), Dynamic 3D Gaussians' "rot"
-// loss: along every edge (i, j) of the graph and every pair of consecutive frames, the relative
-// rotations r^t = q̂^{t+1} ⊗ q̂^{t*} of the two nodes compared as raw 4-vectors, ‖r_j^t − r_i^t‖,
-// under a penalty (E22) with the edge weight w_ij. The default is D3DGS's: sqrt(w ‖·‖² + ε).
-struct RelrotOptions {
-  Normalization normalization = Normalization::sum;  // mean: over (T − 1) · edges terms
-  double weight = 1.0;  // overall factor (dimensionless, r is a unit quaternion's difference)
-  Penalty penalty = Penalty::sqrt_weighted;  // (E22); D3DGS's weighted_l2_loss_v2
-  double penalty_eps = 1e-20;  // ε of sqrt_weighted, finite and > 0; read by it only
-};
 
 // The named enums of the options: enum_values(E{}) is the list of E's values, each with its
 // name to_string(e). The bindings read and write an option of such a type by its name
 // (smg_torch's string, smg_cli's choice flag) and validate_options refuses a value not listed,
-// so an enum added here (its list, to_string and this overload) needs no code in them.
+// so an enum added (its list, to_string and this overload, here or in a term's header) needs no
+// code in them.
 constexpr const auto& enum_values(AccelForm) { return kAccelForms; }
 constexpr const auto& enum_values(Penalty) { return kPenalties; }
 constexpr const auto& enum_values(StopGradient) { return kStopGradients; }
-
-// The fused step (regularizers.hpp): which terms it computes. Confidences off: C-ARAP and LRM
-// use c ≡ 1 (as carap() and lrm() do with an empty confidence view).
-struct RegularizerTerms {
-  bool confidence = true;  // c_{t,i} (E6); written to the `confidence` output when given
-  bool carap = true;       // (E9), weights (E7) with the confidences
-  bool arap = false;       // (E9) with c ≡ 1, α = 1 (ablations)
-  bool lrm = true;         // (E14), weights (E7) with the confidences
-  bool accel = false;      // (E21), trajectory smoothness
-  bool angle = false;      // (E23), rotation-angle velocity / acceleration
-  bool relrot = false;     // (E25), relative-rotation consistency along the edges
-};
-
-// Whether a term that is on reads the rotations (so the caller must give them).
-inline bool reads_rotations(const RegularizerTerms& t) {
-  return t.carap || t.arap || t.angle || t.relrot;
-}
-
-// The options of the fused step: the terms, and each term's own options (plain values).
-struct RegularizerOptions {
-  RegularizerTerms terms;
-  ConfidenceOptions confidence;
-  CarapOptions carap;
-  ArapOptions arap;
-  LrmOptions lrm;
-  AccelOptions accel;
-  AngleOptions angle;
-  RelrotOptions relrot;
-};
 
 namespace detail {
 // SFINAE: O is T or const T (the visitors below take both).
@@ -242,9 +182,9 @@ using IfOptions = std::enable_if_t<std::is_same<std::remove_const_t<O>, T>::valu
 // for_each_option(options, f): f(name, field) for every field of one term's options, in
 // declaration order, by the field's name; `options` const or mutable. Why: the bindings
 // (smg_torch.regularizers, smg_cli regularizers) read, default and print every option through
-// these lists, so an option is declared in its struct and named once, here. Field types: double,
-// bool, GapList, Normalization and the named enums (enum_values: AccelForm, Penalty,
-// StopGradient).
+// these lists, so an option is declared in its struct and named once, in the visitor beside it
+// (here, or in its term's header). Field types: double, bool, GapList, Normalization and the
+// named enums (enum_values).
 template <class O, class F, detail::IfOptions<O, ConfidenceOptions> = 0>
 void for_each_option(O& o, F&& f) {
   f("kappa_m", o.kappa_m);
@@ -288,79 +228,6 @@ void for_each_option(O& o, F&& f) {
   f("detach_omega", o.detach_omega);
   detail::for_each_scaling_option(o, f);
 }
-template <class O, class F, detail::IfOptions<O, AccelOptions> = 0>
-void for_each_option(O& o, F&& f) {
-  f("form", o.form);
-  f("penalty", o.penalty);
-  f("confidence_weighted", o.confidence_weighted);
-  detail::for_each_scaling_option(o, f);
-  f("penalty_eps", o.penalty_eps);
-}
-template <class O, class F, detail::IfOptions<O, AngleOptions> = 0>
-void for_each_option(O& o, F&& f) {
-  f("form", o.form);
-  f("confidence_weighted", o.confidence_weighted);
-  detail::for_each_scaling_option(o, f);
-  f("penalty", o.penalty);
-  f("penalty_eps", o.penalty_eps);
-}
-
-template <class O, class F, detail::IfOptions<O, RelrotOptions> = 0>
-void for_each_option(O& o, F&& f) {
-  detail::for_each_scaling_option(o, f);
-  f("penalty", o.penalty);
-  f("penalty_eps", o.penalty_eps);
-}
-
-// The term list of the fused step: f(name, on, options) for every term of RegularizerOptions, in
-// the driver's order, with on = o.terms.<name> (bool& or const bool&). validate_options below,
-// smg_torch.regularizers (its options, defaults and argument names) and smg_cli regularizers
-// (its flags) loop over it: a term added here is exposed by all of them.
-template <class RO, class F, detail::IfOptions<RO, RegularizerOptions> = 0>
-void for_each_term(RO& o, F&& f) {
-  f("confidence", o.terms.confidence, o.confidence);
-  f("carap", o.terms.carap, o.carap);
-  f("arap", o.terms.arap, o.arap);
-  f("lrm", o.terms.lrm, o.lrm);
-  f("accel", o.terms.accel, o.accel);
-  f("angle", o.terms.angle, o.angle);
-  f("relrot", o.terms.relrot, o.relrot);
-}
-
-// The energies of one fused step, each as the separate operator returns it (0 for a term that
-// is off), in Accumulator<S> (double for float). Plain doubles in this order: the torch CUDA
-// glue reads it as a tensor of each_energy's length.
-template <class S>
-struct RegularizerResult {
-  Accumulator<S> carap = Accumulator<S>(0);
-  Accumulator<S> arap = Accumulator<S>(0);
-  Accumulator<S> lrm = Accumulator<S>(0);
-  Accumulator<S> accel = Accumulator<S>(0);
-  Accumulator<S> angle = Accumulator<S>(0);
-  Accumulator<S> relrot = Accumulator<S>(0);
-
-  // f(name, r.<energy>...) for each energy, in the order above, of one or more results. The list
-  // of energies: total(), +=, the torch glue's energies tensor and smg_torch.Regularizers' names,
-  // smg_cli's summary and the tests follow it, so a term's energy is added here and nowhere else.
-  template <class F, class... R>
-  static void each_energy(F&& f, R&... r) {
-    f("carap", r.carap...);
-    f("arap", r.arap...);
-    f("lrm", r.lrm...);
-    f("accel", r.accel...);
-    f("angle", r.angle...);
-    f("relrot", r.relrot...);
-  }
-  Accumulator<S> total() const {
-    Accumulator<S> t(0);
-    each_energy([&](const char*, const Accumulator<S>& e) { t += e; }, *this);
-    return t;
-  }
-  RegularizerResult& operator+=(const RegularizerResult& o) {
-    each_energy([](const char*, Accumulator<S>& a, const Accumulator<S>& b) { a += b; }, *this, o);
-    return *this;
-  }
-};
 
 namespace detail {
 inline bool finite_in(double v, double lo, double hi) {
@@ -462,26 +329,6 @@ inline Status validate_options(const LrmOptions& o) {
                               detail::check_nonneg("LrmOptions", "weight", o.weight)});
 }
 
-inline Status validate_options(const AccelOptions& o) {
-  return detail::first_error({detail::check_enum("AccelOptions", "form", o.form),
-                              detail::check_enum("AccelOptions", "penalty", o.penalty),
-                              detail::check_nonneg("AccelOptions", "weight", o.weight),
-                              detail::check_positive("AccelOptions", "penalty_eps", o.penalty_eps)});
-}
-
-inline Status validate_options(const AngleOptions& o) {
-  return detail::first_error({detail::check_enum("AngleOptions", "form", o.form),
-                              detail::check_nonneg("AngleOptions", "weight", o.weight),
-                              detail::check_enum("AngleOptions", "penalty", o.penalty),
-                              detail::check_positive("AngleOptions", "penalty_eps", o.penalty_eps)});
-}
-
-inline Status validate_options(const RelrotOptions& o) {
-  return detail::first_error({detail::check_nonneg("RelrotOptions", "weight", o.weight),
-                              detail::check_enum("RelrotOptions", "penalty", o.penalty),
-                              detail::check_positive("RelrotOptions", "penalty_eps", o.penalty_eps)});
-}
-
 // Plain ARAP is C-ARAP with α = 1 and no confidences (the caller passes none).
 inline CarapOptions carap_options_for_arap(const ArapOptions& o) {
   CarapOptions c;
@@ -495,24 +342,6 @@ inline CarapOptions carap_options_for_arap(const ArapOptions& o) {
   c.stop_gradient = o.stop_gradient;
   c.penalty_eps = o.penalty_eps;
   return c;
-}
-
-// The options of every term of the fused step that is on (regularizers(), CPU and CUDA); the
-// first bad one's message.
-inline Status validate_options(const RegularizerOptions& o) {
-  Status first = Status::ok();
-  for_each_term(o, [&](const char*, bool on, const auto& term) {
-    if (on && first) first = validate_options(term);
-  });
-  // The rigid term back-propagates C-ARAP's and ARAP's d-gradients together (E10), so one
-  // call holds the same endpoint for both.
-  if (first && o.terms.carap && o.terms.arap && o.carap.stop_gradient != o.arap.stop_gradient)
-    return Status::error(std::string("RegularizerOptions: carap.stop_gradient (") +
-                         to_string(o.carap.stop_gradient) + ") and arap.stop_gradient (" +
-                         to_string(o.arap.stop_gradient) +
-                         ") differ; one fused call back-propagates both rigid energies together: "
-                         "call them separately");
-  return first;
 }
 
 }  // namespace smg

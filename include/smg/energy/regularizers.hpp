@@ -8,7 +8,7 @@
 // terms and checks the arguments: the walk is the CPU driver's (energy/driver.hpp: frames cut
 // into blocks, each node's neighbourhood over a block's frames gathered once, results
 // bit-identical for any thread count), each term is one header in energy/terms/ built on the
-// element functions (confidence_term.hpp, carap_term.hpp, lrm_term.hpp, common.hpp), and
+// element functions (elements/confidence.hpp, elements/carap.hpp, elements/lrm.hpp, common.hpp), and
 // RegularizerTermSet below is the list of them. Confidences are computed first, per block, into
 // the gathered records: C-ARAP, LRM and (confidence-weighted) smoothness read c at the earlier
 // frame (E7), which the block owns, as constants (stop-gradient).

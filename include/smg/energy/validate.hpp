@@ -1,6 +1,8 @@
 // smg/energy/validate.hpp — the argument checks of the separate energy operators:
-// validate_confidence (node_confidences), validate_carap, validate_arap, validate_lrm,
-// validate_accel, validate_angle and validate_relrot, and the fused step's validate_regularizers; one line naming the bad argument.
+// validate_confidence (node_confidences), validate_carap, validate_arap, validate_lrm and the
+// fused step's validate_regularizers; one line naming the bad argument. A term's own one-term
+// call has its validator in its term header (validate_accel in energy/terms/accel.hpp, ...),
+// pool-free as these are.
 //
 // Why a header of their own: the CUDA launchers' device-memory validators (cuda/validate.cuh)
 // call these on host copies, so that the messages are exactly the CPU's, and device headers
@@ -18,7 +20,7 @@
 #include "smg/core/views.hpp"
 #include "smg/energy/block.hpp"    // detail::validate_gradient_outputs
 #include "smg/energy/common.hpp"   // validate_optional_confidence
-#include "smg/energy/options.hpp"  // validate_options
+#include "smg/energy/term_list.hpp"  // validate_options, the terms' options
 #include "smg/graph/neighbors.hpp"
 
 namespace smg {
@@ -91,53 +93,6 @@ Status validate_lrm(detail::NonDeducedT<PositionsView<const S>> positions,
   if (Status s = validate_optional_output(grad_positions, T, N, "grad_positions"); !s) return s;
   if (Status s = validate_optional_output(omega, T, N, "omega"); !s) return s;
   return Status::ok();
-}
-
-// Checks the arguments of accel(): `confidence` [T][N] may be empty (all 1; read only with
-// options.confidence_weighted), the gradient may be empty (not computed).
-template <class S>
-Status validate_accel(detail::NonDeducedT<PositionsView<const S>> positions,
-                      detail::NonDeducedT<FrameScalarsView<const S>> confidence,
-                      const AccelOptions& options, PositionsView<S> grad_positions = {}) {
-  const Index T = positions.frames(), N = positions.nodes();
-  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  return validate_optional_output(grad_positions, T, N, "grad_positions");
-}
-
-// Checks the arguments of angle(): rotations [T][N][4] (nonzero, normalised on entry);
-// `confidence` [T][N] may be empty (all 1; read only with options.confidence_weighted), the
-// gradient may be empty (not computed).
-template <class S>
-Status validate_angle(detail::NonDeducedT<QuaternionsView<const S>> rotations,
-                      detail::NonDeducedT<FrameScalarsView<const S>> confidence,
-                      const AngleOptions& options,
-                      detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
-  const Index T = rotations.frames(), N = rotations.nodes();
-  if (Status s = validate_quaternions<S>(rotations, -1, -1, QuaternionNorm::normalize_on_entry,
-                                         "rotations");
-      !s)
-    return s;
-  if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  return detail::validate_gradient_outputs<S>(PositionsView<S>(), grad_rotations, T, N);
-}
-
-// Checks the inputs and outputs of relrot(): rotations [T][N][4], graph [N][K]; the gradient may
-// be empty (not computed).
-template <class S, class I>
-Status validate_relrot(detail::NonDeducedT<QuaternionsView<const S>> rotations,
-                       const NeighborsView<S, I>& graph, const RelrotOptions& options,
-                       detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
-  const Index T = rotations.frames(), N = rotations.nodes();
-  if (Status s = validate_quaternions<S>(rotations, -1, -1, QuaternionNorm::normalize_on_entry,
-                                         "rotations");
-      !s)
-    return s;
-  if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  return detail::validate_gradient_outputs<S>(PositionsView<S>(), grad_rotations, T, N);
 }
 
 // Checks the arguments of regularizers(); one line naming the bad argument. `rotations` may be

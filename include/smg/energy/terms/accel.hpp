@@ -23,6 +23,48 @@
 
 namespace smg {
 
+// Smoothness of node trajectories (E21), as MoSca and Shape-of-Motion regularise their motion:
+// the second differences x^{t+2} − 2x^{t+1} + x^t (acceleration) or first differences
+// (velocity) of every node, weighted by c_{t,i} at the earliest frame or by 1, under a penalty
+// (E22): squared by default, or the unsquared norm, or D3DGS's sqrt(w‖a‖² + ε).
+struct AccelOptions {
+  AccelForm form = AccelForm::acceleration;
+  Penalty penalty = Penalty::squared;  // (E22)
+  bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
+  Normalization normalization = Normalization::sum;  // mean: over (T − 2) · N terms (or T − 1)
+  double weight = 1.0;  // overall factor (units: 1 / length² squared, 1 / length otherwise)
+  double penalty_eps = 1e-20;  // ε of sqrt_weighted (length²), finite and > 0; read by it only
+};
+
+template <class O, class F, detail::IfOptions<O, AccelOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("form", o.form);
+  f("penalty", o.penalty);
+  f("confidence_weighted", o.confidence_weighted);
+  detail::for_each_scaling_option(o, f);
+  f("penalty_eps", o.penalty_eps);
+}
+
+inline Status validate_options(const AccelOptions& o) {
+  return detail::first_error({detail::check_enum("AccelOptions", "form", o.form),
+                              detail::check_enum("AccelOptions", "penalty", o.penalty),
+                              detail::check_nonneg("AccelOptions", "weight", o.weight),
+                              detail::check_positive("AccelOptions", "penalty_eps", o.penalty_eps)});
+}
+
+// Checks the arguments of accel(): `confidence` [T][N] may be empty (all 1; read only with
+// options.confidence_weighted), the gradient may be empty (not computed).
+template <class S>
+Status validate_accel(detail::NonDeducedT<PositionsView<const S>> positions,
+                      detail::NonDeducedT<FrameScalarsView<const S>> confidence,
+                      const AccelOptions& options, PositionsView<S> grad_positions = {}) {
+  const Index T = positions.frames(), N = positions.nodes();
+  return detail::first_error({validate_positions<S>(positions, -1, -1, "positions"),
+                              validate_optional_confidence<S>(confidence, T, N),
+                              validate_options(options),
+                              validate_optional_output(grad_positions, T, N, "grad_positions")});
+}
+
 // The penalty (E22) of one term of (E21): the difference a (3 values) of frames t, t+1[, t+2],
 // the factor k (the weight, / the term count with Normalization::mean), the term's weight w (its
 // confidence, or 1) and ε (AccelOptions::penalty_eps); returns P(a) and writes g = ∂P/∂a:
@@ -132,6 +174,12 @@ struct AccelTerm : TermDefaults {
     weighted = o.confidence_weighted;
     scale_d = accel_scale(o, frames, nodes);
     enabled = accel_active(o, frames, nodes);
+  }
+
+  // The list's entry "accel".
+  template <class RO>
+  void setup(const RO& o, const TermShape& s) {
+    if (o.terms.accel) configure(o.accel, s.T, s.N);
   }
 
   bool on() const { return enabled; }

@@ -26,6 +26,50 @@
 
 namespace smg {
 
+// Rotation-angle velocity or acceleration of node rotations (E23, docs/math/terms/angle.md), as
+// MoSca regularises its motion bases' rotations: θ_i^t, the angle of R_i^{t+1} R_i^{tT}, summed
+// (velocity) or |θ_i^{t+1} − θ_i^t| summed (acceleration), unsquared, weighted by c_{t,i} at the
+// earliest frame or by 1. The forms are AccelForm's.
+struct AngleOptions {
+  AccelForm form = AccelForm::acceleration;
+  bool confidence_weighted = false;  // w = c_{t,i} (E6) at the earliest frame; else w = 1
+  Normalization normalization = Normalization::sum;  // mean: over (T − 2) · N terms (or T − 1)
+  double weight = 1.0;  // overall factor (units: 1 / radian, or 1 / radian² squared)
+  // (E22) on the scalar θ (or Δθ): norm |·| (MoSca's, the default), squared (MoSca's
+  // square=True), sqrt_weighted sqrt(w·² + ε).
+  Penalty penalty = Penalty::norm;
+  double penalty_eps = 1e-20;  // ε of sqrt_weighted (radian²), finite and > 0; read by it only
+};
+
+template <class O, class F, detail::IfOptions<O, AngleOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  f("form", o.form);
+  f("confidence_weighted", o.confidence_weighted);
+  detail::for_each_scaling_option(o, f);
+  f("penalty", o.penalty);
+  f("penalty_eps", o.penalty_eps);
+}
+
+inline Status validate_options(const AngleOptions& o) {
+  return detail::first_error({detail::check_enum("AngleOptions", "form", o.form),
+                              detail::check_nonneg("AngleOptions", "weight", o.weight),
+                              detail::check_enum("AngleOptions", "penalty", o.penalty),
+                              detail::check_positive("AngleOptions", "penalty_eps", o.penalty_eps)});
+}
+
+// Checks the arguments of angle(): rotations [T][N][4] (nonzero, normalised on entry);
+// `confidence` [T][N] may be empty (all 1; read only with options.confidence_weighted), the
+// gradient may be empty (not computed).
+template <class S>
+Status validate_angle(detail::NonDeducedT<QuaternionsView<const S>> rotations,
+                      detail::NonDeducedT<FrameScalarsView<const S>> confidence,
+                      const AngleOptions& options,
+                      detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
+  return detail::validate_rotation_term<S>(
+      rotations, validate_optional_confidence<S>(confidence, rotations.frames(), rotations.nodes()),
+      validate_options(options), grad_rotations);
+}
+
 // θ of (E23), the rotation angle of R_b R_aᵀ in [0, π], from the quaternions qa, qb (w, x, y, z;
 // any nonzero norm: θ and u do not depend on it), and u (3 values) with ∂θ/∂φ_b = u, ∂θ/∂φ_a = −u
 // for right-tangent perturbations R ← R Exp(φ). u = 0 where ‖v‖ = 0 (θ = 0) or w = 0 (θ = π, a
@@ -181,6 +225,13 @@ struct AngleTerm : TermDefaults {
     weighted = o.confidence_weighted;
     scale_d = angle_scale(o, frames, nodes);
     enabled = angle_active(o, frames, nodes);
+  }
+
+  // The list's entry "angle".
+  template <class RO>
+  void setup(const RO& o, const TermShape& s) {
+    if (o.terms.angle) configure(o.angle, s.T, s.N);
+    want_rotations = s.want_r;
   }
 
   bool on() const { return enabled; }

@@ -11,7 +11,7 @@
 #include <cstdint>
 
 #include "smg/energy/block.hpp"
-#include "smg/energy/confidence_term.hpp"
+#include "smg/energy/elements/confidence.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/velocity.hpp"
 
@@ -26,6 +26,13 @@ struct ConfidenceTerm : TermDefaults {
   FrameScalarsView<const S> given;       // the caller's c [T][N], when not computed (may be empty)
   FrameScalarsView<S> out;               // output [T][N] (may be empty)
   const S* inv_w = nullptr;              // [N] 1/Σ_k w_ik (fixed scratch)
+
+  // The list's entry "confidence": computed when on, with its constants (E3)-(E6).
+  template <class RO>
+  void setup(const RO& o, const TermShape&) {
+    computed = o.terms.confidence;
+    constants = ConfidenceConstants<S>(o.confidence);
+  }
 
   // Always on: every block needs its c row (1 when nothing is computed).
   bool on() const { return true; }

@@ -1,7 +1,7 @@
 // smg/energy/terms/lrm.hpp — LRM (E11)-(E16) as a term of the regulariser driver
 // (energy/block.hpp has the concept): per node, the block's owned frames in groups of W SIMD
 // lanes (W consecutive frames of one node; its neighbour set does not change with t), read from
-// the block's gathered records. The per-neighbourhood maths is lrm_term.hpp's.
+// the block's gathered records. The per-neighbourhood maths is elements/lrm.hpp's.
 #pragma once
 
 #include "smg/core/config.hpp"
@@ -14,7 +14,7 @@
 #include "smg/energy/block.hpp"
 #include "smg/energy/common.hpp"
 #include "smg/energy/lanes.hpp"
-#include "smg/energy/lrm_term.hpp"
+#include "smg/energy/elements/lrm.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/velocity.hpp"
 
@@ -65,6 +65,12 @@ struct LrmTerm : TermDefaults {
     alpha = L(o.alpha);
     scale = L(scale_d);
     params = lrm_params<S>(o, gradient);
+  }
+
+  // The list's entry "lrm".
+  template <class RO>
+  void setup(const RO& o, const TermShape& s) {
+    if (o.terms.lrm) configure(o.lrm, s.T, s.K, s.edges, s.want_x);
   }
 
   bool on() const { return enabled; }

@@ -27,6 +27,40 @@
 
 namespace smg {
 
+// Relative-rotation consistency (E25, docs/math/terms/relrot.md), Dynamic 3D Gaussians' "rot"
+// loss: along every edge (i, j) of the graph and every pair of consecutive frames, the relative
+// rotations r^t = q̂^{t+1} ⊗ q̂^{t*} of the two nodes compared as raw 4-vectors, ‖r_j^t − r_i^t‖,
+// under a penalty (E22) with the edge weight w_ij. The default is D3DGS's: sqrt(w ‖·‖² + ε).
+struct RelrotOptions {
+  Normalization normalization = Normalization::sum;  // mean: over (T − 1) · edges terms
+  double weight = 1.0;  // overall factor (dimensionless, r is a unit quaternion's difference)
+  Penalty penalty = Penalty::sqrt_weighted;  // (E22); D3DGS's weighted_l2_loss_v2
+  double penalty_eps = 1e-20;  // ε of sqrt_weighted, finite and > 0; read by it only
+};
+
+template <class O, class F, detail::IfOptions<O, RelrotOptions> = 0>
+void for_each_option(O& o, F&& f) {
+  detail::for_each_scaling_option(o, f);
+  f("penalty", o.penalty);
+  f("penalty_eps", o.penalty_eps);
+}
+
+inline Status validate_options(const RelrotOptions& o) {
+  return detail::first_error({detail::check_nonneg("RelrotOptions", "weight", o.weight),
+                              detail::check_enum("RelrotOptions", "penalty", o.penalty),
+                              detail::check_positive("RelrotOptions", "penalty_eps", o.penalty_eps)});
+}
+
+// Checks the inputs and outputs of relrot(): rotations [T][N][4], graph [N][K]; the gradient may
+// be empty (not computed).
+template <class S, class I>
+Status validate_relrot(detail::NonDeducedT<QuaternionsView<const S>> rotations,
+                       const NeighborsView<S, I>& graph, const RelrotOptions& options,
+                       detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
+  return detail::validate_rotation_term<S>(rotations, validate_neighbors(graph, rotations.nodes(), "graph"),
+                                           validate_options(options), grad_rotations);
+}
+
 // r = â ⊗ b̂* of (E25) from the raw quaternions b = q^t and a = q^{t+1} (w, x, y, z; nonzero
 // norm), with the unit quaternions â, b̂ written out for relrot_tangent.
 template <class S>
@@ -85,9 +119,9 @@ inline Index relrot_term_count(Index frames, Index edges) {
   return std::max<Index>(0, frames - 1) * edges;
 }
 inline double relrot_scale(const RelrotOptions& o, Index frames, Index edges) {
-  const Index terms = relrot_term_count(frames, edges);
-  return o.normalization == Normalization::mean ? (terms > 0 ? o.weight / static_cast<double>(terms) : 0.0)
-                                                : o.weight;
+  return o.normalization == Normalization::mean
+             ? detail::scale_over_terms(o.weight, relrot_term_count(frames, edges))
+             : o.weight;
 }
 
 // (E25) as one element (frame t, node n) of the CUDA driver's element pass (cuda/driver.cuh):
@@ -115,9 +149,8 @@ struct RelrotElement {
     if (T < 2) return;
     S f = S(k);
     if (mean) {
-      const std::int32_t edges = eg.in_offsets[N];
-      if (edges == 0) return;
-      f = S(double(k) / (double(T - 1) * double(edges)));
+      if (eg.in_offsets[N] == 0) return;
+      f = S(detail::scale_over_count(double(k), T - 1, &eg.in_offsets[N]));  // as relrot_scale
     }
     const S ep = S(eps);
     const bool want_r = grad_tangent != nullptr || grad_raw != nullptr;
@@ -185,6 +218,13 @@ struct RelrotTerm : TermDefaults {
     weight_d = o.weight;
     scale_d = relrot_scale(o, frames, edges);
     enabled = relrot_term_count(frames, edges) > 0 && o.weight != 0.0;
+  }
+
+  // The list's entry "relrot"; nothing without a graph.
+  template <class RO>
+  void setup(const RO& o, const TermShape& s) {
+    if (o.terms.relrot && s.K > 0) configure(o.relrot, s.T, s.edges);
+    want_rotations = s.want_r;
   }
 
   bool on() const { return enabled; }

@@ -2,7 +2,7 @@
 // under its penalty and stop-gradient (E24), as one term of the regulariser driver (energy/block.hpp has the concept). One term for both because
 // they share the expensive part: d_ij^t = R_i^tᵀ (x_j^t − x_i^t) (E8) is computed once per
 // (frame, edge) and reused by every gap of both energies, and their d-gradients are summed
-// before one back-propagation (E10). The per-element maths is carap_term.hpp's; the vectorised
+// before one back-propagation (E10). The per-element maths is elements/carap.hpp's; the vectorised
 // loops over a node's [edge][frame] arrays are below (carap_loops, also used by carap()).
 #pragma once
 
@@ -15,7 +15,7 @@
 #include "smg/core/quaternion.hpp"
 #include "smg/core/scalar.hpp"
 #include "smg/energy/block.hpp"
-#include "smg/energy/carap_term.hpp"
+#include "smg/energy/elements/carap.hpp"
 #include "smg/energy/common.hpp"
 #include "smg/energy/lanes.hpp"
 #include "smg/energy/options.hpp"
@@ -242,6 +242,14 @@ struct RigidTerm : TermDefaults {
       lambda_l_a = L(arap->lambda_l);
       penalties(*arap, 1);
     }
+  }
+
+  // The list's entries "carap" and "arap" (one term: both read d, (E8)); nothing without a graph.
+  template <class RO>
+  void setup(const RO& o, const TermShape& s) {
+    if (s.K > 0)
+      configure(o.terms.carap ? &o.carap : nullptr, o.terms.arap ? &o.arap : nullptr, s.T, s.edges);
+    want_rotations = s.want_r;
   }
 
   bool on() const { return !gaps.empty(); }

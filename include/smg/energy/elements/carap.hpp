@@ -1,4 +1,4 @@
-// smg/energy/carap_term.hpp — one term of C-ARAP (E9), written once for every place that
+// smg/energy/elements/carap.hpp — one term of C-ARAP (E9), written once for every place that
 // evaluates it: the vectorised energy kernel (carap.hpp), the residual form
 // (carap_residuals.hpp) and, later, GPU kernels; its edge weight (E7) is confidence_edge_weight
 // in common.hpp. Plain functions of scalars, forced inline so that the kernel's loops still

@@ -1,4 +1,4 @@
-// smg/energy/lrm_term.hpp — one LRM neighbourhood term (E11)-(E13) and its exact gradient (E15),
+// smg/energy/elements/lrm.hpp — one LRM neighbourhood term (E11)-(E13) and its exact gradient (E15),
 // written once for every place that evaluates it: the SIMD CPU kernel (lrm.hpp, W frames at
 // once in Lanes), the residual form (lrm_residuals.hpp, plain scalars and AutoDiffScalar) and
 // the CUDA kernel (cuda/lrm.cuh, one thread per node and frame). Host/device functions of a

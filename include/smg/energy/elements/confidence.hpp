@@ -1,4 +1,4 @@
-// smg/energy/confidence_term.hpp — the per-node maths of the node confidences (E1)-(E6),
+// smg/energy/elements/confidence.hpp — the per-node maths of the node confidences (E1)-(E6),
 // written once for the CPU loops (confidence.hpp) and the CUDA kernels (cuda/confidence.cuh):
 // host/device functions of one node and frame, with the option values as a plain struct.
 // Equations and conventions: confidence.hpp and docs/math/energy.md.
