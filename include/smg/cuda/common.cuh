@@ -190,6 +190,9 @@ struct alignas(4 * sizeof(S)) Vec4 {
 };
 
 namespace detail {
+// Normalization::mean's factor over a count in device memory: the CPU's formula (energy/common.hpp).
+using smg::detail::scale_over_count;
+
 // Fixed decomposition of the deterministic sum: kSumBlocks blocks of kThreads threads, each
 // thread summing a fixed strided subset, then a fixed tree in shared memory; a second launch
 // sums the kSumBlocks partials the same way. The order depends on n only.
