@@ -1091,9 +1091,9 @@ for rel in sorted(f for f in tracked_files() if f.startswith(TERMS_DIR + "/") an
     if "smg/energy/terms/%s.hpp" % name not in reached:
         problem("include/smg/energy/regularizers.hpp", 1,
                 "reaches %s neither directly nor through a one-term operator it includes" % rel)
-    structs = re.findall(r"struct (\w+Term) : TermDefaults", text)
+    structs = re.findall(r"struct (\w+Term) : [^{]*\b(?:TermDefaults|ScratchFree\w*Term)\b", text)
     if not structs:
-        problem(rel, 1, "no term struct (struct FooTerm : TermDefaults, energy/block.hpp's concept)")
+        problem(rel, 1, "no term struct (struct FooTerm : TermDefaults or ScratchFreeTerm, energy/block.hpp's concept)")
     for st in structs:
         if st not in listed_terms:
             problem("include/smg/energy/term_list.hpp", 1,

@@ -277,7 +277,7 @@ struct DryrunElement {
 namespace detail {
 
 template <class S, class I>
-struct DryrunTerm : TermDefaults {
+struct DryrunTerm : ScratchFreeTerm {
   using L = Literal<S>;
   using Acc = Accumulator<S>;
 
@@ -309,10 +309,6 @@ struct DryrunTerm : TermDefaults {
     return e;
   }
   static Acc& energy_of(RegularizerResult<S>& r) { return r.dryrun; }
-  Index slot_scalars(const BlockPlan&) const { return 0; }
-  void bind(const BlockPlan&, S*, const NeighborsView<S, I>&) {}
-  struct Block {};
-  Block begin(BlockView<S, I>&, S*) const { return {}; }
 
   template <class E>
   void node(const BlockView<S, I>& v, Block&, Index i, E& energy) const {

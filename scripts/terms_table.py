@@ -85,7 +85,7 @@ def rows():
     headers = {}
     for path in sorted(glob.glob(os.path.join(ROOT, "include/smg/energy/terms/*.hpp"))):
         text = open(path, encoding="utf-8").read()
-        for st in re.findall(r"struct (\w+Term) : TermDefaults", text):
+        for st in re.findall(r"struct (\w+Term) : [^{]*\b(?:TermDefaults|ScratchFree\w*Term)\b", text):
             headers[st] = (os.path.relpath(path, os.path.join(ROOT, "include/smg")), text)
     energy_src = "".join(open(p, encoding="utf-8").read()
                          for p in sorted(glob.glob(os.path.join(ROOT, "include/smg/energy/*.hpp"))))

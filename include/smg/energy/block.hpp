@@ -246,6 +246,28 @@ struct TermDefaults {
   void finish(E&) const {}
 };
 
+// The defaults of a term with no scratch of its own (each step reads the block's records only,
+// as the CUDA element pass's terms do): no slot, nothing to bind, an empty Block.
+struct ScratchFreeTerm : TermDefaults {
+  Index slot_scalars(const BlockPlan&) const { return 0; }
+  template <class S, class I>
+  void bind(const BlockPlan&, S*, const NeighborsView<S, I>&) {}
+  struct Block {};
+  template <class V, class S>
+  Block begin(V&, S*) const {
+    return {};
+  }
+};
+
+// A scratch-free term of the rotations only (angle, relrot): it reads them, writes no position
+// gradient, and the rotation gradient when the caller wants it (setup() sets want_rotations).
+struct ScratchFreeRotationTerm : ScratchFreeTerm {
+  bool want_rotations = false;
+  bool reads_rotations() const { return true; }
+  bool position_gradient() const { return false; }
+  bool rotation_gradient() const { return want_rotations; }
+};
+
 // ---- The term concept, checked (see the top of this file) ----
 // Detection idiom (C++17): Op<Args...> is well-formed.
 template <class, template <class...> class Op, class... Args>

@@ -9,6 +9,7 @@
 #include <cmath>
 
 #include "smg/core/scalar.hpp"
+#include "smg/core/types.hpp"
 #include "smg/energy/options.hpp"  // Penalty
 
 namespace smg {
@@ -36,5 +37,40 @@ SMG_FORCE_INLINE SMG_HOST_DEVICE S penalty_of_square(Penalty p, S k, S w, S eps,
   h = L(2) * f;
   return f * aa;
 }
+
+namespace detail {
+// What the trajectory terms (the smoothness E21, the rotation angle E23) keep of their options,
+// formed on the host in double, and the copy their CUDA Elements take: the form's order (2:
+// acceleration, 1: velocity), the penalty (E22) and its ε, the confidence weighting, the overall
+// factor k (scale_d, / the term count with Normalization::mean), T, and whether it is on.
+struct FormState {
+  bool enabled = false, weighted = false;
+  Index order = 2;
+  Penalty penalty = Penalty::squared;
+  double scale_d = 0, eps_d = 0;
+  Index T = 0;
+
+  template <class O>
+  void set_form(const O& o, Index frames, double scale, bool active) {
+    T = frames;
+    order = o.form == AccelForm::acceleration ? 2 : 1;
+    penalty = o.penalty;
+    eps_d = o.penalty_eps;
+    weighted = o.confidence_weighted;
+    scale_d = scale;
+    enabled = active;
+  }
+  template <class E>
+  E form_element() const {
+    E e;
+    e.k = decltype(e.k)(scale_d);
+    e.eps = decltype(e.eps)(eps_d);
+    e.penalty = penalty;
+    e.weighted = weighted;
+    e.order = static_cast<int>(order);
+    return e;
+  }
+};
+}  // namespace detail
 
 }  // namespace smg

@@ -156,24 +156,12 @@ struct AccelElement {
 namespace detail {
 
 template <class S, class I>
-struct AccelTerm : TermDefaults {
+struct AccelTerm : ScratchFreeTerm, FormState {
   using L = Literal<S>;
   using Acc = Accumulator<S>;
 
-  bool enabled = false, weighted = false;
-  Index order = 2;  // 2: acceleration, 1: velocity
-  Penalty penalty = Penalty::squared;
-  double scale_d = 0, eps_d = 0;
-  Index T = 0;
-
   void configure(const AccelOptions& o, Index frames, Index nodes) {
-    T = frames;
-    order = o.form == AccelForm::acceleration ? 2 : 1;
-    penalty = o.penalty;
-    eps_d = o.penalty_eps;
-    weighted = o.confidence_weighted;
-    scale_d = accel_scale(o, frames, nodes);
-    enabled = accel_active(o, frames, nodes);
+    set_form(o, frames, accel_scale(o, frames, nodes), accel_active(o, frames, nodes));
   }
 
   // The list's entry "accel".
@@ -188,20 +176,8 @@ struct AccelTerm : TermDefaults {
   // The CUDA driver's element pass (cuda/driver.cuh) runs this term as its per-(frame, node)
   // step, configured as above (the scale formed on the host, in double, as node() forms it).
   using Element = AccelElement<S>;
-  Element element() const {
-    Element e;
-    e.k = L(scale_d);
-    e.eps = L(eps_d);
-    e.penalty = penalty;
-    e.weighted = weighted;
-    e.order = static_cast<int>(order);
-    return e;
-  }
+  Element element() const { return form_element<Element>(); }
   static Acc& energy_of(RegularizerResult<S>& r) { return r.accel; }
-  Index slot_scalars(const BlockPlan&) const { return 0; }
-  void bind(const BlockPlan&, S*, const NeighborsView<S, I>&) {}
-  struct Block {};
-  Block begin(BlockView<S, I>&, S*) const { return {}; }
 
   // The terms of node i whose earliest frame the block owns; the gradient into the block's rows.
   // The penalty is a template argument of the loop (one branch per node, not per term).

@@ -207,24 +207,12 @@ struct AngleElement {
 namespace detail {
 
 template <class S, class I>
-struct AngleTerm : TermDefaults {
+struct AngleTerm : ScratchFreeRotationTerm, FormState {
   using L = Literal<S>;
   using Acc = Accumulator<S>;
 
-  bool enabled = false, weighted = false, want_rotations = false;
-  Index order = 2;  // 2: acceleration, 1: velocity
-  Penalty penalty = Penalty::norm;
-  double scale_d = 0, eps_d = 0;
-  Index T = 0;
-
   void configure(const AngleOptions& o, Index frames, Index nodes) {
-    T = frames;
-    penalty = o.penalty;
-    eps_d = o.penalty_eps;
-    order = o.form == AccelForm::acceleration ? 2 : 1;
-    weighted = o.confidence_weighted;
-    scale_d = angle_scale(o, frames, nodes);
-    enabled = angle_active(o, frames, nodes);
+    set_form(o, frames, angle_scale(o, frames, nodes), angle_active(o, frames, nodes));
   }
 
   // The list's entry "angle".
@@ -236,25 +224,10 @@ struct AngleTerm : TermDefaults {
 
   bool on() const { return enabled; }
   Index reach() const { return order; }
-  bool reads_rotations() const { return true; }
-  bool position_gradient() const { return false; }
-  bool rotation_gradient() const { return want_rotations; }
 
   using Element = AngleElement<S>;
-  Element element() const {
-    Element e;
-    e.k = L(scale_d);
-    e.eps = L(eps_d);
-    e.penalty = penalty;
-    e.weighted = weighted;
-    e.order = static_cast<int>(order);
-    return e;
-  }
+  Element element() const { return form_element<Element>(); }
   static Acc& energy_of(RegularizerResult<S>& r) { return r.angle; }
-  Index slot_scalars(const BlockPlan&) const { return 0; }
-  void bind(const BlockPlan&, S*, const NeighborsView<S, I>&) {}
-  struct Block {};
-  Block begin(BlockView<S, I>&, S*) const { return {}; }
 
   // The block's weights: c of node i at the owned frame u (the record's c row).
   struct BlockWeight {

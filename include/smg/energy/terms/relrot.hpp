@@ -200,11 +200,11 @@ struct RelrotElement {
 namespace detail {
 
 template <class S, class I>
-struct RelrotTerm : TermDefaults {
+struct RelrotTerm : ScratchFreeRotationTerm {
   using L = Literal<S>;
   using Acc = Accumulator<S>;
 
-  bool enabled = false, want_rotations = false, mean = false;
+  bool enabled = false, mean = false;
   Penalty penalty = Penalty::sqrt_weighted;
   double weight_d = 0, scale_d = 0, eps_d = 0;
   Index T = 0;
@@ -229,9 +229,6 @@ struct RelrotTerm : TermDefaults {
 
   bool on() const { return enabled; }
   Index reach() const { return 1; }
-  bool reads_rotations() const { return true; }
-  bool position_gradient() const { return false; }
-  bool rotation_gradient() const { return want_rotations; }
 
   using Element = RelrotElement<S>;
   // The GPU reads the edge count on the device: with mean, k is the weight and the element
@@ -245,10 +242,6 @@ struct RelrotTerm : TermDefaults {
     return e;
   }
   static Acc& energy_of(RegularizerResult<S>& r) { return r.relrot; }
-  Index slot_scalars(const BlockPlan&) const { return 0; }
-  void bind(const BlockPlan&, S*, const NeighborsView<S, I>&) {}
-  struct Block {};
-  Block begin(BlockView<S, I>&, S*) const { return {}; }
 
   // Rotation gradient h (tangent, 3 values) of node j at block frame l: an owned frame straight
   // into the caller's rows (the block owns every node's row at that frame), the overlap into the
