@@ -16,7 +16,8 @@
 // (stop-gradient), so no derivative is provided. Compute them once per iteration and pass the
 // [T][N] array to carap()/lrm().
 //
-// This file holds the checks and the CPU loops; the per-node maths they run is
+// This file holds the CPU entry point, a one-term call of the regulariser driver (energy/driver.hpp)
+// with the confidence term (energy/terms/confidence.hpp); the per-node maths it runs is
 // elements/confidence.hpp, shared with the CUDA kernels (cuda/confidence.cuh).
 #pragma once
 
@@ -27,11 +28,11 @@
 #include "smg/core/parallel.hpp"
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
+#include "smg/energy/driver.hpp"
 #include "smg/energy/elements/confidence.hpp"
 #include "smg/energy/options.hpp"
+#include "smg/energy/terms/confidence.hpp"
 #include "smg/energy/validate.hpp"
-#include "smg/energy/velocities.hpp"
-#include "smg/energy/velocity.hpp"
 #include "smg/energy/workspace.hpp"
 #include "smg/graph/neighbors.hpp"
 
@@ -59,42 +60,19 @@ void node_confidences(detail::NonDeducedT<PositionsView<const S>> positions,
   SMG_ASSERT(rigidity.data() == nullptr || (rigidity.frames() == T && rigidity.nodes() == N),
              "node_confidences: rigidity shape");
   if (T == 0 || N == 0) return;
-  detail::WorkspaceRef<S> ws(workspace);
-  S* const edge_change = ws->edge_change(static_cast<std::size_t>(T * N));
-  // Velocities once (E1) and 1 / Σ_k w_ik per row (0 for an empty row).
-  S* const vel = ws->velocity(static_cast<std::size_t>(T * N * 3 + N));
-  S* const inv_w = vel + T * N * 3;
-  velocities<S>(positions, PositionsView<S>(vel, T, N), parallel);
-  for (Index i = 0; i < N; ++i) inv_w[i] = inverse_row_weight(graph, i);
-  // Pass 1: e_i^t (E4) of every node and frame; pass 2 reads the neighbours' values.
-  parallel_for(
-      T * N,
-      [&](Index begin, Index end) {
-        for (Index item = begin; item < end; ++item)
-          edge_change[item] =
-              confidence_edge_change(positions, graph, inv_w[item % N], item / N, item % N);
-      },
-      parallel);
-  // Pass 2: the residuals, their normalisers and the two factors (E2)-(E6).
-  const ConfidenceConstants<S> p(options);
-  parallel_for(
-      T * N,
-      [&](Index begin, Index end) {
-        for (Index item = begin; item < end; ++item) {
-          const Index t = item / N, i = item % N;
-          S m(0), r(0);
-          const S c = confidence_node(vel, edge_change, graph, inv_w[i], t, i, p,
-                                      motion.data() ? &m : nullptr,
-                                      rigidity.data() ? &r : nullptr);
-          if (motion.data()) motion(t, i) = m;
-          if (rigidity.data()) rigidity(t, i) = r;
-          if (confidence.data()) {
-            const S vis = visibility.data() ? S(visibility(t, i) ? 1 : 0) : S(1);
-            confidence(t, i) = vis * c;
-          }
-        }
-      },
-      parallel);
+  // The driver's confidence term alone (the one the fused step runs first), so the two give the
+  // same bits: per block of frames, each frame's velocities (E1) and e_i^t (E4) of every node,
+  // then c_{t,i} (E2)-(E6), in the block's slot; nothing of size T·N besides the outputs.
+  detail::ConfidenceTerm<S, I> term;
+  term.computed = true;
+  term.constants = ConfidenceConstants<S>(options);
+  term.vis = visibility;
+  term.out = confidence;
+  term.motion = motion;
+  term.rigidity = rigidity;
+  detail::drive_views<S, I>(positions, QuaternionsView<const S>(), visibility.data() != nullptr,
+                            graph, PositionsView<S>(), RotationGradientView<S>(), workspace,
+                            parallel, term);
 }
 
 }  // namespace smg

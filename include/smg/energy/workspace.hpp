@@ -19,7 +19,6 @@ template <class S>
 class EnergyWorkspace {
  public:
   // At least n scalars of the named buffer, contents unspecified.
-  S* edge_change(std::size_t n) { return grow(edge_change_, n); }  // confidence: e_i^t [T][N]
   S* spill(std::size_t n) { return grow(spill_, n); }              // C-ARAP: frames past a block
   S* scratch(std::size_t n) { return grow(scratch_, n); }          // per-chunk SoA scratch
   // At least n scalars of the per-chunk scratch starting on a 64-byte boundary. Why: Eigen's
@@ -41,7 +40,7 @@ class EnergyWorkspace {
   // Bytes currently held.
   std::size_t bytes() const {
     return sizeof(S) *
-           (edge_change_.size() + spill_.size() + scratch_.size() + velocity_grad_.size() +
+           (spill_.size() + scratch_.size() + velocity_grad_.size() +
             velocity_.size() + rotation_grad_.size());
   }
   // Returns the memory.
@@ -55,7 +54,7 @@ class EnergyWorkspace {
     if (v.size() < n) v.resize(n);
     return v.data();
   }
-  std::vector<S> edge_change_, spill_, scratch_, velocity_grad_, velocity_, rotation_grad_;
+  std::vector<S> spill_, scratch_, velocity_grad_, velocity_, rotation_grad_;
 };
 
 namespace detail {

@@ -25,6 +25,7 @@ struct ConfidenceTerm : TermDefaults {
   VisibilityView<const std::uint8_t> vis;  // may be empty (all visible)
   FrameScalarsView<const S> given;       // the caller's c [T][N], when not computed (may be empty)
   FrameScalarsView<S> out;               // output [T][N] (may be empty)
+  FrameScalarsView<S> motion, rigidity;  // outputs c^m (E3), c^r (E5) [T][N] (node_confidences; may be empty)
   const S* inv_w = nullptr;              // [N] 1/Σ_k w_ik (fixed scratch)
 
   // The list's entry "confidence": computed when on, with its constants (E3)-(E6).
@@ -72,11 +73,15 @@ struct ConfidenceTerm : TermDefaults {
       }
       for (Index i = 0; i < N; ++i) {
         // Frame index 0 of the one-frame arrays Vel [1][N][3] and Ec [1][N].
-        const S c = confidence_node<S, I>(Vel, Ec, v.graph, inv_w[i], 0, i, constants, nullptr,
-                                          nullptr);
+        S m(0), r(0);
+        const S c = confidence_node<S, I>(Vel, Ec, v.graph, inv_w[i], 0, i, constants,
+                                          motion.data() ? &m : nullptr,
+                                          rigidity.data() ? &r : nullptr);
         const S ci = (vis.data() ? S(vis(t, i) ? 1 : 0) : S(1)) * c;
         v.Xb[i * n4 + 3 * ne + l] = ci;
         if (out.data()) out(t, i) = ci;
+        if (motion.data()) motion(t, i) = m;
+        if (rigidity.data()) rigidity(t, i) = r;
       }
     }
     return {};
