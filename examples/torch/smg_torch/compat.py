@@ -333,7 +333,10 @@ def mosca_vel_acc(node_xyz: torch.Tensor, node_quat: torch.Tensor, *, reduce: st
         angle = dict(REGULARIZER_DEFAULTS["angle"], form=form, penalty=penalty, confidence_weighted=False,
                      normalize=normalize, weight=1.0)
         out.append(regularizers(node_xyz, None, empty, **dict(_ALL_OFF, accel=accel)).total)
-        out.append(regularizers(node_xyz, node_quat, empty, **dict(_ALL_OFF, angle=angle)).total)
+        # The angle term reads no positions: a detached view gives the shapes, so the binding
+        # neither computes nor returns a position gradient of zeros [T, M, 3] (as upstream, whose
+        # q losses have no xyz gradient at all).
+        out.append(regularizers(node_xyz.detach(), node_quat, empty, **dict(_ALL_OFF, angle=angle)).total)
     return out[0], out[1], out[2], out[3]
 
 
