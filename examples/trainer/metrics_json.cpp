@@ -28,7 +28,7 @@ std::string view_json(const ViewMetrics& v) {
 
 // The C-ARAP settings (docs/trainer.md, "C-ARAP options").
 void add_carap_settings(cli::JsonLine& j, const NodeLossOptions& nl) {
-  j.add("alpha", nl.alpha)
+  j.add("alpha", nl.regularizers.carap.alpha)
       .add("carap_reading", carap_reading_names()[static_cast<std::size_t>(nl.carap_reading)])
       .add("confidence_from", confidence_source_names()[static_cast<std::size_t>(nl.confidence_source)])
       .add("confidence_visibility", nl.confidence_visibility);

@@ -50,8 +50,8 @@ void resolve_frames(TrainerConfig& c, int T, const std::vector<std::uint8_t>& ha
 void scale_lengths(TrainerConfig& c, double f) {
   c.nodes.unit *= f;
   c.node_loss.data_huber *= f;
-  c.node_loss.lrm_huber *= f;
-  c.node_loss.confidence.eps *= f;
+  c.node_loss.regularizers.lrm.huber_delta *= f;
+  c.node_loss.regularizers.confidence.eps *= f;
   c.stage1.lr_position *= f;
   c.stage1.lr_position_final *= f;
   c.stage2.lr_means *= f;
@@ -204,7 +204,7 @@ TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point 
   const GroundTruth* truth = r.data.truth ? &*r.data.truth : nullptr;
   // What the run sees of its scene before stage 1 (no truth), and the rule that reads it.
   const std::vector<double> c_lifted =
-      node_confidences(r.nodes, r.nodes.positions, r.config.node_loss.confidence, par);
+      node_confidences(r.nodes, r.nodes.positions, r.config.node_loss.regularizers.confidence, par);
   r.signals = scene_signals(r.nodes, c_lifted);
   if (r.config.node_loss.alpha_auto && r.config.variant.rigidity == Rigidity::carap) {
     r.rule_applied = true;
@@ -218,7 +218,8 @@ TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point 
   // Stage 1, with what the confidences measure before and after it where the truth can tell.
   NodeObjective objective(config.variant, config.node_loss, par);
   const auto diagnose = [&] {
-    return confidence_diagnostics(r.nodes, r.nodes.positions, config.node_loss.confidence, config.node_loss.alpha, par);
+    const smg::RegularizerOptions& ro = config.node_loss.regularizers;
+    return confidence_diagnostics(r.nodes, r.nodes.positions, ro.confidence, ro.carap.alpha, par);
   };
   if (truth) r.confidence_lifted = diagnose();
   r.stage1 = fit_nodes(r.nodes, objective, config.stage1, progress);

@@ -37,6 +37,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "json_line.hpp"
@@ -73,10 +74,11 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
   npy::write(file("graph_weights.npy"), n.graph.weights.data(), {N, K});
 
   const trainer::NodeLossOptions& l = cfg.node_loss;
+  const smg::RegularizerOptions& ro = l.regularizers;
   const trainer::Stage1Options& s = cfg.stage1;
   const trainer::VariantSpec& v = cfg.variant;
   std::string gaps = "[", gap_weights = "[";
-  for (const smg::Gap& g : l.gaps) {
+  for (const smg::Gap& g : ro.carap.gaps) {
     gaps += (gaps.size() > 1 ? "," : "") + std::to_string(g.delta);
     std::array<char, 32> w{};
     std::snprintf(w.data(), w.size(), "%.10g", g.weight);
@@ -97,18 +99,17 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
       .add("quats_order", "wxyz")
       .add("w_data", l.data_weight)
       .add("data_huber", l.data_huber)
-      .add("w_rigidity", l.rigidity_weight)
-      .add("w_lrm", l.lrm_weight)
-      .add("w_accel", l.accel_weight)
-      .add("lrm_huber", l.lrm_huber)
-      .add("alpha", l.alpha)
+      .add("w_rigidity", ro.carap.weight)
+      .add("w_lrm", ro.lrm.weight)
+      .add("lrm_huber", ro.lrm.huber_delta)
+      .add("alpha", ro.carap.alpha)
       .add_raw("gaps", gaps + "]")
       .add_raw("gap_weights", gap_weights + "]")
-      .add("kappa_m", l.confidence.kappa_m)
-      .add("kappa_r", l.confidence.kappa_r)
-      .add("lambda_m", l.confidence.lambda_m)
-      .add("lambda_r", l.confidence.lambda_r)
-      .add("confidence_eps", l.confidence.eps)
+      .add("kappa_m", ro.confidence.kappa_m)
+      .add("kappa_r", ro.confidence.kappa_r)
+      .add("lambda_m", ro.confidence.lambda_m)
+      .add("lambda_r", ro.confidence.lambda_r)
+      .add("confidence_eps", ro.confidence.eps)
       .add("iterations", s.iterations)
       .add("lr_position", s.lr_position)
       .add("lr_position_final", s.lr_position_final)
@@ -118,8 +119,14 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
       .add("extent", r.data.extent)
       .add("unit", n.unit)
       .add("epe_lifted", r.tracks_lifted.all.epe)
-      .add("edges", static_cast<long long>(n.graph.stats.edges))
-      .add("dir", dir.string());
+      .add("edges", static_cast<long long>(n.graph.stats.edges));
+  // Every term its weight switches (not the variant), as w_<term> (w_accel, ...): fit_nodes.py
+  // refuses a case with a term it does not fit, so a new term is recorded without an edit here.
+  smg::for_each_term(ro, [&](const char* name, bool, const auto& o) {
+    if constexpr (trainer::has_weight<std::decay_t<decltype(o)>>::value)
+      if (!trainer::variant_term(name)) j.add(std::string("w_") + name, o.weight);
+  });
+  j.add("dir", dir.string());
   const std::string line = j.str();
   std::ofstream f(dir / "case.json");
   f << line << "\n";

@@ -372,7 +372,7 @@ std::string write_view_html(const std::string& out_dir, const TrainerResult& r, 
   const std::vector<std::uint16_t> qnodes = view_quantise(n.positions, qz);
   blob.add("nodes", qnodes.data(), qnodes.size(), {T, N, 3}, "u16");
   // Confidences c_t (E6) of the final trajectories, whatever the variant used.
-  const std::vector<double> c = node_confidences(n, n.positions, r.config.node_loss.confidence, {},
+  const std::vector<double> c = node_confidences(n, n.positions, r.config.node_loss.regularizers.confidence, {},
                                                  r.config.node_loss.confidence_visibility);
   std::vector<std::uint8_t> qc(c.size());
   for (std::size_t i = 0; i < c.size(); ++i) qc[i] = view_unit_byte(c[i]);
