@@ -287,7 +287,7 @@ trainer::TrainerResult train(Request& q, const trainer::Progress& progress) {
   if (q.queries) {
     trainer::QuerySet set;
     set.queries = *q.queries;
-    if (q.truth) set.truth = *q.truth;
+    set.truth = q.truth.value_or(std::vector<float>());  // empty: the tracks are written, not scored
     stage0.queries = std::move(set);
   }
   return trainer::run_trainer(std::move(stage0), progress);
@@ -300,10 +300,12 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
   const auto t0 = std::chrono::steady_clock::now();
   const trainer::Evaluation& e = r.evaluation;
   std::vector<std::string> written;
+  std::string what = "pictures";  // what the run's images are, for the last lines
   if (!r.data.truth) {
     fs::create_directories(q.out / "renders");
     for (std::size_t v = 0; v < e.frame_renders.size(); ++v)
       trainer::write_png((q.out / "renders" / (r.data.eval[v].name + ".png")).string(), e.frame_renders[v]);
+    what = std::to_string(e.frame_renders.size()) + " renders";
   } else if (q.pictures) {
     written = trainer::write_pictures(q.out.string(), r);
   }
@@ -318,7 +320,7 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
   rec.seconds_read = q.seconds_read;
   rec.seconds_write = trainer::seconds_since(t0);
   rec.queries = q.queries ? q.queries->count() : 0;
-  rec.query_error = q.queries && q.truth ? &te : nullptr;
+  rec.query_error = r.query_stage2.scored ? &te : nullptr;  // scored: the queries had true tracks
   const std::string line = trainer::metrics_json(r, rec);
   trainer::write_metrics_json(q.out.string(), line);
   if (q.view) {
@@ -326,7 +328,7 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
     vi.metrics_json = line;
     if (q.queries) {
       vi.tracks = &tracks;
-      vi.truth = q.truth ? &*q.truth : nullptr;
+      vi.truth = &r.queries->truth;  // empty without --track-truth
       vi.queries = q.queries->count();
     }
     written.push_back(trainer::write_view_html(q.out.string(), r, vi));
@@ -337,8 +339,6 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
       written.push_back((q.out / "ply").string() + "/frame_<t>.ply, t = 0.." + std::to_string(ply.size() - 1) + " (" +
                         std::to_string(r.model.count()) + " Gaussians each)");
   }
-  const std::string what = r.data.truth ? std::string("pictures")
-                                        : std::to_string(e.frame_renders.size()) + " renders";
   progress.line("done", what + " and metrics.json in " + q.out.string() + "/");
   for (const std::string& p : written) progress.line("done", "  " + p);
   return line;
