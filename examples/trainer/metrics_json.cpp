@@ -132,6 +132,7 @@ struct SceneKeys {
   void (*totals)(cli::JsonLine&, const TrainerResult&, const RunRecord&);       // after seconds_eval
 };
 
+// A group of keys that this kind of scene does not have.
 void no_keys(cli::JsonLine&, const TrainerResult&) {}
 
 const SceneKeys kProceduralKeys = {
