@@ -76,13 +76,29 @@ double finite(double v, const std::string& what) {
 const char* model_name(int id) { return id >= 0 && id < kModelCount ? kModels[id].name : nullptr; }
 int model_param_count(int id) { return id >= 0 && id < kModelCount ? kModels[id].params : -1; }
 
-std::vector<CameraRecord> parse_cameras(const std::vector<unsigned char>& bytes) {
+namespace {
+
+// A COLMAP binary file: a uint64 count of records of at least `min_bytes` each (a count beyond
+// the file is a corrupt header, refused before anything is allocated), each record read by
+// `one`, and nothing after the last. Both files have this frame; only their records differ.
+template <class Record, class ReadOne>
+std::vector<Record> parse_records(const std::vector<unsigned char>& bytes, const char* what, std::size_t min_bytes,
+                                  ReadOne one) {
   Reader r(bytes);
-  const std::uint64_t n = r.get<std::uint64_t>("the camera count");
-  // Each camera takes at least 24 bytes: a count beyond the file is a corrupt header.
-  if (n > bytes.size() / 24) throw FormatError("camera count " + std::to_string(n) + " does not fit the file");
-  std::vector<CameraRecord> out;
-  for (std::uint64_t k = 0; k < n; ++k) {
+  const std::uint64_t n = r.get<std::uint64_t>(("the " + std::string(what) + " count").c_str());
+  if (n > bytes.size() / min_bytes)
+    throw FormatError(std::string(what) + " count " + std::to_string(n) + " does not fit the file");
+  std::vector<Record> out;
+  for (std::uint64_t k = 0; k < n; ++k) out.push_back(one(r));
+  r.expect_end();
+  return out;
+}
+
+}  // namespace
+
+std::vector<CameraRecord> parse_cameras(const std::vector<unsigned char>& bytes) {
+  // Each camera takes at least 24 bytes.
+  return parse_records<CameraRecord>(bytes, "camera", 24, [](Reader& r) {
     CameraRecord c;
     c.id = r.get<std::int32_t>("camera_id");
     c.model_id = r.get<std::int32_t>("model_id");
@@ -92,19 +108,13 @@ std::vector<CameraRecord> parse_cameras(const std::vector<unsigned char>& bytes)
     const std::string who = "camera " + std::to_string(c.id);
     if (np < 0) throw FormatError(who + ": unknown camera model id " + std::to_string(c.model_id));
     for (int p = 0; p < np; ++p) c.params.push_back(finite(r.get<double>("params"), who + " parameter " + std::to_string(p)));
-    out.push_back(std::move(c));
-  }
-  r.expect_end();
-  return out;
+    return c;
+  });
 }
 
 std::vector<ImageRecord> parse_images(const std::vector<unsigned char>& bytes) {
-  Reader r(bytes);
-  const std::uint64_t n = r.get<std::uint64_t>("the image count");
   // Each image takes at least 4 + 56 + 4 + 1 + 8 bytes.
-  if (n > bytes.size() / 73) throw FormatError("image count " + std::to_string(n) + " does not fit the file");
-  std::vector<ImageRecord> out;
-  for (std::uint64_t k = 0; k < n; ++k) {
+  return parse_records<ImageRecord>(bytes, "image", 73, [&bytes](Reader& r) {
     ImageRecord im;
     im.id = r.get<std::int32_t>("image_id");
     const std::string who = "image " + std::to_string(im.id);
@@ -115,29 +125,35 @@ std::vector<ImageRecord> parse_images(const std::vector<unsigned char>& bytes) {
     const std::uint64_t points = r.get<std::uint64_t>("the 2D point count");
     if (points > (bytes.size() - r.pos()) / 24) throw FormatError(who + ": 2D point count " + std::to_string(points) + " does not fit the file");
     r.skip(points * 24, "2D points");
-    out.push_back(std::move(im));
-  }
-  r.expect_end();
+    return im;
+  });
+}
+
+namespace {
+
+// The writers' side of parse_records: the uint64 count, then each record written by `one`.
+template <class Record, class PutOne>
+std::string records_bytes(const std::vector<Record>& records, PutOne one) {
+  std::string out;
+  put<std::uint64_t>(out, records.size());
+  for (const Record& rec : records) one(out, rec);
   return out;
 }
 
+}  // namespace
+
 std::string cameras_bytes(const std::vector<CameraRecord>& cameras) {
-  std::string out;
-  put<std::uint64_t>(out, cameras.size());
-  for (const CameraRecord& c : cameras) {
+  return records_bytes(cameras, [](std::string& out, const CameraRecord& c) {
     put<std::int32_t>(out, c.id);
     put<std::int32_t>(out, c.model_id);
     put<std::uint64_t>(out, c.width);
     put<std::uint64_t>(out, c.height);
     for (double p : c.params) put<double>(out, p);
-  }
-  return out;
+  });
 }
 
 std::string images_bytes(const std::vector<ImageRecord>& images) {
-  std::string out;
-  put<std::uint64_t>(out, images.size());
-  for (const ImageRecord& im : images) {
+  return records_bytes(images, [](std::string& out, const ImageRecord& im) {
     put<std::int32_t>(out, im.id);
     for (double q : im.qvec) put<double>(out, q);
     for (double t : im.tvec) put<double>(out, t);
@@ -145,8 +161,7 @@ std::string images_bytes(const std::vector<ImageRecord>& images) {
     out += im.name;
     out += '\0';
     put<std::uint64_t>(out, 0);  // no 2D points
-  }
-  return out;
+  });
 }
 
 }  // namespace trainer::colmap

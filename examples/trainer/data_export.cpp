@@ -9,10 +9,9 @@
 namespace trainer {
 
 DycheckScene to_dycheck(const Dataset& d, int val_gap, int cell) {
-  if (!d.truth || d.truth->test.size() != d.truth->scene.test_cameras.size() ||
-      d.truth->test_covisible.size() != d.truth->test.size())
+  const GroundTruth& g = need_truth(d, "to_dycheck");
+  if (g.test.size() != g.scene.test_cameras.size() || g.test_covisible.size() != g.test.size())
     throw std::invalid_argument("to_dycheck: needs the procedural dataset with test views and covisibility");
-  const GroundTruth& g = *d.truth;
   const Scene& sc = g.scene;
   const int T = d.frames(), W = d.width, H = d.height;
   if (cell < 1 || W % cell != 0 || H % cell != 0)
@@ -62,14 +61,14 @@ DycheckScene to_dycheck(const Dataset& d, int val_gap, int cell) {
 }
 
 QuerySet export_query_set(const Dataset& d, int count) {
-  if (!d.truth) throw std::invalid_argument("export_queries: needs the procedural dataset (true tracks)");
+  const GroundTruth& g = need_truth(d, "export_queries");  // the true tracks and the bodies
   const Tracks& tr = d.priors.tracks;
   const int T = tr.frames, N = tr.count;
   std::vector<int> picked;
   for (int i = 0; i < N; ++i) {
     const int b = tr.body[sz(i)];
     // Any object track truly visible at frame 0 (its true pixel there is the query).
-    if (!tr.visible_true[sz(i)] || b < 0 || !d.truth->scene.bodies[sz(b)].foreground) continue;
+    if (!tr.visible_true[sz(i)] || b < 0 || !g.scene.bodies[sz(b)].foreground) continue;
     picked.push_back(i);
   }
   // Spread the choice over the candidates (they are in track order).
@@ -86,7 +85,7 @@ QuerySet export_query_set(const Dataset& d, int count) {
     const int i = chosen[sz(k)];
     s.queries.xy.push_back(tr.uv_true[sz(i) * 2]);
     s.queries.xy.push_back(tr.uv_true[sz(i) * 2 + 1]);
-    s.semantic_class[sz(k)] = d.truth->scene.bodies[sz(tr.body[sz(i)])].semantic_class;
+    s.semantic_class[sz(k)] = g.scene.bodies[sz(tr.body[sz(i)])].semantic_class;
     for (int t = 0; t < T; ++t) {
       s.visible[sz(k) * T + sz(t)] = tr.visible_true[sz(t) * N + i];
       for (int c = 0; c < 3; ++c)

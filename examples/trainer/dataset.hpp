@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -89,6 +90,21 @@ struct Dataset {
 
   int frames() const { return static_cast<int>(cameras.size()); }
 };
+
+// The ground truth that `who` (a function that cannot work without it) reads: the one place
+// where its absence (a scene from disk) is refused, as std::invalid_argument("<who>: needs the
+// procedural scene's ground truth").
+inline const GroundTruth& need_truth(const Dataset& d, const char* who) {
+  if (!d.truth) throw std::invalid_argument(std::string(who) + ": needs the procedural scene's ground truth");
+  return *d.truth;
+}
+
+// The ground truth, or an empty one (no bodies, classes, cameras or views) for a scene from disk:
+// for code that loops over what the truth has, so that its absence is handled here, once.
+inline const GroundTruth& truth_or_empty(const Dataset& d) {
+  static const GroundTruth empty;
+  return d.truth ? *d.truth : empty;
+}
 
 // Selects a scene layout and the priors that go with it: the occluder layout's depth prior is
 // three times noisier on moving bodies (6 % relative sigma) and mixes more edge pixels (45 %),

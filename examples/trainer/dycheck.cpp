@@ -70,11 +70,21 @@ auto labelled(F&& f) {
 
 // ---- reading ----------------------------------------------------------------------------------
 
-class SceneReader {
+// A scene folder: every file is named by its path `rel` under the root (the reader and the writer
+// share this, so that a message names the file as the scene does).
+class SceneFolder {
  public:
-  explicit SceneReader(std::string root) : root_(std::move(root)) {}
-
+  explicit SceneFolder(std::string root) : root_(std::move(root)) {}
   std::string path(const std::string& rel) const { return (fs::path(root_) / rel).string(); }
+
+ private:
+  std::string root_;
+};
+
+class SceneReader : public SceneFolder {
+ public:
+  using SceneFolder::SceneFolder;
+
   bool exists(const std::string& rel) const {
     std::error_code ec;
     return fs::exists(path(rel), ec);
@@ -106,9 +116,6 @@ class SceneReader {
     const std::vector<unsigned char> b = bytes(rel);
     return labelled([&] { return files::decode_jpeg(b, rel, limits, notes); });
   }
-
- private:
-  std::string root_;
 };
 
 // A finite number member (NaN / Infinity named).
@@ -396,11 +403,10 @@ void read_features(const SceneReader& in, DycheckScene& s) {
 
 // ---- writing ----------------------------------------------------------------------------------
 
-class SceneWriter {
+class SceneWriter : public SceneFolder {
  public:
-  explicit SceneWriter(std::string root) : root_(std::move(root)) {}
+  using SceneFolder::SceneFolder;
 
-  std::string path(const std::string& rel) const { return (fs::path(root_) / rel).string(); }
   void dir(const std::string& rel) const {
     std::error_code ec;
     fs::create_directories(path(rel), ec);
@@ -420,9 +426,6 @@ class SceneWriter {
       fail(rel, "cannot write the PNG");
     }
   }
-
- private:
-  std::string root_;
 };
 
 // JSON number text that reads back to the same double.

@@ -8,7 +8,6 @@
 #include <limits>
 #include <stdexcept>
 
-#include "trainer/data_evaluate.hpp"
 #include "trainer/progress.hpp"
 #include "trainer/util.hpp"
 
@@ -173,7 +172,8 @@ Evaluation evaluate(const Dataset& d, const Nodes& nodes, const GaussianModel<fl
   const auto t0 = std::chrono::steady_clock::now();
   Evaluation e;
   if (d.truth) evaluate_views(d, nodes, model, parallel, keep_renders, e);
-  if (!d.eval.empty()) evaluate_frames(d, nodes, model, parallel, keep_renders, &e);
+  if (!d.eval.empty())
+    evaluate_frames(d, nodes, model, parallel, &e.frames, &e.frames_mean, keep_renders ? &e.frame_renders : nullptr);
   e.seconds = seconds_since(t0);
   return e;
 }

@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "trainer/data_evaluate.hpp"  // FrameScore, evaluate_frames
 #include "trainer/dataset.hpp"
 #include "trainer/gaussians.hpp"
 #include "trainer/image.hpp"
@@ -35,12 +36,6 @@ struct ViewMetrics {
 
 struct TrackMetrics {
   TrackingError all, box, arm, ball, hidden, box_hidden;
-};
-
-// Image metrics of one validation frame (Dycheck's definitions, dycheck_metrics.hpp).
-struct FrameScore {
-  std::string name;
-  double mpsnr = 0, mssim = 0, mssim_covisible = 0, psnr = 0, ssim = 0;
 };
 
 // The evaluation of a run: the procedural scene's test views (with truth) and the validation

@@ -14,7 +14,7 @@
 #include "npy.hpp"
 #include "json_read.hpp"
 #include "trainer/camera.hpp"
-#include "trainer/dycheck.hpp"
+#include "trainer/dycheck_scene.hpp"
 #include "trainer/file_formats.hpp"
 #include "trainer/image.hpp"
 

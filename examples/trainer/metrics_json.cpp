@@ -28,7 +28,7 @@ std::string view_json(const ViewMetrics& v) {
 
 // The C-ARAP settings (docs/trainer.md, "C-ARAP options").
 void add_carap_settings(cli::JsonLine& j, const NodeLossOptions& nl) {
-  j.add("alpha", nl.alpha)
+  j.add("alpha", nl.regularizers.carap.alpha)
       .add("carap_reading", carap_reading_names()[static_cast<std::size_t>(nl.carap_reading)])
       .add("confidence_from", confidence_source_names()[static_cast<std::size_t>(nl.confidence_source)])
       .add("confidence_visibility", nl.confidence_visibility);
@@ -118,79 +118,124 @@ double peak_memory_mib() {
   return static_cast<double>(u.ru_maxrss) / 1024.0;  // Linux: KiB
 }
 
+// The keys only one kind of scene has, each group written at its place in the line: the
+// procedural scene's (what its truth measures) or a scene from disk's (its validation frames,
+// reading and writing). metrics_json picks the table once instead of testing for truth at every
+// group, and the keys keep their order.
+struct SceneKeys {
+  void (*scene)(cli::JsonLine&, const TrainerResult&, const RunRecord&);        // after variant
+  void (*images)(cli::JsonLine&, const TrainerResult&, const RunRecord&);       // after threads
+  void (*evaluation)(cli::JsonLine&, const TrainerResult&, const RunRecord&);   // after the C-ARAP settings
+  void (*node_split)(cli::JsonLine&, const TrainerResult&);                     // after epe_query
+  void (*lengths)(cli::JsonLine&, const TrainerResult&);                        // after extent
+  void (*read)(cli::JsonLine&, const TrainerResult&, const RunRecord&);         // before seconds_stage0
+  void (*totals)(cli::JsonLine&, const TrainerResult&, const RunRecord&);       // after seconds_eval
+};
+
+// A group of keys that this kind of scene does not have.
+void no_keys(cli::JsonLine&, const TrainerResult&) {}
+
+const SceneKeys kProceduralKeys = {
+    [](cli::JsonLine& j, const TrainerResult&, const RunRecord& run) {
+      const TrainerConfig& cfg = *run.config;
+      j.add("scene", to_string(cfg.dataset.scene.layout)).add("seed", static_cast<long long>(cfg.dataset.scene.seed));
+      if (cfg.dataset.tracker_failures != TrackerFailures::scene)  // only when set: the default keys stay
+        j.add("tracker_failures", tracker_failure_names()[static_cast<std::size_t>(cfg.dataset.tracker_failures)]);
+    },
+    [](cli::JsonLine& j, const TrainerResult& r, const RunRecord& run) {
+      if (run.config->image_eval) {
+        const Evaluation& e = r.evaluation;
+        j.add("test_psnr", e.mean.psnr)
+            .add("test_ssim", e.mean.ssim)
+            .add("test_psnr_masked", e.mean.psnr_masked)
+            .add("test_ssim_masked", e.mean.ssim_masked)
+            .add("test_psnr_box", e.mean.psnr_box)
+            .add("test_psnr_objects", e.mean.psnr_objects)
+            .add("train_psnr", e.train_psnr);
+        std::string views = "{";
+        for (const auto& v : e.views)
+          views += (views.size() > 1 ? "," : "") + cli::JsonLine::quote(v.name) + ":" + view_json(v);
+        j.add_raw("views", views + "}");
+      }
+      add_tracks(j, "", r.evaluation.tracks);
+      add_tracks(j, "_stage1", r.tracks_stage1);
+      add_tracks(j, "_lifted", r.tracks_lifted);
+    },
+    [](cli::JsonLine& j, const TrainerResult& r, const RunRecord&) {
+      add_confidence(j, "", r.confidence_stage1);
+      add_confidence(j, "_lifted", r.confidence_lifted);
+    },
+    [](cli::JsonLine& j, const TrainerResult& r) {
+      j.add_raw("node_epe_split_stage1", node_split_json(r.node_split_stage1));
+    },
+    no_keys,
+    [](cli::JsonLine& j, const TrainerResult& r, const RunRecord&) { j.add("seconds_dataset", r.seconds_dataset); },
+    [](cli::JsonLine& j, const TrainerResult& r, const RunRecord&) { j.add("seconds_total", r.seconds_total); },
+};
+
+const SceneKeys kDiskKeys = {
+    [](cli::JsonLine& j, const TrainerResult& r, const RunRecord&) { j.add("scene", r.data.source); },
+    [](cli::JsonLine&, const TrainerResult&, const RunRecord&) {},
+    [](cli::JsonLine& j, const TrainerResult& r, const RunRecord& run) {
+      const Evaluation& e = r.evaluation;
+      j.add("semantic_graph", r.config.variant.semantic_graph);
+      if (run.config->image_eval)
+        j.add("val_frames", static_cast<long long>(e.frames.size()))
+            .add("mpsnr", e.frames_mean.mpsnr)
+            .add("mssim", e.frames_mean.mssim)
+            .add("mssim_covisible", e.frames_mean.mssim_covisible)
+            .add("psnr", e.frames_mean.psnr)
+            .add("ssim", e.frames_mean.ssim);
+      std::string frames = "[";
+      for (const FrameScore& f : e.frames) {
+        cli::JsonLine fj;
+        fj.add("frame", f.name).add("mpsnr", f.mpsnr).add("mssim", f.mssim).add("mssim_covisible", f.mssim_covisible)
+            .add("psnr", f.psnr).add("ssim", f.ssim);
+        frames += (frames.size() > 1 ? "," : "") + fj.str();
+      }
+      j.add_raw("per_frame", frames + "]");
+      if (run.queries > 0) j.add("queries", run.queries);
+      if (run.query_error)
+        j.add("epe", run.query_error->epe)
+            .add("delta_5cm", run.query_error->within_5cm)
+            .add("delta_10cm", run.query_error->within_10cm);
+    },
+    no_keys,
+    [](cli::JsonLine& j, const TrainerResult& r) {
+      j.add("length_factor", r.length_factor).add("unit", r.nodes.unit).add("lifted_tracks", r.lifted.count);
+    },
+    [](cli::JsonLine& j, const TrainerResult&, const RunRecord& run) { j.add("seconds_read", run.seconds_read); },
+    [](cli::JsonLine& j, const TrainerResult& r, const RunRecord& run) {
+      j.add("seconds_write", run.seconds_write)
+          .add("seconds_total", run.seconds_read + r.seconds_total + run.seconds_write)
+          .add("peak_memory_mib", peak_memory_mib());
+    },
+};
+
 }  // namespace
 
 std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
   const TrainerConfig& cfg = *run.config;
-  const bool truth = r.data.truth.has_value();
+  const SceneKeys& kind = r.data.truth ? kProceduralKeys : kDiskKeys;
   cli::JsonLine j;
   j.add("program", "smg_trainer").add("variant", to_string(cfg.variant.variant));
-  if (truth) {
-    j.add("scene", to_string(cfg.dataset.scene.layout)).add("seed", static_cast<long long>(cfg.dataset.scene.seed));
-    if (cfg.dataset.tracker_failures != TrackerFailures::scene)  // only when set: the default keys stay
-      j.add("tracker_failures", tracker_failure_names()[static_cast<std::size_t>(cfg.dataset.tracker_failures)]);
-  } else {
-    j.add("scene", r.data.source);
-  }
+  kind.scene(j, r, run);
   j.add("T", r.data.frames())
       .add("width", r.data.width)
       .add("height", r.data.height)
       .add("threads", cfg.threads > 0 ? cfg.threads : smg::num_threads());
   if (!cfg.image_eval) j.add("image_eval", false);  // --no-image-eval: no image metrics below
-  if (truth && cfg.image_eval) {
-    const Evaluation& e = r.evaluation;
-    j.add("test_psnr", e.mean.psnr)
-        .add("test_ssim", e.mean.ssim)
-        .add("test_psnr_masked", e.mean.psnr_masked)
-        .add("test_ssim_masked", e.mean.ssim_masked)
-        .add("test_psnr_box", e.mean.psnr_box)
-        .add("test_psnr_objects", e.mean.psnr_objects)
-        .add("train_psnr", e.train_psnr);
-    std::string views = "{";
-    for (const auto& v : e.views) views += (views.size() > 1 ? "," : "") + cli::JsonLine::quote(v.name) + ":" + view_json(v);
-    j.add_raw("views", views + "}");
-  }
-  if (truth) {
-    add_tracks(j, "", r.evaluation.tracks);
-    add_tracks(j, "_stage1", r.tracks_stage1);
-    add_tracks(j, "_lifted", r.tracks_lifted);
-  }
+  kind.images(j, r, run);
   add_carap_settings(j, cfg.node_loss);
-  if (truth) {
-    add_confidence(j, "", r.confidence_stage1);
-    add_confidence(j, "_lifted", r.confidence_lifted);
-  } else {
-    const Evaluation& e = r.evaluation;
-    j.add("semantic_graph", r.config.variant.semantic_graph);
-    if (cfg.image_eval) j.add("val_frames", static_cast<long long>(e.frames.size()))
-        .add("mpsnr", e.frames_mean.mpsnr)
-        .add("mssim", e.frames_mean.mssim)
-        .add("mssim_covisible", e.frames_mean.mssim_covisible)
-        .add("psnr", e.frames_mean.psnr)
-        .add("ssim", e.frames_mean.ssim);
-    std::string frames = "[";
-    for (const FrameScore& f : e.frames) {
-      cli::JsonLine fj;
-      fj.add("frame", f.name).add("mpsnr", f.mpsnr).add("mssim", f.mssim).add("mssim_covisible", f.mssim_covisible)
-          .add("psnr", f.psnr).add("ssim", f.ssim);
-      frames += (frames.size() > 1 ? "," : "") + fj.str();
-    }
-    j.add_raw("per_frame", frames + "]");
-    if (run.queries > 0) j.add("queries", run.queries);
-    if (run.query_error)
-      j.add("epe", run.query_error->epe)
-          .add("delta_5cm", run.query_error->within_5cm)
-          .add("delta_10cm", run.query_error->within_10cm);
-  }
+  kind.evaluation(j, r, run);
   if (r.query_stage1.scored) {
-    const std::vector<std::string> none;
-    const std::vector<std::string>& names = truth ? r.data.truth->scene.class_names : none;
+    const std::vector<std::string>& names = truth_or_empty(r.data).scene.class_names;  // none from disk
     cli::JsonLine q;
     q.add("queries", r.queries->queries.count())
         .add_raw("stage1", query_score_json(r.query_stage1, names))
         .add_raw("stage2", query_score_json(r.query_stage2, names));
     j.add_raw("epe_query", q.str());
-    if (truth) j.add_raw("node_epe_split_stage1", node_split_json(r.node_split_stage1));
+    kind.node_split(j, r);
   }
   {
     cli::JsonLine sj;
@@ -203,7 +248,7 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
       j.add("alpha_auto", true).add("rigidity", r.config.variant.rigidity == Rigidity::carap ? "carap" : "arap");
   }
   j.add("extent", r.data.extent);
-  if (!truth) j.add("length_factor", r.length_factor).add("unit", r.nodes.unit).add("lifted_tracks", r.lifted.count);
+  kind.lengths(j, r);
   j.add("nodes", r.nodes.count)
       .add("edges", static_cast<long long>(r.nodes.graph.stats.edges))
       .add("gate_removed_edges", static_cast<long long>(r.nodes.graph.stats.gate_removed_edges))
@@ -213,21 +258,12 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
       .add("pruned", r.stage2.pruned)
       .add("stage1_iterations", r.stage1.iterations)
       .add("stage2_iterations", r.stage2.iterations);
-  if (truth)
-    j.add("seconds_dataset", r.seconds_dataset);
-  else
-    j.add("seconds_read", run.seconds_read);
+  kind.read(j, r, run);
   j.add("seconds_stage0", r.seconds_stage0)
       .add("seconds_stage1", r.stage1.seconds)
       .add("seconds_stage2", r.stage2.seconds)
       .add("seconds_eval", r.evaluation.seconds);
-  if (truth) {
-    j.add("seconds_total", r.seconds_total);
-  } else {
-    j.add("seconds_write", run.seconds_write)
-        .add("seconds_total", run.seconds_read + r.seconds_total + run.seconds_write)
-        .add("peak_memory_mib", peak_memory_mib());
-  }
+  kind.totals(j, r, run);
   j.add("out", run.out);
   return j.str();
 }

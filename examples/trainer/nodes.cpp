@@ -6,6 +6,9 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
+#include <utility>
+#include <vector>
 
 #include <Eigen/SVD>
 
@@ -164,7 +167,8 @@ void NodeObjective::update_confidences(const Nodes& n) {
       throw std::invalid_argument("confidences from the truth need the procedural scene's ground truth");
     from = &n.truth;
   }
-  confidence_ = node_confidences(n, *from, options_.confidence, parallel_, options_.confidence_visibility, &ws_);
+  confidence_ = node_confidences(n, *from, options_.regularizers.confidence, parallel_, options_.confidence_visibility,
+                                 &ws_);
 }
 
 namespace {
@@ -362,17 +366,17 @@ NodeLossTerms NodeObjective::evaluate(const Nodes& n, double scale, double* gp, 
           "regularizers");
     const smg::RegularizerResult<double> r = smg::regularizers<double>(
         n.positions_view(), n.rotations_view(), {}, n.graph.view(), ro, cview, gpv, grv, &ws_, parallel_);
-    out.rigidity = (r.carap + r.arap) / scale;
-    out.lrm = r.lrm / scale;
-    out.accel = r.accel / scale;
+    // Every energy unscaled (a term that is off is 0 and stays 0).
+    smg::RegularizerResult<double>::each_energy([&](const char*, double& e, double v) { e = v / scale; }, out.energy,
+                                                r);
   }
   if (directed) {
     smg::CarapOptions co = ro.carap;  // configured as for the fused step's C-ARAP
     const smg::FrameScalarsView<const double> c(cview.data(), cview.frames(), cview.nodes());
     check(smg::validate_carap<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv, grv), "carap");
-    out.rigidity = smg::carap_directed<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv, grv,
-                                               parallel_) /
-                   scale;
+    out.energy.carap = smg::carap_directed<double>(n.positions_view(), n.rotations_view(), c, n.graph.view(), co, gpv,
+                                                   grv, parallel_) /
+                       scale;
   }
   return out;
 }
@@ -381,29 +385,61 @@ bool NodeObjective::directed_carap() const {
   return variant_.rigidity == Rigidity::carap && options_.carap_reading == CarapReading::directed;
 }
 
+namespace {
+
+// Whether a term's options have temporal gaps (C-ARAP, plain ARAP): its weight is normalised per
+// weighted frame pair instead of per frame.
+template <class O, class = void>
+struct has_gaps : std::false_type {};
+template <class O>
+struct has_gaps<O, std::void_t<decltype(std::declval<O&>().gaps)>> : std::true_type {};
+
+// The terms of the stage-1 log line: data and rigidity (C-ARAP or plain ARAP), then every other
+// term of the fused step that is on, by the library's name, so that a new term shows itself.
+std::string terms_line(const NodeLossTerms& l, const smg::RegularizerOptions& ro) {
+  std::string s = format("data %.3e  rigidity %.3e", l.data, l.rigidity());
+  std::vector<std::string> on;
+  smg::for_each_term(ro, [&](const char* name, bool is_on, const auto&) {
+    if (is_on) on.emplace_back(name);
+  });
+  smg::RegularizerResult<double>::each_energy(
+      [&](const char* name, double e) {
+        const std::string n = name;
+        if (n != "carap" && n != "arap" && std::find(on.begin(), on.end(), n) != on.end())
+          s += format("  %s %.3e", name, e);
+      },
+      l.energy);
+  return s;
+}
+
+}  // namespace
+
 smg::RegularizerOptions NodeObjective::regularizer_options(int T, int N, double scale) const {
-  smg::RegularizerOptions ro;
+  // The settings hold every term's options with its weight per node and frame; here only what
+  // depends on the variant and on T and N is decided, the same way for every term, so that a new
+  // term of the fused step reaches stage 1 through its flag alone.
+  smg::RegularizerOptions ro = options_.regularizers;
   const double per_node_frame = 1.0 / (static_cast<double>(T) * N);
+  smg::for_each_term(ro, [&](const char* name, bool& on, auto& o) {
+    using O = std::decay_t<decltype(o)>;
+    if constexpr (has_weight<O>::value) {
+      // Normalised per node and frame; a term over temporal gaps (the rigidity) per node and
+      // weighted frame pair, Σ_δ γ_δ (T − δ).
+      if constexpr (has_gaps<O>::value) {
+        double frames_gaps = 0;
+        for (const smg::Gap& g : o.gaps) frames_gaps += g.weight * std::max(0, T - g.delta);
+        o.weight = frames_gaps > 0 ? o.weight / (N * frames_gaps) * scale : 0.0;
+      } else {
+        o.weight = o.weight * per_node_frame * scale;
+      }
+      if (!variant_term(name)) on = o.weight > 0;
+    }
+  });
   ro.terms.confidence = false;  // the trainer's own (update_confidences), passed as the caller's
-  // Rigidity: C-ARAP or plain ARAP over the gaps, normalised per node and weighted frame pair.
-  double frames_gaps = 0;
-  for (const smg::Gap& g : options_.gaps) frames_gaps += g.weight * std::max(0, T - g.delta);
-  const double w_rigid = frames_gaps > 0 ? options_.rigidity_weight / (N * frames_gaps) : 0.0;
-  ro.terms.carap = variant_.rigidity == Rigidity::carap;  // the directed reading: configured, run apart
-  ro.carap.gaps = options_.gaps;
-  ro.carap.alpha = options_.alpha;
-  ro.carap.weight = w_rigid * scale;
+  // The variant's rungs; the directed reading of C-ARAP is configured in `carap` but run apart.
+  ro.terms.carap = variant_.rigidity == Rigidity::carap && !directed_carap();
   ro.terms.arap = variant_.rigidity == Rigidity::arap;
-  ro.arap.gaps = options_.gaps;
-  ro.arap.weight = w_rigid * scale;
   ro.terms.lrm = variant_.lrm;
-  ro.lrm.alpha = options_.alpha;
-  ro.lrm.huber_delta = options_.lrm_huber;
-  ro.lrm.weight = options_.lrm_weight * per_node_frame * scale;
-  // Smoothness (E21): unweighted accelerations, every variant, 0 = off.
-  ro.terms.accel = options_.accel_weight > 0;
-  ro.accel.weight = options_.accel_weight * per_node_frame * scale;
-  if (directed_carap()) ro.terms.carap = false;
   return ro;
 }
 
@@ -417,6 +453,7 @@ Stage1Result fit_nodes(Nodes& n, NodeObjective& obj, const Stage1Options& o, con
   std::vector<double> gx(sz(T) * N * 3), gq(sz(T) * N * 3);
   const bool rotations_matter = obj.variant().rigidity != Rigidity::none;
   NodeLossTerms last = r.initial;
+  const smg::RegularizerOptions on = obj.regularizer_options(T, N);  // the log names the terms that are on
   for (int it = 0; it < o.iterations; ++it) {
     if (o.confidence_every > 0 && it > 0 && it % o.confidence_every == 0) obj.update_confidences(n);
     std::fill(gx.begin(), gx.end(), 0.0);
@@ -428,9 +465,8 @@ Stage1Result fit_nodes(Nodes& n, NodeObjective& obj, const Stage1Options& o, con
     adam_x.step(n.positions.data(), gx.data());
     if (rotations_matter) adam_q.step_rotations(n.rotations.data(), gq.data());
     if (o.log_every > 0 && (it % o.log_every == 0 || it + 1 == o.iterations))
-      progress.line("stage1", format("it %4d/%d  loss %.4e  (data %.3e  rigidity %.3e  lrm %.3e  accel %.3e)",
-                                     it + 1, o.iterations, last.total(), last.data, last.rigidity, last.lrm,
-                                     last.accel));
+      progress.line("stage1",
+                    format("it %4d/%d  loss %.4e  (", it + 1, o.iterations, last.total()) + terms_line(last, on) + ")");
   }
   obj.update_confidences(n);
   r.final = obj.evaluate(n);

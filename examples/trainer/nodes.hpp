@@ -27,6 +27,8 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "smg/core/parallel.hpp"
@@ -112,21 +114,50 @@ inline const std::vector<std::string>& confidence_source_names() {
   return names;
 }
 
+// Whether the variant switches this term of the fused step (C-ARAP, plain ARAP, LRM) rather
+// than its weight (every other term), and the confidences, which the trainer computes itself.
+inline bool variant_term(const std::string& name) {
+  return name == "confidence" || name == "carap" || name == "arap" || name == "lrm";
+}
+
+// Whether a term's options have an overall factor `weight` (every energy; not the confidences).
+template <class O, class = void>
+struct has_weight : std::false_type {};
+template <class O>
+struct has_weight<O, std::void_t<decltype(std::declval<O&>().weight)>> : std::true_type {};
+
+// The regularisers' settings in the library's own options (smg::RegularizerOptions), so that a
+// flag writes straight into them and a new term of the fused step needs no trainer code beyond
+// its flag row (settings.cpp). Each term's `weight` is the trainer's weight per node and frame
+// (per node and weighted frame pair for a term with gaps, the rigidity); regularizer_options
+// normalises it. C-ARAP, plain ARAP and LRM are switched by the variant; every other term is on
+// when its weight is above 0. `terms` is not read (the variant and the weights decide).
+inline smg::RegularizerOptions default_node_regularizers() {
+  smg::RegularizerOptions r;
+  // Tuned once on seed 0 (quick scene, full variant) for the lowest stage-1 node EPE and used
+  // unchanged by every variant and seed: at 1.0 the rigidity term wins against the Huber data
+  // term and shrinks the node cloud (ARAP's energy falls as s^2 under a uniform scaling s of
+  // every frame, the data term's Huber tail only as s).
+  r.carap.weight = 0.1;  // plain ARAP or C-ARAP (one setting, --w-rigidity)
+  r.arap.weight = 0.1;
+  r.lrm.weight = 0.1;
+  r.lrm.huber_delta = 0.01;  // metres per frame
+  // The terms the paper does not have are off (weight 0) until a flag sets them; trajectory
+  // smoothness (E21, unweighted accelerations, as MoSca and Shape-of-Motion) is --w-accel.
+  smg::for_each_term(r, [](const char* name, bool, auto& o) {
+    if constexpr (has_weight<std::decay_t<decltype(o)>>::value)
+      if (!variant_term(name)) o.weight = 0.0;
+  });
+  return r;
+}
+
 struct NodeLossOptions {
   double data_weight = 1.0;
   double data_huber = 0.02;        // metres: lifted depth noise is ~3 cm at 1.5 m
-  // Regulariser weights, tuned once on seed 0 (quick scene, full variant) for the lowest
-  // stage-1 node EPE and used unchanged by every variant and seed: at 1.0 the rigidity term
-  // wins against the Huber data term and shrinks the node cloud (ARAP's energy falls as s^2
-  // under a uniform scaling s of every frame, the data term's Huber tail only as s).
-  double rigidity_weight = 0.1;    // plain ARAP or C-ARAP, per node and frame
-  double lrm_weight = 0.1;
-  double lrm_huber = 0.01;         // metres per frame (smg::LrmOptions::huber_delta)
-  // Trajectory smoothness (E21, unweighted accelerations, as MoSca and Shape-of-Motion): every
-  // variant, 0 = off (the paper has no such term).
-  double accel_weight = 0.0;
-  double alpha = 0.6;              // confidence floor of C-ARAP and LRM (E7)
-  // --alpha auto: the trainer picks C-ARAP (with `alpha`) or plain ARAP for the rigidity term of
+  // The regularisers (above): weights per node and frame, alpha (E7) of C-ARAP and LRM, the
+  // gaps, LRM's Huber width and the confidence options (E6).
+  smg::RegularizerOptions regularizers = default_node_regularizers();
+  // --alpha auto: the trainer picks C-ARAP (with its alpha) or plain ARAP for the rigidity term of
   // a variant with C-ARAP from what it sees before stage 1 (pipeline.hpp, choose_carap).
   bool alpha_auto = false;
   CarapReading carap_reading = CarapReading::symmetric;
@@ -134,13 +165,20 @@ struct NodeLossOptions {
   // E6's visibility factor v_{t,i}: off computes the confidences as if every sample were
   // observed (c = c^m c^r), so that an unobserved node keeps the weight its motion earns.
   bool confidence_visibility = true;
-  smg::GapList gaps = smg::default_gaps();
-  smg::ConfidenceOptions confidence{};
 };
 
+// The energies of one evaluation, unscaled: the data term and every regulariser as the fused
+// step names them (the directed reading of C-ARAP under carap).
 struct NodeLossTerms {
-  double data = 0, rigidity = 0, lrm = 0, accel = 0;
-  double total() const { return data + rigidity + lrm + accel; }
+  double data = 0;
+  smg::RegularizerResult<double> energy;
+  double rigidity() const { return energy.carap + energy.arap; }  // C-ARAP or plain ARAP
+  // In the order the terms were summed before the fused step (data first), so that logs compare.
+  double total() const {
+    double t = data;
+    smg::RegularizerResult<double>::each_energy([&](const char*, double e) { t += e; }, energy);
+    return t;
+  }
 };
 
 // Data term + the variant's regularisers over the node trajectories, with exact gradients

@@ -52,8 +52,7 @@ Image node_overlay(const TrainerResult& r, const Camera& cam, const Image& gt, i
 
 std::vector<std::string> write_pictures(const std::string& dir, const TrainerResult& r, int shown) {
   namespace fs = std::filesystem;
-  if (!r.data.truth) throw std::invalid_argument("write_pictures: needs the procedural scene's test views");
-  const GroundTruth& g = *r.data.truth;
+  const GroundTruth& g = need_truth(r.data, "write_pictures");  // the test views
   const Scene& scene = g.scene;
   const int T = r.data.frames(), V = static_cast<int>(scene.test_cameras.size());
   const std::vector<std::vector<Image>>& renders = r.evaluation.renders;

@@ -50,8 +50,8 @@ void resolve_frames(TrainerConfig& c, int T, const std::vector<std::uint8_t>& ha
 void scale_lengths(TrainerConfig& c, double f) {
   c.nodes.unit *= f;
   c.node_loss.data_huber *= f;
-  c.node_loss.lrm_huber *= f;
-  c.node_loss.confidence.eps *= f;
+  c.node_loss.regularizers.lrm.huber_delta *= f;
+  c.node_loss.regularizers.confidence.eps *= f;
   c.stage1.lr_position *= f;
   c.stage1.lr_position_final *= f;
   c.stage2.lr_means *= f;
@@ -143,7 +143,15 @@ TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Pro
   r.lifted = lift_tracks(d.cameras, d.priors, config.lift);
   // Without feature maps there are no descriptors: the graph is geometric (train.cpp says so).
   if (d.priors.feature_dim == 0) config.variant.semantic_graph = false;
-  if (!truth) {
+  const auto select_nodes = [&] { return make_nodes(r.lifted, config.nodes, config.variant.semantic_graph, par); };
+  if (truth) {
+    r.nodes = select_nodes();
+    // What only the truth can say of stage 0 (the node labels take no part in training; the
+    // error of the lifted trajectories reads no rotation).
+    label_nodes_from_truth(d, r.lifted, r.nodes);
+    r.tracks_lifted = track_metrics(d.truth->scene, r.nodes);
+    r.queries = export_query_set(d, kQueryCount);
+  } else {
     // A scene from disk: its scale decides every length (docs/data.md section 5). Too little
     // usable data is a problem of the scene's files (exit 2 in smg_trainer), named by the files
     // that decide it.
@@ -158,17 +166,15 @@ TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Pro
     progress.line("data", format("%s: T=%d %dx%d, %d tracks, %d validation frames, extent %.3f m (lengths x %.3f)",
                                  d.source.c_str(), d.frames(), d.width, d.height, d.priors.tracks.count,
                                  static_cast<int>(d.eval.size()), extent, r.length_factor));
-  }
-  try {
-    r.nodes = make_nodes(r.lifted, config.nodes, config.variant.semantic_graph, par);
-  } catch (const std::runtime_error& e) {
-    // No node (no track visible in enough frames): on disk that is the scene's problem, not the
-    // program's.
-    if (truth) throw;
-    throw DataError("priors/tracks.npz: " + std::string(e.what()));
+    try {
+      r.nodes = select_nodes();
+    } catch (const std::runtime_error& e) {
+      // No node (no track visible in enough frames): on disk that is the scene's problem, not the
+      // program's.
+      throw DataError("priors/tracks.npz: " + std::string(e.what()));
+    }
   }
   init_rotations(r.nodes);
-  if (truth) label_nodes_from_truth(d, r.lifted, r.nodes);
   r.seconds_stage0 = seconds_since(t0);
   {
     const smg::GraphStats& gs = r.nodes.graph.stats;
@@ -179,10 +185,6 @@ TrainerResult run_stage0(const TrainerConfig& config_in, Dataset data, const Pro
                                    static_cast<long long>(gs.edges), gs.mean_degree,
                                    static_cast<long long>(gs.gate_removed_edges),
                                    static_cast<long long>(gs.isolated_nodes), r.seconds_stage0));
-  }
-  if (truth) {
-    r.tracks_lifted = track_metrics(d.truth->scene, r.nodes);
-    r.queries = export_query_set(d, kQueryCount);
   }
   return r;
 }
@@ -201,10 +203,10 @@ void log_queries(const Progress& progress, const char* stage, int count, const Q
 // Stages 1 and 2 and the evaluation, after run_stage0.
 TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point start, const Progress& progress) {
   const smg::ParallelOptions par{r.config.threads, 0};
-  const GroundTruth* truth = r.data.truth ? &*r.data.truth : nullptr;
+  const bool truth = r.data.truth.has_value();
   // What the run sees of its scene before stage 1 (no truth), and the rule that reads it.
   const std::vector<double> c_lifted =
-      node_confidences(r.nodes, r.nodes.positions, r.config.node_loss.confidence, par);
+      node_confidences(r.nodes, r.nodes.positions, r.config.node_loss.regularizers.confidence, par);
   r.signals = scene_signals(r.nodes, c_lifted);
   if (r.config.node_loss.alpha_auto && r.config.variant.rigidity == Rigidity::carap) {
     r.rule_applied = true;
@@ -215,22 +217,11 @@ TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point 
   }
   const TrainerConfig& config = r.config;
 
-  // Stage 1, with what the confidences measure before and after it where the truth can tell.
+  // Stage 1. What the truth can say of it is scored below, once the query tracks are known.
   NodeObjective objective(config.variant, config.node_loss, par);
-  const auto diagnose = [&] {
-    return confidence_diagnostics(r.nodes, r.nodes.positions, config.node_loss.confidence, config.node_loss.alpha, par);
-  };
-  if (truth) r.confidence_lifted = diagnose();
+  const std::vector<double> lifted = r.nodes.positions;  // stage 1's start, for the diagnostics
   r.stage1 = fit_nodes(r.nodes, objective, config.stage1, progress);
-  if (truth) {
-    r.confidence_stage1 = diagnose();
-    r.tracks_stage1 = track_metrics(truth->scene, r.nodes);
-    progress.line("stage1", format("done in %.1fs: node EPE %.4f m (lifted %.4f), box %.4f, hidden %.4f",
-                                   r.stage1.seconds, r.tracks_stage1.all.epe, r.tracks_lifted.all.epe,
-                                   r.tracks_stage1.box.epe, r.tracks_stage1.hidden.epe));
-  } else {
-    progress.line("stage1", format("done in %.1fs", r.stage1.seconds));
-  }
+  progress.line("stage1", format("done in %.1fs", r.stage1.seconds));
 
   // Stage 2.
   auto t0 = std::chrono::steady_clock::now();
@@ -240,8 +231,19 @@ TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point 
   if (r.queries) {
     r.query_stage1 = score_queries(*r.queries, r.data, r.nodes, r.model, par);
     log_queries(progress, "stage1", r.queries->queries.count(), r.query_stage1);
-    if (truth && r.query_stage1.scored)
-      r.node_split_stage1 = node_error_split(truth->scene, r.nodes, c_lifted, r.query_stage1.node_weight);
+  }
+  // Stage 1 against the truth, in one place: what the confidences measure of the lifted
+  // trajectories and of stage 1's, the node EPE, and its split by what explains it.
+  if (truth) {
+    const Scene& scene = r.data.truth->scene;
+    const smg::RegularizerOptions& ro = config.node_loss.regularizers;
+    r.confidence_lifted = confidence_diagnostics(r.nodes, lifted, ro.confidence, ro.carap.alpha, par);
+    r.confidence_stage1 = confidence_diagnostics(r.nodes, r.nodes.positions, ro.confidence, ro.carap.alpha, par);
+    r.tracks_stage1 = track_metrics(scene, r.nodes);
+    progress.line("stage1", format("node EPE %.4f m (lifted %.4f), box %.4f, hidden %.4f", r.tracks_stage1.all.epe,
+                                   r.tracks_lifted.all.epe, r.tracks_stage1.box.epe, r.tracks_stage1.hidden.epe));
+    if (r.query_stage1.scored)
+      r.node_split_stage1 = node_error_split(scene, r.nodes, c_lifted, r.query_stage1.node_weight);
   }
   Stage2Options s2 = config.stage2;
   s2.seed = r.data.seed;
@@ -250,11 +252,7 @@ TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point 
                                  1e3 * r.stage2.seconds / std::max(1, r.stage2.iterations)));
 
   // Evaluation.
-  if (config.image_eval) {
-    r.evaluation = evaluate(r.data, r.nodes, r.model, par, /*keep_renders=*/true);
-  } else if (truth) {
-    r.evaluation.tracks = track_metrics(truth->scene, r.nodes);
-  }
+  if (config.image_eval) r.evaluation = evaluate(r.data, r.nodes, r.model, par, /*keep_renders=*/true);
   const Evaluation& e = r.evaluation;
   if (!e.frames.empty()) {
     const FrameScore& m = e.frames_mean;
@@ -266,11 +264,18 @@ TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point 
     r.query_stage2 = score_queries(*r.queries, r.data, r.nodes, r.model, par);
     log_queries(progress, "eval", r.queries->queries.count(), r.query_stage2);
   }
-  if (truth && config.image_eval)
-    progress.line("eval", format("test PSNR %.2f dB (masked %.2f), SSIM %.4f, box PSNR %.2f; node EPE %.4f m, "
-                                 "d5 %.3f, d10 %.3f, box EPE %.4f (%.1fs)",
-                                 e.mean.psnr, e.mean.psnr_masked, e.mean.ssim, e.mean.psnr_box, e.tracks.all.epe,
-                                 e.tracks.all.within_5, e.tracks.all.within_10, e.tracks.box.epe, e.seconds));
+  // The run against the truth: the node error after stage 2 (evaluate() scores it with the
+  // images; without them it is scored here) and the test views.
+  if (truth) {
+    if (!config.image_eval) {
+      r.evaluation.tracks = track_metrics(r.data.truth->scene, r.nodes);
+    } else {
+      progress.line("eval", format("test PSNR %.2f dB (masked %.2f), SSIM %.4f, box PSNR %.2f; node EPE %.4f m, "
+                                   "d5 %.3f, d10 %.3f, box EPE %.4f (%.1fs)",
+                                   e.mean.psnr, e.mean.psnr_masked, e.mean.ssim, e.mean.psnr_box, e.tracks.all.epe,
+                                   e.tracks.all.within_5, e.tracks.all.within_10, e.tracks.box.epe, e.seconds));
+    }
+  }
   r.seconds_total = seconds_since(start);
   return r;
 }

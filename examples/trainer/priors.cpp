@@ -533,18 +533,26 @@ LiftedTracks lift_tracks(const std::vector<Camera>& cameras, const Priors& p, co
   out.feature_samples.assign(sz(T) * N * C, 0.0);
   out.positions_true.assign(sz(T) * N * 3, 0.0);
   out.rotations_true.assign(sz(T) * N * 4, 0.0);
-  const bool truth = !tr.positions_true.empty();  // a scene from disk has none: zeros
-  for (int j = 0; j < N; ++j) {
-    const int i = out.track[sz(j)];
-    out.body.push_back(truth ? tr.body[sz(i)] : -1);
-    for (int t = 0; t < T; ++t) {
-      const std::size_t s = sz(t) * N0 + i, d = sz(t) * N + j;
-      if (truth) {
+  // The truth of the selected tracks, in one pass: a scene from disk has none (body -1, positions
+  // 0, identity rotations).
+  out.body.assign(sz(N), -1);
+  if (!tr.positions_true.empty()) {
+    for (int j = 0; j < N; ++j) {
+      const int i = out.track[sz(j)];
+      out.body[sz(j)] = tr.body[sz(i)];
+      for (int t = 0; t < T; ++t) {
+        const std::size_t s = sz(t) * N0 + i, d = sz(t) * N + j;
         for (int c = 0; c < 3; ++c) out.positions_true[d * 3 + c] = tr.positions_true[s * 3 + c];
         for (int c = 0; c < 4; ++c) out.rotations_true[d * 4 + c] = tr.rotations_true[s * 4 + c];
-      } else {
-        out.rotations_true[d * 4] = 1.0;
       }
+    }
+  } else {
+    for (std::size_t d = 0; d < sz(T) * N; ++d) out.rotations_true[d * 4] = 1.0;
+  }
+  for (int j = 0; j < N; ++j) {
+    const int i = out.track[sz(j)];
+    for (int t = 0; t < T; ++t) {
+      const std::size_t s = sz(t) * N0 + i, d = sz(t) * N + j;
       if (!vis[s]) continue;
       out.visible[d] = 1;
       for (int c = 0; c < 3; ++c) out.positions[d * 3 + c] = pos[s * 3 + c];

@@ -40,6 +40,17 @@ std::string join(const std::vector<std::string>& names) {
 using K = SettingKind;
 using C = TrainerConfig;
 
+// The accessors of an integer setting of the generated scene (frames, width, height): one pair
+// of functions serves every such row.
+template <int SceneConfig::*F>
+double scene_int(const C& c) {
+  return static_cast<double>(c.dataset.scene.*F);
+}
+template <int SceneConfig::*F>
+void set_scene_int(C& c, double v) {
+  c.dataset.scene.*F = static_cast<int>(v);
+}
+
 }  // namespace
 
 const std::vector<std::string>& export_layout_names() {
@@ -71,14 +82,11 @@ const std::vector<Setting>& settings() {
       {"threads", K::integer, "worker threads, 0 = all hardware threads", 0, 1024, nullptr,
        [](const C& c) { return static_cast<double>(c.threads); }, [](C& c, double v) { c.threads = static_cast<int>(v); }},
       {"frames", K::integer, "number of frames T", 4, 1000, nullptr,
-       [](const C& c) { return static_cast<double>(c.dataset.scene.frames); },
-       [](C& c, double v) { c.dataset.scene.frames = static_cast<int>(v); }, "", true},
+       &scene_int<&SceneConfig::frames>, &set_scene_int<&SceneConfig::frames>, "", true},
       {"width", K::integer, "image width in pixels", 32, 4096, nullptr,
-       [](const C& c) { return static_cast<double>(c.dataset.scene.width); },
-       [](C& c, double v) { c.dataset.scene.width = static_cast<int>(v); }, "", true},
+       &scene_int<&SceneConfig::width>, &set_scene_int<&SceneConfig::width>, "", true},
       {"height", K::integer, "image height in pixels", 32, 4096, nullptr,
-       [](const C& c) { return static_cast<double>(c.dataset.scene.height); },
-       [](C& c, double v) { c.dataset.scene.height = static_cast<int>(v); }, "", true},
+       &scene_int<&SceneConfig::height>, &set_scene_int<&SceneConfig::height>, "", true},
       {"tracks", K::integer, "number of 2D tracks", 10, 1000000, nullptr,
        [](const C& c) { return static_cast<double>(c.dataset.priors.tracks); },
        [](C& c, double v) { c.dataset.priors.tracks = static_cast<int>(v); }, "", true},
@@ -95,13 +103,17 @@ const std::vector<Setting>& settings() {
       {"w-data", K::number, "weight of the node data term", 0.0, 1e6, nullptr,
        [](const C& c) { return c.node_loss.data_weight; }, [](C& c, double v) { c.node_loss.data_weight = v; }},
       {"w-rigidity", K::number, "weight of the rigidity term, ARAP or C-ARAP", 0.0, 1e6, nullptr,
-       [](const C& c) { return c.node_loss.rigidity_weight; }, [](C& c, double v) { c.node_loss.rigidity_weight = v; }},
+       [](const C& c) { return c.node_loss.regularizers.carap.weight; },
+       [](C& c, double v) { c.node_loss.regularizers.carap.weight = c.node_loss.regularizers.arap.weight = v; }},
       {"w-lrm", K::number, "weight of the LRM term", 0.0, 1e6, nullptr,
-       [](const C& c) { return c.node_loss.lrm_weight; }, [](C& c, double v) { c.node_loss.lrm_weight = v; }},
+       [](const C& c) { return c.node_loss.regularizers.lrm.weight; },
+       [](C& c, double v) { c.node_loss.regularizers.lrm.weight = v; }},
       {"w-accel", K::number, "weight of trajectory smoothness (squared node accelerations, E21, as MoSca and Shape-of-Motion); 0 = off", 0.0, 1e6, nullptr,
-       [](const C& c) { return c.node_loss.accel_weight; }, [](C& c, double v) { c.node_loss.accel_weight = v; }},
+       [](const C& c) { return c.node_loss.regularizers.accel.weight; },
+       [](C& c, double v) { c.node_loss.regularizers.accel.weight = v; }},
       {"alpha", K::number, "confidence floor alpha of C-ARAP and LRM, E7; 1 makes C-ARAP plain ARAP; auto: C-ARAP or plain ARAP chosen by the trainer from the scene (docs/results.md)", 0.0, 1.0,
-       nullptr, [](const C& c) { return c.node_loss.alpha; }, [](C& c, double v) { c.node_loss.alpha = v; }},
+       nullptr, [](const C& c) { return c.node_loss.regularizers.carap.alpha; },
+       [](C& c, double v) { c.node_loss.regularizers.carap.alpha = c.node_loss.regularizers.lrm.alpha = v; }},
       {"carap-reading", K::choice,
        "how C-ARAP moves the nodes: symmetric is the gradient of E9, directed lets term i-j move node i only "
        "(E20, docs/results.md)",

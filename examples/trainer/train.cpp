@@ -37,6 +37,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "json_line.hpp"
@@ -73,10 +74,11 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
   npy::write(file("graph_weights.npy"), n.graph.weights.data(), {N, K});
 
   const trainer::NodeLossOptions& l = cfg.node_loss;
+  const smg::RegularizerOptions& ro = l.regularizers;
   const trainer::Stage1Options& s = cfg.stage1;
   const trainer::VariantSpec& v = cfg.variant;
   std::string gaps = "[", gap_weights = "[";
-  for (const smg::Gap& g : l.gaps) {
+  for (const smg::Gap& g : ro.carap.gaps) {
     gaps += (gaps.size() > 1 ? "," : "") + std::to_string(g.delta);
     std::array<char, 32> w{};
     std::snprintf(w.data(), w.size(), "%.10g", g.weight);
@@ -97,18 +99,17 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
       .add("quats_order", "wxyz")
       .add("w_data", l.data_weight)
       .add("data_huber", l.data_huber)
-      .add("w_rigidity", l.rigidity_weight)
-      .add("w_lrm", l.lrm_weight)
-      .add("w_accel", l.accel_weight)
-      .add("lrm_huber", l.lrm_huber)
-      .add("alpha", l.alpha)
+      .add("w_rigidity", ro.carap.weight)
+      .add("w_lrm", ro.lrm.weight)
+      .add("lrm_huber", ro.lrm.huber_delta)
+      .add("alpha", ro.carap.alpha)
       .add_raw("gaps", gaps + "]")
       .add_raw("gap_weights", gap_weights + "]")
-      .add("kappa_m", l.confidence.kappa_m)
-      .add("kappa_r", l.confidence.kappa_r)
-      .add("lambda_m", l.confidence.lambda_m)
-      .add("lambda_r", l.confidence.lambda_r)
-      .add("confidence_eps", l.confidence.eps)
+      .add("kappa_m", ro.confidence.kappa_m)
+      .add("kappa_r", ro.confidence.kappa_r)
+      .add("lambda_m", ro.confidence.lambda_m)
+      .add("lambda_r", ro.confidence.lambda_r)
+      .add("confidence_eps", ro.confidence.eps)
       .add("iterations", s.iterations)
       .add("lr_position", s.lr_position)
       .add("lr_position_final", s.lr_position_final)
@@ -118,8 +119,14 @@ std::string export_case(const fs::path& dir, const trainer::TrainerConfig& cfg, 
       .add("extent", r.data.extent)
       .add("unit", n.unit)
       .add("epe_lifted", r.tracks_lifted.all.epe)
-      .add("edges", static_cast<long long>(n.graph.stats.edges))
-      .add("dir", dir.string());
+      .add("edges", static_cast<long long>(n.graph.stats.edges));
+  // Every term its weight switches (not the variant), as w_<term> (w_accel, ...): fit_nodes.py
+  // refuses a case with a term it does not fit, so a new term is recorded without an edit here.
+  smg::for_each_term(ro, [&](const char* name, bool, const auto& o) {
+    if constexpr (trainer::has_weight<std::decay_t<decltype(o)>>::value)
+      if (!trainer::variant_term(name)) j.add(std::string("w_") + name, o.weight);
+  });
+  j.add("dir", dir.string());
   const std::string line = j.str();
   std::ofstream f(dir / "case.json");
   f << line << "\n";
@@ -280,7 +287,7 @@ trainer::TrainerResult train(Request& q, const trainer::Progress& progress) {
   if (q.queries) {
     trainer::QuerySet set;
     set.queries = *q.queries;
-    if (q.truth) set.truth = *q.truth;
+    set.truth = q.truth.value_or(std::vector<float>());  // empty: the tracks are written, not scored
     stage0.queries = std::move(set);
   }
   return trainer::run_trainer(std::move(stage0), progress);
@@ -293,10 +300,12 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
   const auto t0 = std::chrono::steady_clock::now();
   const trainer::Evaluation& e = r.evaluation;
   std::vector<std::string> written;
+  std::string what = "pictures";  // what the run's images are, for the last lines
   if (!r.data.truth) {
     fs::create_directories(q.out / "renders");
     for (std::size_t v = 0; v < e.frame_renders.size(); ++v)
       trainer::write_png((q.out / "renders" / (r.data.eval[v].name + ".png")).string(), e.frame_renders[v]);
+    what = std::to_string(e.frame_renders.size()) + " renders";
   } else if (q.pictures) {
     written = trainer::write_pictures(q.out.string(), r);
   }
@@ -311,7 +320,7 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
   rec.seconds_read = q.seconds_read;
   rec.seconds_write = trainer::seconds_since(t0);
   rec.queries = q.queries ? q.queries->count() : 0;
-  rec.query_error = q.queries && q.truth ? &te : nullptr;
+  rec.query_error = r.query_stage2.scored ? &te : nullptr;  // scored: the queries had true tracks
   const std::string line = trainer::metrics_json(r, rec);
   trainer::write_metrics_json(q.out.string(), line);
   if (q.view) {
@@ -319,7 +328,7 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
     vi.metrics_json = line;
     if (q.queries) {
       vi.tracks = &tracks;
-      vi.truth = q.truth ? &*q.truth : nullptr;
+      vi.truth = &r.queries->truth;  // empty without --track-truth
       vi.queries = q.queries->count();
     }
     written.push_back(trainer::write_view_html(q.out.string(), r, vi));
@@ -330,8 +339,6 @@ std::string write_run(const Request& q, const trainer::TrainerResult& r, const t
       written.push_back((q.out / "ply").string() + "/frame_<t>.ply, t = 0.." + std::to_string(ply.size() - 1) + " (" +
                         std::to_string(r.model.count()) + " Gaussians each)");
   }
-  const std::string what = r.data.truth ? std::string("pictures")
-                                        : std::to_string(e.frame_renders.size()) + " renders";
   progress.line("done", what + " and metrics.json in " + q.out.string() + "/");
   for (const std::string& p : written) progress.line("done", "  " + p);
   return line;

@@ -235,9 +235,10 @@ std::vector<ViewPicture> view_pictures(const TrainerResult& r, ViewBlob& blob) {
     }
     pictures.push_back(p);
   }
-  // Procedural test views: fixed cameras at every frame, scored on their covisible pixels.
-  if (d.truth) {
-    const GroundTruth& g = *d.truth;
+  // Procedural test views: fixed cameras at every frame, scored on their covisible pixels (none
+  // from disk: its truth is empty).
+  {
+    const GroundTruth& g = truth_or_empty(d);
     for (std::size_t v = 0; v < g.test.size() && v + 1 < ev.renders.size(); ++v)
       for (int t = 0; t < T && sz(t) < g.test[v].size(); ++t) {
         const std::string id = std::to_string(v) + "_" + std::to_string(t);
@@ -287,8 +288,8 @@ std::vector<ViewPicture> view_pictures(const TrainerResult& r, ViewBlob& blob) {
 std::vector<std::uint8_t> view_node_classes(const TrainerResult& r, std::vector<std::string>* names) {
   const Nodes& n = r.nodes;
   std::vector<std::uint8_t> cls(sz(n.count), 255);
-  if (r.data.truth && n.body.size() == sz(n.count) && !r.data.truth->scene.class_names.empty()) {
-    const Scene& scene = r.data.truth->scene;
+  const Scene& scene = truth_or_empty(r.data).scene;  // no classes from disk
+  if (n.body.size() == sz(n.count) && !scene.class_names.empty()) {
     *names = scene.class_names;
     for (int i = 0; i < n.count; ++i) {
       const int b = n.body[sz(i)];
@@ -372,7 +373,7 @@ std::string write_view_html(const std::string& out_dir, const TrainerResult& r, 
   const std::vector<std::uint16_t> qnodes = view_quantise(n.positions, qz);
   blob.add("nodes", qnodes.data(), qnodes.size(), {T, N, 3}, "u16");
   // Confidences c_t (E6) of the final trajectories, whatever the variant used.
-  const std::vector<double> c = node_confidences(n, n.positions, r.config.node_loss.confidence, {},
+  const std::vector<double> c = node_confidences(n, n.positions, r.config.node_loss.regularizers.confidence, {},
                                                  r.config.node_loss.confidence_visibility);
   std::vector<std::uint8_t> qc(c.size());
   for (std::size_t i = 0; i < c.size(); ++i) qc[i] = view_unit_byte(c[i]);
@@ -416,8 +417,8 @@ std::string write_view_html(const std::string& out_dir, const TrainerResult& r, 
   std::string train_cams = "[", test_cams = "[";
   for (std::size_t t = 0; t < r.data.cameras.size(); ++t)
     train_cams += (t ? "," : "") + view_camera_json(r.data.cameras[t], "train " + std::to_string(t));
-  if (r.data.truth) {
-    const Scene& scene = r.data.truth->scene;
+  {
+    const Scene& scene = truth_or_empty(r.data).scene;  // no test cameras from disk
     for (std::size_t v = 0; v < scene.test_cameras.size(); ++v)
       test_cams += (v ? "," : "") + view_camera_json(scene.test_cameras[v], v < scene.test_views.size()
                                                                                   ? "test " + scene.test_views[v].name

@@ -76,8 +76,8 @@ TEST_CASE("stage 1 (full variant, quick scene): node EPE below the lifted EPE") 
   CHECK(fitted.all.samples == lifted.all.samples);
   CHECK(fitted.all.epe < lifted.all.epe);
   CHECK(r.final.total() < r.initial.total());
-  CHECK(r.final.rigidity > 0);
-  CHECK(r.final.lrm > 0);
+  CHECK(r.final.rigidity() > 0);
+  CHECK(r.final.energy.lrm > 0);
   for (std::size_t s = 0; s < nodes.rotations.size() / 4; ++s) {
     const double norm = std::sqrt(nodes.rotations[4 * s] * nodes.rotations[4 * s] +
                                   nodes.rotations[4 * s + 1] * nodes.rotations[4 * s + 1] +
@@ -102,8 +102,8 @@ TEST_CASE("stage 1 (base variant): observed samples stay at their lifted value")
   s1.iterations = 100;
   trainer::NodeObjective objective(c.variant, c.node_loss, par);
   const trainer::Stage1Result r = trainer::fit_nodes(nodes, objective, s1, stage1_silent());
-  CHECK(r.final.rigidity == 0.0);
-  CHECK(r.final.lrm == 0.0);
+  CHECK(r.final.rigidity() == 0.0);
+  CHECK(r.final.energy.lrm == 0.0);
   double worst = 0;
   long long observed = 0;
   for (std::size_t s = 0; s < nodes.visible.size(); ++s) {
@@ -159,7 +159,7 @@ TEST_CASE("C-ARAP options: the directed reading keeps the energy and rotation gr
   std::vector<double> gx_s(n, 0.0), gr_s(n, 0.0), gx_d(n, 0.0), gr_d(n, 0.0);
   const trainer::NodeLossTerms es = sym.evaluate(nodes, 1.0, gx_s.data(), gr_s.data());
   const trainer::NodeLossTerms ed = dir.evaluate(nodes, 1.0, gx_d.data(), gr_d.data());
-  CHECK(ed.rigidity == doctest::Approx(es.rigidity).epsilon(1e-12));
+  CHECK(ed.rigidity() == doctest::Approx(es.rigidity()).epsilon(1e-12));
   CHECK(ed.data == es.data);
   double dr = 0, nr = 0, dx = 0, nx = 0;
   for (std::size_t k = 0; k < n; ++k) {
@@ -196,9 +196,10 @@ TEST_CASE("C-ARAP options: confidences from the estimate follow it, from the lif
   CHECK(est0 != est1);
   CHECK(lift0 == lift1);
   CHECK(tru0 == tru1);
-  CHECK(tru0 == trainer::node_confidences(nodes, nodes.truth, c.node_loss.confidence, par));
+  CHECK(tru0 == trainer::node_confidences(nodes, nodes.truth, c.node_loss.regularizers.confidence, par));
   // Without the visibility factor: the same value where observed, the motion factors elsewhere.
-  const std::vector<double> all = trainer::node_confidences(nodes, nodes.positions, c.node_loss.confidence, par, false);
+  const std::vector<double> all =
+      trainer::node_confidences(nodes, nodes.positions, c.node_loss.regularizers.confidence, par, false);
   long long hidden_positive = 0;
   for (std::size_t s = 0; s < all.size(); ++s) {
     if (nodes.visible[s]) {
@@ -224,7 +225,7 @@ TEST_CASE("confidence diagnostics: rank correlations, bins and the weight ratios
   const smg::ParallelOptions par{2, 0};
   trainer::Nodes nodes = trainer::make_nodes(q.lifted, c.nodes, true, par);
   const trainer::ConfidenceDiagnostics d =
-      trainer::confidence_diagnostics(nodes, nodes.positions, c.node_loss.confidence, 0.6, par);
+      trainer::confidence_diagnostics(nodes, nodes.positions, c.node_loss.regularizers.confidence, 0.6, par);
   long long observed = 0;
   for (std::uint8_t v : nodes.visible) observed += v;
   long long binned = 0;
@@ -242,14 +243,14 @@ TEST_CASE("confidence diagnostics: rank correlations, bins and the weight ratios
   CHECK(d.symmetric_low < d.symmetric_high);
   // With alpha = 1 every ratio is 1; the estimate at the truth has zero error everywhere.
   const trainer::ConfidenceDiagnostics one =
-      trainer::confidence_diagnostics(nodes, nodes.positions, c.node_loss.confidence, 1.0, par);
+      trainer::confidence_diagnostics(nodes, nodes.positions, c.node_loss.regularizers.confidence, 1.0, par);
   CHECK(one.symmetric_low == doctest::Approx(1.0));
   CHECK(one.directed_high == doctest::Approx(1.0));
   // Observations equal to the truth all fall in the first bin.
   trainer::Nodes exact = nodes;
   exact.observed = exact.truth;
   const trainer::ConfidenceDiagnostics e =
-      trainer::confidence_diagnostics(exact, exact.truth, c.node_loss.confidence, 0.6, par);
+      trainer::confidence_diagnostics(exact, exact.truth, c.node_loss.regularizers.confidence, 0.6, par);
   CHECK(e.count_by_observation_error[0] == observed);
   // At the truth, the estimate's and the truth's confidences coincide.
   CHECK(e.mean_observed == e.mean_observed_truth);
@@ -266,7 +267,7 @@ TEST_CASE("confidence diagnostics: rank correlations, bins and the weight ratios
   marked.failed_report.assign(marked.visible.size(), 1);
   marked.semantic_class.assign(static_cast<std::size_t>(marked.count), 0);
   const trainer::ConfidenceDiagnostics m =
-      trainer::confidence_diagnostics(marked, marked.positions, c.node_loss.confidence, 0.6, par);
+      trainer::confidence_diagnostics(marked, marked.positions, c.node_loss.regularizers.confidence, 0.6, par);
   CHECK(m.count_failed_observed == observed);
   CHECK(m.failed_observed == doctest::Approx(d.mean_observed).epsilon(1e-12));
   CHECK(m.clean_observed == 0.0);
