@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -25,6 +26,13 @@ namespace smg::test::cuda {
     REQUIRE_MESSAGE(smg_test_err_ == cudaSuccess, #expr, ": ", cudaGetErrorName(smg_test_err_), \
                     " (", cudaGetErrorString(smg_test_err_), ")");                          \
   } while (0)
+
+// The name and sizes a random case of these tests starts with: frames T, nodes N, neighbours per
+// node K, points P, drivers per point D (each case uses those it has; the others stay 0).
+struct CaseSizes {
+  std::string name;
+  std::ptrdiff_t T = 0, N = 0, K = 0, P = 0, D = 0;  // smg::Index
+};
 
 template <class T>
 class DeviceArray {

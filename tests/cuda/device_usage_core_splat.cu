@@ -6,6 +6,8 @@
 // from compiling ("calling a __host__ function from a __global__ function").
 #include <cstdint>
 
+#include "device_usage.cuh"
+
 #include "smg/core/quaternion.hpp"
 #include "smg/core/quaternion_manifold.hpp"
 #include "smg/core/rotation_gradient.hpp"
@@ -31,12 +33,7 @@ using smg::Quaternion;
 using smg::Vector2;
 using smg::Vector3;
 using smg::Vector4;
-
-// Sums a matrix into *sink so that no call is optimised away.
-template <class S, class M>
-__device__ void sink(S* out, const M& m) {
-  for (Index k = 0; k < m.size(); ++k) *out += m.data()[k];
-}
+using smg_device_usage::sink;
 
 template <class S>
 __global__ void core_usage(const S* in, S* out) {

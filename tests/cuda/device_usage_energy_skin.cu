@@ -5,6 +5,8 @@
 // SMG_HOST_DEVICE (or gains a host-only call) stops this file from compiling.
 #include <cstdint>
 
+#include "device_usage.cuh"
+
 #include "smg/core/dual_quaternion.hpp"
 #include "smg/energy/common.hpp"
 #include "smg/energy/lanes.hpp"
@@ -17,11 +19,7 @@ namespace smg_device_usage_energy_skin {
 using smg::Index;
 using smg::Quaternion;
 using smg::Vector3;
-
-template <class S, class M>
-__device__ void sink(S* out, const M& m) {
-  for (Index k = 0; k < m.size(); ++k) *out += m.data()[k];
-}
+using smg_device_usage::sink;
 
 template <class S>
 __global__ void lrm_usage(const S* in, S* out) {

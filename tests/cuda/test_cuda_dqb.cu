@@ -24,9 +24,7 @@ using smg::Index;
 using namespace smg::test::cuda;
 
 // A skinning problem in double (cast to the scalar of the run).
-struct DqbCase {
-  std::string name;
-  Index T = 0, N = 0, P = 0, D = 0;
+struct DqbCase : CaseSizes {
   std::vector<double> xn, qn;          // [T][N][3], [T][N][4] (not normalised)
   std::vector<std::int32_t> drivers;   // [P][D]
   std::vector<double> weights;         // [P][D]
@@ -43,11 +41,7 @@ DqbCase random_case(const std::string& name, Index T, Index N, Index P, Index D,
                     std::uint64_t seed, bool point_quats) {
   smg::test::Rng rng(seed);
   DqbCase c;
-  c.name = name;
-  c.T = T;
-  c.N = N;
-  c.P = P;
-  c.D = D;
+  static_cast<CaseSizes&>(c) = {name, T, N, 0, P, D};
   for (Index k = 0; k < T * N; ++k) {
     const smg::Vector3<double> x = rng.vec3(2.0);
     c.xn.insert(c.xn.end(), {x(0), x(1), x(2)});

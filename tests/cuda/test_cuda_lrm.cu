@@ -21,9 +21,7 @@ using smg::Index;
 using namespace smg::test::cuda;
 
 // A test problem in double (cast to the scalar of the run).
-struct LrmCase {
-  std::string name;
-  Index T = 0, N = 0, K = 0;
+struct LrmCase : CaseSizes {
   std::vector<double> x;        // [T][N][3]
   std::vector<double> c;        // [T][N]; empty = no confidence
   std::vector<std::int64_t> idx;  // [N][K]
@@ -37,10 +35,7 @@ LrmCase random_case(const std::string& name, Index T, Index N, Index K, Index mi
                     std::uint64_t seed, bool with_conf) {
   smg::test::Rng rng(seed);
   LrmCase c;
-  c.name = name;
-  c.T = T;
-  c.N = N;
-  c.K = K;
+  static_cast<CaseSizes&>(c) = {name, T, N, K};
   c.x.resize(static_cast<std::size_t>(T * N * 3));
   std::vector<double> base(static_cast<std::size_t>(N * 3)), vel(static_cast<std::size_t>(N * 3));
   for (auto& v : base) v = rng.uniform();

@@ -18,6 +18,7 @@
 #include <cstdint>
 #include <cstring>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "cuda/cuda_test_support.cuh"
@@ -117,7 +118,8 @@ Out<S> host_scheme(const Case<S, I>& s, const smg::RegularizerOptions& o, const 
   std::vector<std::int32_t> off;
   std::vector<std::int64_t> ent;
   host_reverse(s.idx, N, off, ent);
-  r.e.carap = 1e30;  // the driver overwrites the result
+  smg::RegularizerResult<S>::each_energy([](const char*, smg::Accumulator<S>& e) { e = 1e30; },
+                                         r.e);  // the driver overwrites the result
   const smg::Status st = cd::drive<S, I>(
       cd::HostBackend{}, p, o, s.positions(), s.rotations(),
       f.vis ? s.visibility() : smg::VisibilityView<const std::uint8_t>(), s.graph(), off.data(),
@@ -172,6 +174,21 @@ void check_same(const Out<S>& a, const Out<S>& b, const smg::RegularizerOptions&
 
 smg::RegularizerOptions options(unsigned mask) { return smg::test::fused_options(mask); }
 
+// f(options, flags) for each mask of `masks`, with tangent and with raw rotation gradients.
+template <class F>
+void each_mask_and_form(const std::vector<unsigned>& masks, F&& f) {
+  for (const unsigned mask : masks) {
+    CAPTURE(mask);
+    const smg::RegularizerOptions o = options(mask);
+    for (const bool raw : {false, true}) {
+      CAPTURE(raw);
+      Flags flags;
+      flags.raw = raw;
+      f(o, flags);
+    }
+  }
+}
+
 smg::test::Scene<double> scene(Index T, Index N, Index K, std::uint64_t seed) {
   smg::test::Rng rng(seed);
   return smg::test::random_scene(T, N, K, rng);
@@ -183,19 +200,15 @@ void subsets_case(std::uint64_t seed) {
   CAPTURE(sizeof(S));
   CAPTURE(sizeof(I));
   const Case<S, I> s(scene(9, 23, 6, seed));
-  for (unsigned mask = 1; mask <= smg::test::fused_all_terms(); ++mask) {
-    CAPTURE(mask);
-    const smg::RegularizerOptions o = options(mask);
-    for (const bool raw : {false, true}) {
-      Flags f;
-      f.raw = raw;
-      const Out<S> ref = cpu(s, o, f);
-      for (const Index chunk : {Index(1), Index(2), Index(3), Index(0)}) {
-        CAPTURE(chunk);
-        check_same(host_scheme(s, o, f, chunk, chunk), ref, o, f, "subset");
-      }
+  std::vector<unsigned> every_subset;
+  for (unsigned mask = 1; mask <= smg::test::fused_all_terms(); ++mask) every_subset.push_back(mask);
+  each_mask_and_form(every_subset, [&](const smg::RegularizerOptions& o, const Flags& f) {
+    const Out<S> ref = cpu(s, o, f);
+    for (const Index chunk : {Index(1), Index(2), Index(3), Index(0)}) {
+      CAPTURE(chunk);
+      check_same(host_scheme(s, o, f, chunk, chunk), ref, o, f, "subset");
     }
-  }
+  });
 }
 
 }  // namespace fused_cuda_test
@@ -211,12 +224,26 @@ TEST_SUITE("cuda-host") {
   TEST_CASE("cuda regularizers: host scheme, outputs left out, mean normalisation, no visibility") {
     using namespace fused_cuda_test;
     const Case<double, std::int32_t> s(scene(12, 31, 8, 21));
+    // Every term's normalisation mean, and its stop-gradients that are bools (detach_*) on: by
+    // the options' lists, so a term added to them is run this way too.
     smg::RegularizerOptions o = options(smg::test::fused_all_terms());
-    o.accel.normalization = smg::Normalization::mean;
-    o.carap.normalization = smg::Normalization::mean;
-    o.arap.normalization = smg::Normalization::mean;
-    o.lrm.normalization = smg::Normalization::mean;
-    o.lrm.detach_omega = true;
+    int mean = 0, detached = 0;
+    smg::for_each_term(o, [&](const char*, bool, auto& term) {
+      smg::for_each_option(term, [&](const char* name, auto& field) {
+        using V = std::decay_t<decltype(field)>;
+        if constexpr (std::is_same<V, smg::Normalization>::value) {
+          field = smg::Normalization::mean;
+          ++mean;
+        } else if constexpr (std::is_same<V, bool>::value) {
+          if (std::string(name).rfind("detach_", 0) == 0) {
+            field = true;
+            ++detached;
+          }
+        }
+      });
+    });
+    CHECK(mean >= 4);  // at least the four terms this case had by name before the list
+    CHECK(detached >= 1);
     for (int variant = 0; variant < 5; ++variant) {
       CAPTURE(variant);
       Flags f;
@@ -246,7 +273,13 @@ TEST_SUITE("cuda-host") {
     for (const unsigned mask : masks) {
       CAPTURE(mask);
       smg::RegularizerOptions base = options(mask);
-      base.accel.penalty_eps = base.carap.penalty_eps = base.arap.penalty_eps = 1e-3;  // visible
+      // Every term's penalty_eps at 1e-3, where its effect is visible.
+      smg::for_each_term(base, [](const char*, bool, auto& term) {
+        smg::for_each_option(term, [](const char* name, auto& field) {
+          if constexpr (std::is_same<std::decay_t<decltype(field)>, double>::value)
+            if (std::string(name) == "penalty_eps") field = 1e-3;
+        });
+      });
       calls += smg::test::for_each_option_variant(base, [&](const std::string& label,
                                                             const smg::RegularizerOptions& o) {
         CAPTURE(label);
@@ -261,8 +294,12 @@ TEST_SUITE("cuda-host") {
   TEST_CASE("cuda regularizers: host scheme, rotation-angle forms, weighted or not, tangent or raw") {
     using namespace fused_cuda_test;
     const Case<double, std::int32_t> s(scene(9, 13, 5, 23));
-    // Bit 5 of fused_options: angle (for_each_term's order); alone, with the confidences, with all.
-    for (const unsigned mask : {32u, 33u, 63u})
+    // The angle term's bit of fused_options (its place in for_each_term): alone, with the
+    // confidences, with every term.
+    const unsigned angle = 1u << smg::test::fused_term_index("angle");
+    const unsigned conf = 1u << smg::test::fused_term_index("confidence");
+    REQUIRE(angle < (1u << smg::test::fused_term_count()));
+    for (const unsigned mask : {angle, angle | conf, smg::test::fused_all_terms()})
       for (const bool velocity : {false, true})
         for (const bool weighted : {false, true})
           for (const bool raw : {false, true}) {
@@ -285,10 +322,15 @@ TEST_SUITE("cuda-host") {
     using namespace fused_cuda_test;
     const smg::RegularizerOptions o = options(smg::test::fused_all_terms());
     Flags f;
-    SUBCASE("one frame: no pairs, LRM without velocity") {
+    SUBCASE("one frame: no pairs, no velocity: every energy 0") {
       const Case<double, std::int32_t> s(scene(1, 12, 4, 31));
       const auto ref = cpu(s, o, f);
-      CHECK(double(ref.e.carap) == 0.0);
+      smg::RegularizerResult<double>::each_energy(
+          [](const char* name, const smg::Accumulator<double>& e) {
+            INFO(name);
+            CHECK(double(e) == 0.0);
+          },
+          ref.e);
       check_same(host_scheme(s, o, f, 1, 1), ref, o, f, "T=1");
     }
     SUBCASE("T below the largest gap; K = 1") {
@@ -319,7 +361,7 @@ TEST_SUITE("cuda-host") {
 
   TEST_CASE("cuda regularizers: scratch within the inputs' bytes for long sequences") {
     using namespace fused_cuda_test;
-    const smg::RegularizerOptions o = options(15);
+    const smg::RegularizerOptions o = options(smg::test::fused_all_terms());
     for (const Index N : {Index(5000), Index(50000)}) {
       CAPTURE(N);
       const Index T = 400, K = 16;
@@ -347,7 +389,7 @@ TEST_SUITE("cuda-host") {
     smg::cuda::ReverseGraph rev;  // host-side checks read only its shape
     rev.nodes = s.N;
     rev.k = s.K;
-    const smg::RegularizerOptions o = options(15);
+    const smg::RegularizerOptions o = options(smg::test::fused_all_terms());
     auto msg = [](const smg::Status& st) { return std::string(st.message()); };
     CHECK(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
         s.positions(), s.rotations(), s.visibility(), s.graph(), o, rev));
@@ -378,7 +420,9 @@ TEST_SUITE("cuda-host") {
                   s.positions(), s.rotations(), s.visibility(), s.graph(), o, rev, {},
                   smg::PositionsView<float>(g.data(), s.T + 1, s.N)))
               .rfind("grad_positions:", 0) == 0);
-    // K above the CUDA LRM kernel's maximum: refused with LRM on, taken without it.
+    // K above the most a CUDA kernel takes (the LRM kernel's kLrmMaxK): refused with every term
+    // on, taken once the term that limits K is off; which term that is comes from the list (the
+    // single-term removals that make it accepted), not from its name.
     const Index K = smg::cuda::kLrmMaxK + 1;
     std::vector<std::int32_t> idx(static_cast<std::size_t>(s.N * K), -1);
     std::vector<float> w(static_cast<std::size_t>(s.N * K), 0.f);
@@ -389,15 +433,35 @@ TEST_SUITE("cuda-host") {
     CHECK(msg(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
                   s.positions(), s.rotations(), s.visibility(), wide, o, rw))
               .rfind("graph:", 0) == 0);
-    smg::RegularizerOptions no_lrm = o;
-    no_lrm.terms.lrm = false;
-    CHECK(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
-        s.positions(), s.rotations(), s.visibility(), wide, no_lrm, rw));
-    smg::RegularizerOptions bad = o;
-    bad.carap.alpha = 2.0;
-    CHECK(msg(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
-                  s.positions(), s.rotations(), s.visibility(), s.graph(), bad, rev))
-              .find("alpha") != std::string::npos);
+    int limits_k = 0;
+    for (unsigned k = 0; k < smg::test::fused_term_count(); ++k)
+      if (smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+              s.positions(), s.rotations(), s.visibility(), wide, options(smg::test::fused_all_terms() & ~(1u << k)), rw))
+        ++limits_k;
+    CHECK(limits_k >= 1);
+    // Every number of every term's options at NaN: refused before launch, naming the option.
+    int numbers = 0;
+    smg::for_each_term(o, [&](const char* term, bool, const auto& opts) {
+      smg::for_each_option(opts, [&](const char* name, const auto& field) {
+        if constexpr (std::is_same<std::decay_t<decltype(field)>, double>::value) {
+          const std::string term_name = term, option = name;  // CAPTURE shows a char* as a pointer
+          CAPTURE(term_name);
+          CAPTURE(option);
+          smg::RegularizerOptions bad = o;
+          smg::for_each_term(bad, [&](const char* t, bool, auto& b) {
+            smg::for_each_option(b, [&](const char* n, auto& g) {
+              if constexpr (std::is_same<std::decay_t<decltype(g)>, double>::value)
+                if (std::string(t) == term && std::string(n) == name) g = std::nan("");
+            });
+          });
+          CHECK(msg(smg::cuda::validate_regularizers_shapes<float, std::int32_t>(
+                        s.positions(), s.rotations(), s.visibility(), s.graph(), bad, rev))
+                    .find(name) != std::string::npos);
+          ++numbers;
+        }
+      });
+    });
+    CHECK(numbers > 0);
   }
 }
 
@@ -456,20 +520,14 @@ void gpu_case(std::uint64_t seed, Index T, Index N, Index K) {
   CAPTURE(seed);
   CAPTURE(sizeof(S));
   const Case<S, I> s(scene(T, N, K, seed));
-  for (const unsigned mask : list_masks()) {
-    CAPTURE(mask);
-    const smg::RegularizerOptions o = options(mask);
-    for (const bool raw : {false, true}) {
-      Flags f;
-      f.raw = raw;
-      const Out<S> a = gpu(s, o, f);
-      check_same(a, cpu(s, o, f), o, f, "gpu vs cpu", /*conf_bitwise=*/false);
-      const Out<S> b = gpu(s, o, f);
-      CHECK(std::memcmp(&a.e, &b.e, sizeof(a.e)) == 0);
-      CHECK(std::memcmp(a.gx.data(), b.gx.data(), a.gx.size() * sizeof(S)) == 0);
-      CHECK(std::memcmp(a.gr.data(), b.gr.data(), a.gr.size() * sizeof(S)) == 0);
-    }
-  }
+  each_mask_and_form(list_masks(), [&](const smg::RegularizerOptions& o, const Flags& f) {
+    const Out<S> a = gpu(s, o, f);
+    check_same(a, cpu(s, o, f), o, f, "gpu vs cpu", /*conf_bitwise=*/false);
+    const Out<S> b = gpu(s, o, f);
+    CHECK(std::memcmp(&a.e, &b.e, sizeof(a.e)) == 0);
+    CHECK(std::memcmp(a.gx.data(), b.gx.data(), a.gx.size() * sizeof(S)) == 0);
+    CHECK(std::memcmp(a.gr.data(), b.gr.data(), a.gr.size() * sizeof(S)) == 0);
+  });
 }
 
 }  // namespace fused_cuda_test

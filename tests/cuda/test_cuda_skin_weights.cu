@@ -26,9 +26,7 @@ using namespace smg::test::cuda;
 // A random problem in double: positions [T][N][3], a graph [N][K] (random degree 0..K, distinct
 // neighbours, no self edges, −1 padded), anchors [P], t_ref [P], points [P][3] near their anchor
 // (scaled by `spread`), sigma [N] in [sigma_lo, 2 sigma_lo].
-struct WeightsCase {
-  std::string name;
-  Index T = 0, N = 0, K = 0, P = 0;
+struct WeightsCase : CaseSizes {
   std::vector<double> x, gw, points, sigma;
   std::vector<std::int64_t> idx;
   std::vector<std::int32_t> anchor, t_ref;
@@ -38,11 +36,7 @@ WeightsCase random_case(const std::string& name, Index T, Index N, Index K, Inde
                         std::uint64_t seed, double spread = 1.0, double sigma_lo = 0.3) {
   smg::test::Rng rng(seed);
   WeightsCase c;
-  c.name = name;
-  c.T = T;
-  c.N = N;
-  c.K = K;
-  c.P = P;
+  static_cast<CaseSizes&>(c) = {name, T, N, K, P};
   for (Index k = 0; k < T * N; ++k) {
     const smg::Vector3<double> v = rng.vec3(2.0);
     c.x.insert(c.x.end(), {v(0), v(1), v(2)});

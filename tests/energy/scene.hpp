@@ -61,19 +61,11 @@ struct Scene {
     p[3] = r.z();
   }
 
+  // The same scene in scalar U.
   template <class U>
   Scene<U> cast() const {
-    Scene<U> o;
-    o.T = T;
-    o.N = N;
-    o.K = K;
-    o.x.assign(x.begin(), x.end());
-    o.q.assign(q.begin(), q.end());
-    o.v = v;
-    o.c.assign(c.begin(), c.end());
-    o.idx = idx;
-    o.w.assign(w.begin(), w.end());
-    return o;
+    auto in_u = [](const std::vector<S>& a) { return std::vector<U>(a.begin(), a.end()); };
+    return Scene<U>{T, N, K, in_u(x), in_u(q), v, in_u(c), idx, in_u(w)};
   }
 };
 
@@ -145,6 +137,43 @@ inline Scene<double> random_scene(Index T, Index N, Index K, Rng& rng, bool knn 
     knn_graph(s, K);
   else
     random_graph(s, K, 1, rng);
+  return s;
+}
+
+// A star: node 0 with neighbours 1..n (weights 1/n) at place(t, k) for neighbour k + 1 at frame
+// t, every other row empty; node 0's trajectory, the rotations and visibility random. The
+// degenerate neighbourhoods of the hard cases (collinear, coincident, a single neighbour).
+template <class Place>
+Scene<double> star_scene(Index T, Index n, Rng& rng, Place&& place) {
+  Scene<double> s = random_scene(T, n + 1, n, rng);
+  std::fill(s.idx.begin(), s.idx.end(), -1);
+  std::fill(s.w.begin(), s.w.end(), 0.0);
+  for (Index k = 0; k < n; ++k) {
+    s.idx[static_cast<std::size_t>(k)] = static_cast<std::int32_t>(k + 1);
+    s.w[static_cast<std::size_t>(k)] = 1.0 / double(n);
+  }
+  for (Index t = 0; t < T; ++t)
+    for (Index k = 0; k < n; ++k) s.set_pos(t, k + 1, place(t, k));
+  return s;
+}
+
+// Node i loses its neighbours (its row of the graph empty: −1, weight 0); edges into it stay.
+inline void isolate_node(Scene<double>& s, Index i) {
+  for (Index k = 0; k < s.K; ++k) {
+    s.idx[static_cast<std::size_t>(i * s.K + k)] = -1;
+    s.w[static_cast<std::size_t>(i * s.K + k)] = 0.0;
+  }
+}
+
+// A random scene (6 frames, 6 nodes, each with its 3 nearest as neighbours) whose node 0 and its
+// first neighbour coincide at frames 1 and 4: zero-length edges. Every neighbourhood keeps a
+// point elsewhere (3 distinct neighbours), so that an edge, not a whole neighbourhood, has
+// length 0 (a neighbourhood all at one point is the coincident case, where a fit is pinned and
+// the energy not continuous).
+inline Scene<double> zero_length_edge_scene(Rng& rng) {
+  Scene<double> s = random_scene(6, 6, 3, rng, true);
+  const Index j = s.idx[0];
+  for (Index t : {Index(1), Index(4)}) s.set_pos(t, j, s.pos(t, 0));
   return s;
 }
 

@@ -48,6 +48,16 @@ smg::AngleOptions angle_options(smg::AccelForm form, smg::Normalization n = smg:
   return o;
 }
 
+// Random rotations [T][N][4] as raw quaternions of norms in [0.5, 2] (the operators normalise).
+std::vector<double> raw_quaternions(smg::Index T, smg::Index N, smg::test::Rng& rng) {
+  std::vector<double> q(static_cast<std::size_t>(4 * T * N));
+  for (smg::Index k = 0; k < T * N; ++k) {
+    const Eigen::Vector4d w = smg::to_wxyz(rng.quaternion()) * rng.uniform(0.5, 2.0);
+    for (int c = 0; c < 4; ++c) q[static_cast<std::size_t>(4 * k + c)] = w(c);
+  }
+  return q;
+}
+
 }  // namespace
 
 TEST_CASE("angle: constant rotations give energy 0 and a gradient exactly 0") {
@@ -93,11 +103,7 @@ TEST_CASE("angle: a rotation by a known angle per frame gives θ exactly") {
 TEST_CASE("angle: q and −q give the same energy and the same tangent gradient") {
   SMG_TEST_RNG(rng, 4403);
   const smg::Index T = 9, N = 6;
-  std::vector<double> q(static_cast<std::size_t>(4 * T * N));
-  for (smg::Index k = 0; k < T * N; ++k) {
-    const Eigen::Vector4d w = smg::to_wxyz(rng.quaternion()) * rng.uniform(0.5, 2.0);
-    for (int c = 0; c < 4; ++c) q[static_cast<std::size_t>(4 * k + c)] = w(c);
-  }
+  std::vector<double> q = raw_quaternions(T, N, rng);
   std::vector<double> flipped = q;
   for (std::size_t k = 0; k < flipped.size(); k += 8)  // every other quaternion negated
     for (int c = 0; c < 4; ++c) flipped[k + c] = -flipped[k + c];
@@ -132,11 +138,7 @@ TEST_CASE("angle: relative rotations near and at 180 degrees stay finite") {
 TEST_CASE("angle: the raw-quaternion gradient matches central differences on the raw coordinates") {
   SMG_TEST_RNG(rng, 4406);
   const smg::Index T = 6, N = 3;
-  std::vector<double> q(static_cast<std::size_t>(4 * T * N));
-  for (smg::Index k = 0; k < T * N; ++k) {
-    const Eigen::Vector4d w = smg::to_wxyz(rng.quaternion()) * rng.uniform(0.5, 2.0);
-    for (int c = 0; c < 4; ++c) q[static_cast<std::size_t>(4 * k + c)] = w(c);
-  }
+  std::vector<double> q = raw_quaternions(T, N, rng);
   std::vector<double> conf(static_cast<std::size_t>(T * N));
   for (double& c : conf) c = rng.uniform(0.2, 1.0);
   for (smg::AccelForm form : smg::kAccelForms) {

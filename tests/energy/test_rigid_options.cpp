@@ -83,6 +83,14 @@ RigidOut rigid_run(const Scene<double>& s, const smg::CarapOptions& o, bool with
   return r;
 }
 
+// rigid_run with C-ARAP's defaults but the penalty and the stop-gradient.
+RigidOut rigid_held(const Scene<double>& s, smg::Penalty penalty, smg::StopGradient hold, bool with_confidence) {
+  smg::CarapOptions o;
+  o.penalty = penalty;
+  o.stop_gradient = hold;
+  return rigid_run(s, o, with_confidence);
+}
+
 }  // namespace
 
 TEST_CASE("rigid options: the defaults are the paper's (squared, no stop-gradient)") {
@@ -133,13 +141,9 @@ TEST_CASE("rigid stop-gradient: held row + held neighbour = the full gradient; r
   const Scene<double> s = smg::test::random_scene(8, 16, 5, rng);
   for (const smg::Penalty penalty : smg::kPenalties) {
     CAPTURE(smg::to_string(penalty));
-    smg::CarapOptions o;
-    o.penalty = penalty;
-    const RigidOut full = rigid_run(s, o, true);
-    o.stop_gradient = smg::StopGradient::row;
-    const RigidOut row = rigid_run(s, o, true);
-    o.stop_gradient = smg::StopGradient::neighbor;
-    const RigidOut nbr = rigid_run(s, o, true);
+    const RigidOut full = rigid_held(s, penalty, smg::StopGradient::none, true);
+    const RigidOut row = rigid_held(s, penalty, smg::StopGradient::row, true);
+    const RigidOut nbr = rigid_held(s, penalty, smg::StopGradient::neighbor, true);
     CHECK(row.energy == full.energy);
     CHECK(nbr.energy == full.energy);
     CHECK(row.gr == full.gr);
@@ -175,11 +179,8 @@ TEST_CASE("rigid stop-gradient: a held neighbour equals a graph whose neighbours
   }
   for (const smg::Penalty penalty : smg::kPenalties) {
     CAPTURE(smg::to_string(penalty));
-    smg::CarapOptions o;
-    o.penalty = penalty;
-    const RigidOut copies = rigid_run(d, o, false);
-    o.stop_gradient = smg::StopGradient::neighbor;
-    const RigidOut held = rigid_run(s, o, false);
+    const RigidOut copies = rigid_held(d, penalty, smg::StopGradient::none, false);
+    const RigidOut held = rigid_held(s, penalty, smg::StopGradient::neighbor, false);
     CHECK(std::abs(copies.energy - held.energy) <= 1e-13 * held.energy);
     for (Index t = 0; t < s.T; ++t)
       for (Index i = 0; i < s.N; ++i)

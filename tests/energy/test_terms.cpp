@@ -20,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "energy/operator_runs.hpp"
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
 #include "support/autodiff.hpp"
@@ -28,100 +29,20 @@
 #include "support/prelude.hpp"
 
 using smg::test::AD;
+using smg::test::all_finite;
+using smg::test::Outputs;
+using smg::test::run_op;
+using smg::test::same_bits;
 using smg::test::Scene;
-
-namespace {
-
-// One operator's outputs on a scene: energy, position and rotation (tangent) gradients,
-// confidences.
-template <class S>
-struct Outputs {
-  double energy = 0;
-  std::vector<S> gx, gr, c;
-};
-
-template <class Op, class S>
-Outputs<S> run_op(const Scene<S>& s, int threads, smg::EnergyWorkspace<S>* ws = nullptr) {
-  Outputs<S> o;
-  const std::size_t TN = static_cast<std::size_t>(s.T * s.N);
-  o.gx.assign(3 * TN, S(0));
-  o.gr.assign(3 * TN, S(0));
-  o.c.assign(TN, S(0));
-  smg::ParallelOptions par;
-  par.threads = threads;
-  o.energy = static_cast<double>(Op::run(smg::test::inputs_of(s, s.graph(), s.confidence()),
-                                         smg::test::OperatorOutputs<S>{{o.gx.data(), s.T, s.N},
-                                                                       {o.gr.data(), s.T, s.N},
-                                                                       {o.c.data(), s.T, s.N}},
-                                         ws, par));
-  return o;
-}
-
-// A random scene with confidences in [0, 1] and about a fifth of the nodes hidden per frame.
-Scene<double> term_scene(smg::Index T, smg::Index N, smg::Index K, unsigned seed) {
-  smg::test::Rng rng(seed);
-  Scene<double> s = smg::test::random_scene(T, N, K, rng);
-  for (std::size_t k = 0; k < s.c.size(); ++k) {
-    s.c[k] = rng.uniform(0.0, 1.0);
-    s.v[k] = rng.uniform(0.0, 1.0) < 0.2 ? 0 : 1;
-  }
-  return s;
-}
-
-// The energy of Op at the scene's current values (gradients not computed).
-template <class Op>
-double energy_of(const Scene<double>& s) {
-  smg::ParallelOptions par;
-  par.threads = 1;
-  return static_cast<double>(
-      Op::run(smg::test::inputs_of(s, s.graph(), s.confidence()),
-              smg::test::OperatorOutputs<double>{},
-              static_cast<smg::EnergyWorkspace<double>*>(nullptr), par));
-}
-
-// Every output bit for bit.
-template <class S>
-bool same_bits(const Outputs<S>& a, const Outputs<S>& b) {
-  return a.energy == b.energy && a.gx == b.gx && a.gr == b.gr && a.c == b.c;
-}
-
-template <class S>
-bool all_finite(const Outputs<S>& o) {
-  auto fin = [](const std::vector<S>& v) {
-    return std::all_of(v.begin(), v.end(), [](S x) { return std::isfinite(x); });
-  };
-  return std::isfinite(o.energy) && fin(o.gx) && fin(o.gr) && fin(o.c);
-}
-
-}  // namespace
+using smg::test::term_scene;
 
 TEST_CASE("every operator with an exact gradient matches central differences") {
   Scene<double> s = term_scene(9, 10, 4, 3501);
-  smg::test::for_each_operator([&](auto op) {
+  smg::test::every_operator([&](auto op) {
     using Op = decltype(op);
     if constexpr (Op::exact_gradient) {
-      const std::string op_name = Op::name;  // doctest CAPTUREs a const char* as a pointer
-      CAPTURE(op_name);
-      const Outputs<double> a = run_op<Op>(s, 1);
-      CHECK(a.energy > 0);
-      const std::vector<double> fx =
-          smg::test::central_gradient(s.x, [&] { return energy_of<Op>(s); });
-      CHECK(smg::test::relative_error(a.gx, fx) < 1e-7);
-      // Rotations along the right tangent (operators without rotations: exactly 0).
-      std::vector<double> fr(a.gr.size());
-      for (smg::Index t = 0; t < s.T; ++t)
-        for (smg::Index i = 0; i < s.N; ++i) {
-          const Eigen::Quaterniond q0 = s.rot(t, i);
-          for (int c = 0; c < 3; ++c)
-            fr[static_cast<std::size_t>((t * s.N + i) * 3 + c)] =
-                smg::test::central_difference_tangent(
-                    q0, c, [&](const Eigen::Quaterniond& q) { s.set_rot(t, i, q); },
-                    [&] { return energy_of<Op>(s); });
-        }
-      if (smg::test::relative_error(fr, std::vector<double>(fr.size(), 0.0)) == 0.0)
-        CHECK(std::all_of(a.gr.begin(), a.gr.end(), [](double v) { return v == 0.0; }));
-      else
-        CHECK(smg::test::relative_error(a.gr, fr) < 1e-7);
+      CHECK(run_op<Op>(s, 1).energy > 0);
+      smg::test::check_gradient_fd<Op>(s, 1e-7);
     }
   });
 }
@@ -147,11 +68,9 @@ TEST_CASE("every operator with an exact gradient equals AutoDiffScalar through i
                                          {s.idx.data(), w.data(), s.N, s.K}};
   smg::ParallelOptions par;
   par.threads = 1;
-  smg::test::for_each_operator([&](auto op) {
+  smg::test::every_operator([&](auto op) {
     using Op = decltype(op);
     if constexpr (Op::exact_gradient) {
-      const std::string op_name = Op::name;
-      CAPTURE(op_name);
       const AD e = Op::run(in, smg::test::OperatorOutputs<AD>{},
                            static_cast<smg::EnergyWorkspace<AD>*>(nullptr), par);
       const Outputs<double> a = run_op<Op>(s, 1);
@@ -170,13 +89,10 @@ TEST_CASE("every operator with an exact gradient equals AutoDiffScalar through i
 
 TEST_CASE("every operator in float agrees with double") {
   const Scene<double> sd = term_scene(20, 30, 6, 3503);
-  const Scene<float> sf = sd.cast<float>();
-  smg::test::for_each_operator([&](auto op) {
+  smg::test::every_operator([&](auto op) {
     using Op = decltype(op);
-    const std::string op_name = Op::name;
-    CAPTURE(op_name);
     const Outputs<double> d = run_op<Op>(sd, 2);
-    const Outputs<float> f = run_op<Op>(sf, 2);
+    const Outputs<float> f = run_op<Op>(sd.cast<float>(), 2);
     CHECK(all_finite(f));
     CHECK(std::abs(f.energy - d.energy) <= 1e-4 * std::abs(d.energy));
     CHECK(smg::test::relative_error(f.gx, d.gx) <= 1e-3);
@@ -192,10 +108,8 @@ TEST_CASE("every operator is bit-identical for 1, 2 and 3 threads") {
   // T = 41: several blocks of frames, the last one short.
   const Scene<double> sd = term_scene(41, 36, 7, 3504);
   const Scene<float> sf = sd.cast<float>();
-  smg::test::for_each_operator([&](auto op) {
+  smg::test::every_operator([&](auto op) {
     using Op = decltype(op);
-    const std::string op_name = Op::name;
-    CAPTURE(op_name);
     const Outputs<double> d1 = run_op<Op>(sd, 1);
     const Outputs<float> f1 = run_op<Op>(sf, 1);
     for (int threads : {2, 3}) {
@@ -232,10 +146,8 @@ TEST_CASE("every operator stays finite on the hard cases") {
   add("tiny coordinates", 6, 3508, [](Scene<double>& s) { for (double& v : s.x) v *= 1e-6; });
   add("one frame", 1, 3509, [](Scene<double>&) {});
   add("two frames", 2, 3509, [](Scene<double>&) {});
-  smg::test::for_each_operator([&](auto op) {
+  smg::test::every_operator([&](auto op) {
     using Op = decltype(op);
-    const std::string op_name = Op::name;
-    CAPTURE(op_name);
     for (const Case& c : cases) {
       CAPTURE(c.name);
       const Outputs<double> d = run_op<Op>(c.s, 2);
@@ -282,10 +194,8 @@ TEST_CASE("every operator's validator takes good arguments and names a bad one")
     INFO(st.message());
     return !st && std::string(st.message()).rfind(arg, 0) == 0;
   };
-  t::for_each_operator([&](auto op) {
+  t::every_operator([&](auto op) {
     using Op = decltype(op);
-    const std::string op_name = Op::name;
-    CAPTURE(op_name);
     const smg::Status ok = Op::validate(good, out);
     CHECK_MESSAGE(ok, ok.message());
     t::OperatorInputs<double> in = good;

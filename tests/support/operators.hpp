@@ -59,15 +59,34 @@ constexpr unsigned kNoPositions = 16;
 // them by the list). `reads` says which of the optional inputs the operator reads (a bad one of
 // those must be refused).
 // The separate operators of the fused step's terms also have `term`, the term's name in
-// smg::for_each_term (nullptr for the others), and separate(in, o, grad_positions,
+// smg::for_each_term (nullptr for the others), separate(in, o, grad_positions,
 // grad_rotations, confidence, workspace, parallel): the call with o's options for the term
-// (tests/energy/test_regularizers.cpp runs the fused step against them by the list); run() is
-// separate() with options(), the test defaults.
-struct Confidences {
+// (tests/energy/test_regularizers.cpp runs the fused step against them by the list), and
+// validate_with(in, out, o), its validator with o's options (tests/stability/
+// test_energy_hard_cases.cpp gives it each bad option value); run() is separate() and validate()
+// validate_with() with options(), the test defaults.
+
+// run() and validate() of a term's operator (Op: Confidences, Carap, ...): separate() and
+// validate_with() with Op::options(), the test defaults. One definition, so that an operator
+// entry only says what differs (its call, its validator, its options).
+template <class Op>
+struct TermOperator {
+  static RegularizerOptions options() { return {}; }  // an operator with other defaults hides it
+  template <class S, class I, bool M>
+  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out,
+                            EnergyWorkspace<S>* workspace = nullptr, ParallelOptions parallel = {}) {
+    return Op::separate(in, Op::options(), out.positions, out.rotations, out.confidence, workspace, parallel);
+  }
+  template <class S, class I, bool M>
+  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
+    return Op::validate_with(in, out, Op::options());
+  }
+};
+
+struct Confidences : TermOperator<Confidences> {
   static constexpr const char* name = "confidences";
   static constexpr const char* term = "confidence";
   static constexpr bool exact_gradient = false;  // no energy
-  static RegularizerOptions options() { return {}; }
   template <class S, class I, bool M>
   static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S>,
                                  detail::NonDeducedT<RotationGradientView<S>>, FrameScalarsView<S> confidence,
@@ -75,33 +94,23 @@ struct Confidences {
     node_confidences(in.positions, in.visibility, in.graph, o.confidence, confidence, {}, {}, workspace, parallel);
     return Accumulator<S>(0);
   }
-  template <class S, class I, bool M>
-  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
-                    ParallelOptions parallel = {}) {
-    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
-  }
   static constexpr unsigned reads = kReadsGraph | kReadsVisibility;
   template <class S, class I, bool M>
-  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_confidence(in.positions, in.visibility, in.graph, options().confidence, out.confidence);
+  static Status validate_with(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out,
+                              const RegularizerOptions& o) {
+    return validate_confidence(in.positions, in.visibility, in.graph, o.confidence, out.confidence);
   }
 };
 
-struct Carap {
+struct Carap : TermOperator<Carap> {
   static constexpr const char* name = "carap";
   static constexpr const char* term = "carap";
   static constexpr bool exact_gradient = true;
-  static RegularizerOptions options() { return {}; }
   template <class S, class I, bool M>
   static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S> gx,
                                  detail::NonDeducedT<RotationGradientView<S>> gr, FrameScalarsView<S>, EnergyWorkspace<S>* workspace,
                                  ParallelOptions parallel) {
     return carap(in.positions, in.rotations, in.confidence, in.graph, o.carap, gx, gr, workspace, parallel);
-  }
-  template <class S, class I, bool M>
-  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
-                    ParallelOptions parallel = {}) {
-    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsConfidence | kReadsRotations;
   static constexpr Penalty default_penalty = Penalty::squared;
@@ -112,32 +121,23 @@ struct Carap {
     return validate_carap(in.positions, in.rotations, in.confidence, in.graph, o.carap, out.positions,
                              out.rotations);
   }
-  template <class S, class I, bool M>
-  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_with(in, out, options());
-  }
 };
 
-struct Arap {
+struct Arap : TermOperator<Arap> {
   static constexpr const char* name = "arap";
   static constexpr const char* term = "arap";
   static constexpr bool exact_gradient = true;
-  static RegularizerOptions options() { return {}; }
   template <class S, class I, bool M>
   static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S> gx,
                                  detail::NonDeducedT<RotationGradientView<S>> gr, FrameScalarsView<S>, EnergyWorkspace<S>* workspace,
                                  ParallelOptions parallel) {
     return arap(in.positions, in.rotations, in.graph, o.arap, gx, gr, workspace, parallel);
   }
-  template <class S, class I, bool M>
-  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
-                    ParallelOptions parallel = {}) {
-    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
-  }
   static constexpr unsigned reads = kReadsGraph | kReadsRotations;
   template <class S, class I, bool M>
-  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_arap(in.positions, in.rotations, in.graph, options().arap, out.positions, out.rotations);
+  static Status validate_with(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out,
+                              const RegularizerOptions& o) {
+    return validate_arap(in.positions, in.rotations, in.graph, o.arap, out.positions, out.rotations);
   }
 };
 
@@ -159,31 +159,26 @@ struct CarapDirected {
   }
 };
 
-struct Lrm {
+struct Lrm : TermOperator<Lrm> {
   static constexpr const char* name = "lrm";
   static constexpr const char* term = "lrm";
   static constexpr bool exact_gradient = true;
-  static RegularizerOptions options() { return {}; }
   template <class S, class I, bool M>
   static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S> gx,
                                  detail::NonDeducedT<RotationGradientView<S>>, FrameScalarsView<S>, EnergyWorkspace<S>* workspace,
                                  ParallelOptions parallel) {
     return lrm(in.positions, in.confidence, in.graph, o.lrm, gx, workspace, parallel);
   }
-  template <class S, class I, bool M>
-  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
-                    ParallelOptions parallel = {}) {
-    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
-  }
   static constexpr unsigned reads = kReadsGraph | kReadsConfidence;
   template <class S, class I, bool M>
-  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_lrm(in.positions, in.confidence, in.graph, options().lrm, out.positions);
+  static Status validate_with(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out,
+                              const RegularizerOptions& o) {
+    return validate_lrm(in.positions, in.confidence, in.graph, o.lrm, out.positions);
   }
 };
 
 // Trajectory smoothness (E21), acceleration form, weighted by the given confidences.
-struct Accel {
+struct Accel : TermOperator<Accel> {
   static constexpr const char* name = "accel";
   static constexpr const char* term = "accel";
   static constexpr bool exact_gradient = true;
@@ -198,11 +193,6 @@ struct Accel {
                                  ParallelOptions parallel) {
     return accel(in.positions, in.confidence, o.accel, gx, workspace, parallel);
   }
-  template <class S, class I, bool M>
-  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
-                    ParallelOptions parallel = {}) {
-    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
-  }
   static constexpr unsigned reads = kReadsConfidence;
   static constexpr Penalty default_penalty = Penalty::squared;
   static Penalty& penalty_of(RegularizerOptions& o) { return o.accel.penalty; }
@@ -211,15 +201,11 @@ struct Accel {
                               const RegularizerOptions& o) {
     return validate_accel(in.positions, in.confidence, o.accel, out.positions);
   }
-  template <class S, class I, bool M>
-  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_with(in, out, options());
-  }
 };
 
 // Rotation-angle acceleration (E23), weighted by the given confidences: it reads the rotations
 // only (no positions) and writes the rotation gradient only.
-struct Angle {
+struct Angle : TermOperator<Angle> {
   static constexpr const char* name = "angle";
   static constexpr const char* term = "angle";
   static constexpr bool exact_gradient = true;
@@ -234,11 +220,6 @@ struct Angle {
                                  EnergyWorkspace<S>* workspace, ParallelOptions parallel) {
     return angle(in.rotations, in.confidence, o.angle, gr, workspace, parallel);
   }
-  template <class S, class I, bool M>
-  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
-                    ParallelOptions parallel = {}) {
-    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
-  }
   static constexpr unsigned reads = kReadsConfidence | kReadsRotations | kNoPositions;
   static constexpr Penalty default_penalty = Penalty::norm;
   static Penalty& penalty_of(RegularizerOptions& o) { return o.angle.penalty; }
@@ -247,30 +228,21 @@ struct Angle {
                               const RegularizerOptions& o) {
     return validate_angle<S>(in.rotations, in.confidence, o.angle, out.rotations);
   }
-  template <class S, class I, bool M>
-  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_with(in, out, options());
-  }
 };
 
 // Relative-rotation consistency (E25) with its default penalty, sqrt_weighted: k sqrt(ε) per
 // term where the relative rotations agree (a still trajectory's energy is above 0).
-struct Relrot {
+struct Relrot : TermOperator<Relrot> {
   static constexpr const char* name = "relrot";
   static constexpr const char* term = "relrot";
   static constexpr bool exact_gradient = true;
   static constexpr bool still_floor = true;
-  static RegularizerOptions options() { return {}; }
+  static constexpr bool sign_sensitive = true;  // r = q^{t+1} q^{t*} as a raw 4-vector (E25)
   template <class S, class I, bool M>
   static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S>,
                                  detail::NonDeducedT<RotationGradientView<S>> gr, FrameScalarsView<S>,
                                  EnergyWorkspace<S>* workspace, ParallelOptions parallel) {
     return relrot(in.rotations, in.graph, o.relrot, gr, workspace, parallel);
-  }
-  template <class S, class I, bool M>
-  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
-                    ParallelOptions parallel = {}) {
-    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
   }
   static constexpr unsigned reads = kReadsGraph | kReadsRotations | kNoPositions;
   static constexpr Penalty default_penalty = Penalty::sqrt_weighted;
@@ -279,10 +251,6 @@ struct Relrot {
   static Status validate_with(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out,
                               const RegularizerOptions& o) {
     return validate_relrot<S>(in.rotations, in.graph, o.relrot, out.rotations);
-  }
-  template <class S, class I, bool M>
-  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_with(in, out, options());
   }
 };
 
@@ -304,7 +272,10 @@ constexpr OperatorName variant_name(const char* base, const char* value) {
   return n;
 }
 template <class Base, Penalty P>
-struct WithPenalty : Base {
+struct WithPenalty : Base, TermOperator<WithPenalty<Base, P>> {
+  // run() and validate() with this options(), not the base's.
+  using TermOperator<WithPenalty<Base, P>>::run;
+  using TermOperator<WithPenalty<Base, P>>::validate;
   static constexpr Penalty penalty = P;
   // sqrt(w‖r‖² + ε) is k sqrt(ε) per term at r = 0: a still trajectory's energy is not 0.
   static constexpr bool still_floor = P == Penalty::sqrt_weighted;
@@ -316,24 +287,36 @@ struct WithPenalty : Base {
     Base::penalty_of(o) = P;
     return o;
   }
-  template <class S, class I, bool M>
-  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
-                    ParallelOptions parallel = {}) {
-    return Base::separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
-  }
-  template <class S, class I, bool M>
-  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return Base::validate_with(in, out, options());
-  }
 };
-// Whether Op declares `still_floor` true: its energy on a still trajectory is a constant above 0
-// (tests/energy/test_terms.cpp's hard cases); an operator without the member has none.
-template <class Op, class = void>
-struct StillFloor : std::false_type {};
+// The operators' optional bool traits, false where an operator does not declare one; the generic
+// tests read them instead of a name:
+//   still_floor: its energy on a still trajectory is a constant above 0 (sqrt_weighted's
+//     k sqrt(ε) per term; tests/energy/test_terms.cpp's and test_energy_hard_cases.cpp's hard
+//     cases);
+//   sign_sensitive: it compares quaternions as raw 4-vectors without choosing a sign (relrot,
+//     as D3DGS does), so q and −q, the same rotation, give other outputs; every other operator
+//     must not see the sign (tests/stability/test_energy_hard_cases.cpp);
+//   graph_free_terms: besides terms along the graph's edges it has terms of single nodes (the
+//     fused step's smoothness and angles), so an empty graph does not make its energy 0; an
+//     operator that reads the graph without it has only edge terms (the same file).
+namespace detail_operators {
+template <template <class> class Trait, class Op, class = void>
+struct Declared : std::false_type {};
+template <template <class> class Trait, class Op>
+struct Declared<Trait, Op, std::void_t<Trait<Op>>> : Trait<Op> {};
 template <class Op>
-struct StillFloor<Op, std::void_t<decltype(Op::still_floor)>> : std::bool_constant<Op::still_floor> {};
+using StillFloorOf = std::bool_constant<Op::still_floor>;
 template <class Op>
-constexpr bool still_floor() { return StillFloor<Op>::value; }
+using SignSensitiveOf = std::bool_constant<Op::sign_sensitive>;
+template <class Op>
+using GraphFreeTermsOf = std::bool_constant<Op::graph_free_terms>;
+}  // namespace detail_operators
+template <class Op>
+constexpr bool still_floor() { return detail_operators::Declared<detail_operators::StillFloorOf, Op>::value; }
+template <class Op>
+constexpr bool sign_sensitive() { return detail_operators::Declared<detail_operators::SignSensitiveOf, Op>::value; }
+template <class Op>
+constexpr bool graph_free_terms() { return detail_operators::Declared<detail_operators::GraphFreeTermsOf, Op>::value; }
 
 namespace detail_operators {
 template <class Base, std::size_t... K>
@@ -352,6 +335,8 @@ using PenaltyOperators = decltype(detail_operators::penalty_operators<Base>(
 struct Regularizers {
   static constexpr const char* name = "regularizers";
   static constexpr const char* term = nullptr;  // the fused step itself
+  static constexpr bool graph_free_terms = true;  // smoothness, angles
+  static constexpr bool sign_sensitive = true;    // relative rotations
   // Every term of the list on, with its defaults.
   static RegularizerOptions options() {
     RegularizerOptions o;
