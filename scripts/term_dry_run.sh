@@ -436,31 +436,26 @@ edit("include/smg/energy/regularizers.hpp", '#include "smg/energy/confidence.hpp
 P = "tests/support/operators.hpp"
 edit(P, "// A term's operator (Accel, Carap, Angle) with each other penalty", """\
 // THROWAWAY (scripts/term_dry_run.sh): the dry-run term (@LABEL@), default options.
-struct Dryrun {
+struct Dryrun : TermOperator<Dryrun> {
   static constexpr const char* name = "dryrun";
   static constexpr const char* term = "dryrun";
   static constexpr bool exact_gradient = true;
-  static RegularizerOptions options() { return {}; }
   template <class S, class I, bool M>
   static Accumulator<S> separate(const OperatorInputs<S, I, M>& in, const RegularizerOptions& o, PositionsView<S> gx,
                                  detail::NonDeducedT<RotationGradientView<S>>, FrameScalarsView<S>,
                                  EnergyWorkspace<S>* workspace, ParallelOptions parallel) {
     return dryrun(in.positions, o.dryrun, gx, workspace, parallel);
   }
-  template <class S, class I, bool M>
-  static Accumulator<S> run(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out, EnergyWorkspace<S>* workspace = nullptr,
-                    ParallelOptions parallel = {}) {
-    return separate(in, options(), out.positions, out.rotations, out.confidence, workspace, parallel);
-  }
   static constexpr unsigned reads = 0;
   template <class S, class I, bool M>
-  static Status validate(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out) {
-    return validate_dryrun<S>(in.positions, options().dryrun, out.positions);
+  static Status validate_with(const OperatorInputs<S, I, M>& in, const OperatorOutputs<S>& out,
+                              const RegularizerOptions& o) {
+    return validate_dryrun<S>(in.positions, o.dryrun, out.positions);
   }
 };
 
 """, "before")
-edit(P, "Lrm, Accel, Angle>{}", "Lrm, Accel, Angle, Dryrun>{}", "replace")
+edit(P, "Lrm, Accel, Angle, Relrot>{}", "Lrm, Accel, Angle, Relrot, Dryrun>{}", "replace")
 PYEOF
 
 # The docs' terms table is generated (scripts/terms_table.py), not edited by hand.
