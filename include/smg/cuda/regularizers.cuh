@@ -22,7 +22,7 @@
 #include "smg/cuda/lrm.cuh"
 #include "smg/cuda/validate.cuh"
 #include "smg/energy/block.hpp"
-#include "smg/energy/options.hpp"
+#include "smg/energy/term_list.hpp"  // RegularizerOptions
 #include "smg/graph/neighbors.hpp"
 
 namespace smg::cuda {

@@ -20,7 +20,7 @@
 #include "smg/core/views.hpp"
 #include "smg/energy/elements/carap.hpp"
 #include "smg/energy/common.hpp"
-#include "smg/energy/options.hpp"
+#include "smg/energy/term_list.hpp"  // RegularizerOptions
 #include "smg/graph/neighbors.hpp"
 
 namespace smg::cuda {
