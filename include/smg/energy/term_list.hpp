@@ -65,7 +65,7 @@ struct RegularizerTerms {
 // Whether a term that is on reads the rotations (so the caller must give them).
 inline bool reads_rotations(const RegularizerTerms& t) {
   bool r = false;
-#define SMG_TERM_READS_(name, Options, Term, on, rot) r = r || (rot && t.name);
+#define SMG_TERM_READS_(name, Options, Term, on, rot) r = r || ((rot) && t.name);
   SMG_REGULARIZER_TERMS(SMG_TERM_READS_)
 #undef SMG_TERM_READS_
   return r;
@@ -169,7 +169,8 @@ inline namespace SMG_ISA_NAMESPACE {
 // struct names an Element runs in its element pass (cuda/driver.cuh, ListElements).
 template <class S, class I>
 struct RegularizerTermSet {
-#define SMG_TERM_TYPE_(name, Options, Term, on, rot) , Term<S, I>
+// Term names a template: (Term)<S, I> would not parse.
+#define SMG_TERM_TYPE_(name, Options, Term, on, rot) , Term<S, I>  // NOLINT(bugprone-macro-parentheses)
   using Energies =
       typename TupleOf<typename UniqueTypes<TypeList<> SMG_REGULARIZER_TERMS(SMG_TERM_TYPE_)>::type>::type;
 #undef SMG_TERM_TYPE_
