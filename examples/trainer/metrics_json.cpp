@@ -258,6 +258,8 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
       .add("pruned", r.stage2.pruned)
       .add("stage1_iterations", r.stage1.iterations)
       .add("stage2_iterations", r.stage2.iterations);
+  if (run.config->stage2.hold_unobserved)  // only when set: the default keys stay
+    j.add("stage2_unobserved", "hold");
   kind.read(j, r, run);
   j.add("seconds_stage0", r.seconds_stage0)
       .add("seconds_stage1", r.stage1.seconds)

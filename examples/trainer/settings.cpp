@@ -12,6 +12,11 @@ namespace trainer {
 
 namespace {
 
+const std::vector<std::string>& stage2_unobserved_names() {
+  static const std::vector<std::string> names = {"move", "hold"};
+  return names;
+}
+
 const std::vector<std::string>& on_off_names() {
   static const std::vector<std::string> names = {"on", "off"};
   return names;
@@ -96,6 +101,11 @@ const std::vector<Setting>& settings() {
       {"stage2-iters", K::integer, "stage-2 (Gaussians) iterations", 0, 1000000, nullptr,
        [](const C& c) { return static_cast<double>(c.stage2.iterations); },
        [](C& c, double v) { c.stage2.iterations = static_cast<int>(v); }},
+      {"stage2-unobserved", K::choice,
+       "stage 2 at a node's unobserved frames: move lets the photometric gradient reach its pose there, hold "
+       "leaves it to the regularisers (no observation carries evidence; docs/results.md)",
+       0, 0, &stage2_unobserved_names, [](const C& c) { return c.stage2.hold_unobserved ? 1.0 : 0.0; },
+       [](C& c, double v) { c.stage2.hold_unobserved = v == 1.0; }},
       {"unit", K::number, "node selection unit in metres", 0.005, 1.0, nullptr,
        [](const C& c) { return c.nodes.unit; }, [](C& c, double v) { c.nodes.unit = v; }},
       {"lambda-depth", K::number, "weight of the expected-depth L1 loss", 0.0, 100.0, nullptr,

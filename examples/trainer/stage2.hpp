@@ -34,6 +34,11 @@ struct Stage2Options {
   double lr_node_position = 2e-4, lr_node_position_final = 2e-5;
   double lr_node_rotation = 2e-3, lr_node_rotation_final = 2e-4;
   double node_weight = 1.0;  // weight of the nodes' objective relative to stage 1
+  // hold (--stage2-unobserved hold): no photometric gradient reaches node i's pose at frame t
+  // when its track is unobserved there (Nodes::visible[t][i] == 0), so that only the
+  // regularisers move the nodes where no observation carries evidence; move (false): the
+  // photometric gradient reaches every node at the rendered frame.
+  bool hold_unobserved = false;
   int confidence_every = 50;
   // Density control: prune every prune_every iterations in [prune_from, iterations - prune_tail).
   int prune_every = 250, prune_from = 500, prune_tail = 200;

@@ -45,6 +45,7 @@ TEST_CASE("smg_trainer: usage errors are one line on stderr and exit code 2") {
       {"--carap-reading both", "carap-reading"},
       {"--confidence-from oracle", "confidence-from"},
       {"--confidence-visibility maybe", "confidence-visibility"},
+      {"--stage2-unobserved keep", "stage2-unobserved"},
       {"--data /nonexistent --confidence-from truth", "--confidence-from truth needs"},
       {"--data /nonexistent --scene occluder", "--scene cannot be used with --data"},
       {"stray", "unexpected argument 'stray'"},

@@ -200,16 +200,21 @@ void for_each_scaling_option(O& o, F&& f) {
   f("normalization", o.normalization);
   f("weight", o.weight);
 }
+// The fields of every term with a penalty (E22) (as check_penalty_options checks them).
+template <class O, class F>
+void for_each_penalty_option(O& o, F&& f) {
+  for_each_scaling_option(o, f);
+  f("penalty", o.penalty);
+  f("penalty_eps", o.penalty_eps);
+}
 // The fields C-ARAP and plain ARAP share (as check_rigidity_options checks them).
 template <class O, class F>
 void for_each_rigidity_option(O& o, F&& f) {
   f("lambda_c", o.lambda_c);
   f("lambda_l", o.lambda_l);
   f("gaps", o.gaps);
-  for_each_scaling_option(o, f);
-  f("penalty", o.penalty);
   f("stop_gradient", o.stop_gradient);
-  f("penalty_eps", o.penalty_eps);
+  for_each_penalty_option(o, f);
 }
 }  // namespace detail
 template <class O, class F, detail::IfOptions<O, CarapOptions> = 0>
@@ -293,16 +298,21 @@ inline Status first_error(std::initializer_list<Status> checks) {
     if (!s) return s;
   return Status::ok();
 }
-// The checks C-ARAP and plain ARAP share (`what` names the options type in the messages):
-// λc, λl >= 0, the gap list, weight >= 0.
+// The checks of every term with a penalty (E22) (`what` names the options type in the
+// messages): weight >= 0, a listed penalty, ε finite and > 0.
+template <class Options>
+inline Status check_penalty_options(const char* what, const Options& o) {
+  return first_error({check_nonneg(what, "weight", o.weight), check_enum(what, "penalty", o.penalty),
+                      check_positive(what, "penalty_eps", o.penalty_eps)});
+}
+// The checks C-ARAP and plain ARAP share: λc, λl >= 0, the gap list, a listed stop-gradient, and
+// the penalty's.
 template <class Options>
 inline Status check_rigidity_options(const char* what, const Options& o) {
   return first_error({check_nonneg(what, "lambda_c", o.lambda_c),
                       check_nonneg(what, "lambda_l", o.lambda_l), check_gaps(what, o.gaps),
-                      check_nonneg(what, "weight", o.weight),
-                      check_enum(what, "penalty", o.penalty),
                       check_enum(what, "stop_gradient", o.stop_gradient),
-                      check_positive(what, "penalty_eps", o.penalty_eps)});
+                      check_penalty_options(what, o)});
 }
 }  // namespace detail
 

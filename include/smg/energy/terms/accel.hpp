@@ -39,17 +39,13 @@ struct AccelOptions {
 template <class O, class F, detail::IfOptions<O, AccelOptions> = 0>
 void for_each_option(O& o, F&& f) {
   f("form", o.form);
-  f("penalty", o.penalty);
   f("confidence_weighted", o.confidence_weighted);
-  detail::for_each_scaling_option(o, f);
-  f("penalty_eps", o.penalty_eps);
+  detail::for_each_penalty_option(o, f);
 }
 
 inline Status validate_options(const AccelOptions& o) {
   return detail::first_error({detail::check_enum("AccelOptions", "form", o.form),
-                              detail::check_enum("AccelOptions", "penalty", o.penalty),
-                              detail::check_nonneg("AccelOptions", "weight", o.weight),
-                              detail::check_positive("AccelOptions", "penalty_eps", o.penalty_eps)});
+                              detail::check_penalty_options("AccelOptions", o)});
 }
 
 // Checks the arguments of accel(): `confidence` [T][N] may be empty (all 1; read only with

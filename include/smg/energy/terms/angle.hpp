@@ -45,16 +45,12 @@ template <class O, class F, detail::IfOptions<O, AngleOptions> = 0>
 void for_each_option(O& o, F&& f) {
   f("form", o.form);
   f("confidence_weighted", o.confidence_weighted);
-  detail::for_each_scaling_option(o, f);
-  f("penalty", o.penalty);
-  f("penalty_eps", o.penalty_eps);
+  detail::for_each_penalty_option(o, f);
 }
 
 inline Status validate_options(const AngleOptions& o) {
   return detail::first_error({detail::check_enum("AngleOptions", "form", o.form),
-                              detail::check_nonneg("AngleOptions", "weight", o.weight),
-                              detail::check_enum("AngleOptions", "penalty", o.penalty),
-                              detail::check_positive("AngleOptions", "penalty_eps", o.penalty_eps)});
+                              detail::check_penalty_options("AngleOptions", o)});
 }
 
 // Checks the arguments of angle(): rotations [T][N][4] (nonzero, normalised on entry);

@@ -40,15 +40,11 @@ struct RelrotOptions {
 
 template <class O, class F, detail::IfOptions<O, RelrotOptions> = 0>
 void for_each_option(O& o, F&& f) {
-  detail::for_each_scaling_option(o, f);
-  f("penalty", o.penalty);
-  f("penalty_eps", o.penalty_eps);
+  detail::for_each_penalty_option(o, f);
 }
 
 inline Status validate_options(const RelrotOptions& o) {
-  return detail::first_error({detail::check_nonneg("RelrotOptions", "weight", o.weight),
-                              detail::check_enum("RelrotOptions", "penalty", o.penalty),
-                              detail::check_positive("RelrotOptions", "penalty_eps", o.penalty_eps)});
+  return detail::check_penalty_options("RelrotOptions", o);
 }
 
 // Checks the inputs and outputs of relrot(): rotations [T][N][4], graph [N][K]; the gradient may

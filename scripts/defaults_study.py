@@ -1,0 +1,205 @@
+#!/usr/bin/env python3
+"""What smg_trainer turns on by default, chosen by one protocol (docs/results.md, "Defaults by
+evidence"; issue 47).
+
+Every candidate is a trainer flag with today's default (the baseline) and one or more other values:
+  stage2-unobserved  move (today) | hold: stage 2 leaves a node's unobserved frames to the regularisers
+  w-accel            0 (today) | 0.1 | 0.3: trajectory smoothness (E21)
+  alpha              0.6 (today, C-ARAP) | 1 (plain ARAP) | auto (the trainer's rule)
+Each value runs the full pipeline (stages 0-2, --threads 1) on every cell (scene x tracker-failure
+level) and seed, beside the baseline on the same cell and seed, and is scored by what users measure:
+the 3D EPE of the surface query tracks after stage 2 (all samples, truly visible and hidden ones)
+and the masked test PSNR. The protocol:
+  1. design seeds (--seeds): per candidate, the value with the lowest mean paired query-EPE change
+     over every cell is chosen (none when no value lowers it);
+  2. held-out seeds (--holdout-seeds), never used in step 1: the chosen value becomes the default
+     only where, in every cell, it is never worse beyond noise (the paired 95 % interval of the
+     query-EPE change lies above 0, or that of the masked-PSNR change below 0) and it is better
+     somewhere (an interval of the query-EPE change below 0). For alpha, auto is kept only when it
+     also beats both fixed values there.
+It writes the tables and verdicts between <!-- ladder:defaults-study --> and
+<!-- /ladder:defaults-study --> of the results page. A run whose metrics.json exists is not
+repeated (delete OUT to start over), so a study can be run in parts (--phase design first).
+Usage: scripts/defaults_study.py [--candidates "stage2-unobserved w-accel alpha"]
+                                 [--scenes "standard occluder bending"] [--failures "off typical double"]
+                                 [--seeds "0 1 2 3 4"] [--holdout-seeds "5 6 7 8 9"] [--phase design|both]
+                                 [--jobs 2] [--out build/defaults_study] [--doc docs/results.md]
+                                 [--trainer build/release/examples/smg_trainer]
+Without --trainer it first builds the trainer into build/release (scripts/build_trainer.sh)."""
+import concurrent.futures
+import datetime
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from ladder_report import fmt, mean_ci, study_arguments, write_section  # noqa: E402
+
+SCENES = ["standard", "occluder", "bending"]
+FAILURES = ["off", "typical", "double"]
+# candidate -> (baseline label, [(label, flags)]): the baseline runs with no flag (today's default).
+CANDIDATES = {
+    "stage2-unobserved": ("move", [("hold", ["--stage2-unobserved", "hold"])]),
+    "w-accel": ("0", [("0.1", ["--w-accel", "0.1"]), ("0.3", ["--w-accel", "0.3"])]),
+    "alpha": ("0.6", [("1", ["--alpha", "1"]), ("auto", ["--alpha", "auto"])]),
+}
+BASE = "default"
+
+
+def extra_arguments(ap):
+    ap.add_argument("--candidates", default=" ".join(CANDIDATES))
+    ap.add_argument("--scenes", default=" ".join(SCENES))
+    ap.add_argument("--failures", default=" ".join(FAILURES))
+    ap.add_argument("--holdout-seeds", default="5 6 7 8 9", help="the seeds the choice is confirmed on")
+    ap.add_argument("--phase", choices=["design", "both"], default="both",
+                    help="design: run and report the design seeds only")
+
+
+def run(trainer, out, scene, failures, seed, tag, flags):
+    """metrics.json of one full-pipeline run (tag names the flags; BASE runs none)."""
+    d = os.path.join(out, f"{scene}_{failures}_{tag}_s{seed}")
+    path = os.path.join(d, "metrics.json")
+    if not os.path.exists(path):
+        cmd = [trainer, "--scene", scene, "--tracker-failures", failures, "--seed", str(seed), "--threads", "1",
+               "--no-pictures", "--no-view", "--quiet", "--out", d] + flags
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    return json.load(open(path))
+
+
+def query(m, part="all"):
+    """Query EPE after stage 2 (m); None when the part has no samples."""
+    return m["epe_query"]["stage2"].get(part, {}).get("epe")
+
+
+# (name, title, metric, scale to the table's unit, decimals, +1 higher is better / -1 lower is better)
+MEASURES = [("epe", "query EPE (mm)", lambda m: query(m), 1e3, 2, -1),
+            ("visible", "visible (mm)", lambda m: query(m, "visible"), 1e3, 2, -1),
+            ("hidden", "hidden (mm)", lambda m: query(m, "hidden"), 1e3, 2, -1),
+            ("psnr", "masked PSNR (dB)", lambda m: m["test_psnr_masked"], 1.0, 2, +1)]
+
+
+def paired(res, cells, seeds, a, b, metric, scale):
+    """metric(a) − metric(b) per (cell, seed) in the table's unit; pairs with a missing part dropped."""
+    out = []
+    for c in cells:
+        for sd in seeds:
+            va, vb = metric(res[c + (sd, a)]), metric(res[c + (sd, b)])
+            if va is not None and vb is not None:
+                out.append(scale * (va - vb))
+    return out
+
+
+def verdict(dd, sense):
+    """'better' / 'worse' when the 95 % interval of the change excludes 0 (sense: +1 higher is
+    better), else 'tie'."""
+    if len(dd) < 2:
+        return "tie"
+    mu, half = mean_ci(dd)
+    if mu - half > 0:
+        return "better" if sense > 0 else "worse"
+    if mu + half < 0:
+        return "worse" if sense > 0 else "better"
+    return "tie"
+
+
+def table(res, cells, seeds, a, b):
+    """Per cell: each measure's paired change a − b (mean ± 95 %, seeds on which a is better) and
+    its verdict; returns (rows, verdicts by cell)."""
+    rows = ["| scene | failures | " + " | ".join(f"Δ {t}" for _, t, *_ in MEASURES) + " |",
+            "|---|---|" + "---:|" * len(MEASURES)]
+    verdicts = {}
+    for c in cells:
+        parts = []
+        for name, _, metric, scale, nd, sense in MEASURES:
+            dd = paired(res, [c], seeds, a, b, metric, scale)
+            if not dd:
+                parts.append("–")
+                continue
+            mu, half = mean_ci(dd)
+            wins = sum(1 for x in dd if x * sense > 0)
+            v = verdict(dd, sense)
+            verdicts[(c, name)] = v
+            parts.append(f"{fmt(mu, half, nd)} ({wins}/{len(dd)}){'' if v == 'tie' else ' ' + v}")
+        rows.append(f"| {c[0]} | {c[1]} | " + " | ".join(parts) + " |")
+    return rows, verdicts
+
+
+def mean_change(res, cells, seeds, a, b):
+    dd = paired(res, cells, seeds, a, b, MEASURES[0][2], 1e3)
+    return sum(dd) / len(dd)
+
+
+def adopts(verdicts):
+    """Never worse beyond noise (query EPE or masked PSNR) in any cell, better (query EPE) in one."""
+    worse = any(v == "worse" for (c, name), v in verdicts.items() if name in ("epe", "psnr"))
+    better = any(v == "better" for (c, name), v in verdicts.items() if name == "epe")
+    return better and not worse
+
+
+def main():
+    a = study_arguments("build/defaults_study", extra_arguments)
+    seeds, hold = a.seeds.split(), a.holdout_seeds.split()
+    phases = [("design", seeds)] + ([("held-out", hold)] if a.phase == "both" else [])
+    cands = a.candidates.split()
+    for c in cands:
+        if c not in CANDIDATES:
+            sys.exit(f"defaults_study: --candidates: unknown candidate '{c}' (known: {' '.join(CANDIDATES)})")
+    cells = [(s, f) for s in a.scenes.split() for f in a.failures.split()]
+    flags = {BASE: []}
+    for c in cands:
+        for label, fl in CANDIDATES[c][1]:
+            flags[f"{c}={label}"] = fl
+    os.makedirs(a.out, exist_ok=True)
+    all_seeds = seeds + (hold if a.phase == "both" else [])
+    keys = [cell + (sd, tag) for cell in cells for sd in all_seeds for tag in flags]
+    with concurrent.futures.ThreadPoolExecutor(a.jobs) as ex:
+        futs = {k: ex.submit(run, a.trainer, a.out, k[0], k[1], k[2], k[3].replace("=", "_"), flags[k[3]])
+                for k in keys}
+        res = {k: f.result() for k, f in futs.items()}
+
+    base_m = res[cells[0] + (seeds[0], BASE)]
+    lines = ["<!-- ladder:defaults-study -->",
+             f"Written by `scripts/defaults_study.py --candidates \"{a.candidates}\" --scenes \"{a.scenes}\" "
+             f"--failures \"{a.failures}\" --seeds \"{a.seeds}\" --holdout-seeds \"{a.holdout_seeds}\" "
+             f"--phase {a.phase}` on {datetime.date.today()} ({platform.machine()}, full pipeline, "
+             f"{base_m.get('stage2_iterations')} stage-2 iterations, one thread per run). Each entry is the "
+             "paired change candidate − today's default over the seeds of the cell: mean ± 95 % interval "
+             "(Student's t), the seeds on which the candidate is better, and a verdict where the interval "
+             "excludes 0. Query EPE: the surface query tracks after stage 2 (all, truly visible, hidden samples).",
+             ""]
+    for c in cands:
+        base_label, options = CANDIDATES[c]
+        lines += [f"**`--{c}`** (today: {base_label})", ""]
+        tags = [f"{c}={label}" for label, _ in options]
+        means = {t: mean_change(res, cells, seeds, t, BASE) for t in tags}
+        chosen = min(tags, key=lambda t: means[t])
+        for t in tags:
+            rows, _ = table(res, cells, seeds, t, BASE)
+            lines += [f"Design seeds {a.seeds}: `--{c} {t.split('=')[1]}` − `{base_label}` "
+                      f"(query EPE over all cells {means[t]:+.2f} mm)", ""] + rows + [""]
+        if means[chosen] >= 0:
+            lines += [f"Chosen on the design seeds: none (no value lowers the query EPE); the default stays "
+                      f"{base_label}.", ""]
+            continue
+        lines += [f"Chosen on the design seeds: {chosen.split('=')[1]}.", ""]
+        if a.phase != "both":
+            lines += ["Not yet confirmed on held-out seeds (--phase design).", ""]
+            continue
+        rows, verdicts = table(res, cells, hold, chosen, BASE)
+        ok = adopts(verdicts)
+        if ok and c == "alpha" and chosen.endswith("=auto"):
+            others = [t for t in tags if t != chosen]
+            ok = all(mean_change(res, cells, hold, chosen, t) < 0 for t in others)
+        lines += [f"Held-out seeds {a.holdout_seeds}: `--{c} {chosen.split('=')[1]}` − `{base_label}`", ""] + rows
+        lines += ["", f"Verdict: **{'becomes the default' if ok else 'stays off'}** "
+                      f"({'never worse beyond noise and better somewhere' if ok else 'the rule is not met'}).", ""]
+    lines.append("<!-- /ladder:defaults-study -->")
+    write_section(a.doc, "defaults-study", "\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
