@@ -29,7 +29,6 @@ Without --trainer it first builds the trainer into build/release (scripts/build_
 import concurrent.futures
 import datetime
 import json
-import math
 import os
 import platform
 import subprocess
@@ -105,25 +104,32 @@ def verdict(dd, sense):
     return "tie"
 
 
+def entry(dd, sense, nd, judged=True):
+    """One table entry: mean ± 95 %, the pairs on which the candidate is better, the verdict."""
+    if not dd:
+        return "–", None
+    mu, half = mean_ci(dd)
+    wins = sum(1 for x in dd if x * sense > 0)
+    v = verdict(dd, sense) if judged else "tie"
+    return f"{fmt(mu, half, nd)} ({wins}/{len(dd)}){'' if v == 'tie' else ' ' + v}", v
+
+
 def table(res, cells, seeds, a, b):
     """Per cell: each measure's paired change a − b (mean ± 95 %, seeds on which a is better) and
-    its verdict; returns (rows, verdicts by cell)."""
+    its verdict, then every cell's pairs pooled (for reading only: the rule judges cell by cell);
+    returns (rows, verdicts by cell and measure)."""
     rows = ["| scene | failures | " + " | ".join(f"Δ {t}" for _, t, *_ in MEASURES) + " |",
             "|---|---|" + "---:|" * len(MEASURES)]
     verdicts = {}
-    for c in cells:
+    for c in cells + [None]:
         parts = []
         for name, _, metric, scale, nd, sense in MEASURES:
-            dd = paired(res, [c], seeds, a, b, metric, scale)
-            if not dd:
-                parts.append("–")
-                continue
-            mu, half = mean_ci(dd)
-            wins = sum(1 for x in dd if x * sense > 0)
-            v = verdict(dd, sense)
-            verdicts[(c, name)] = v
-            parts.append(f"{fmt(mu, half, nd)} ({wins}/{len(dd)}){'' if v == 'tie' else ' ' + v}")
-        rows.append(f"| {c[0]} | {c[1]} | " + " | ".join(parts) + " |")
+            text, v = entry(paired(res, cells if c is None else [c], seeds, a, b, metric, scale), sense, nd,
+                            judged=c is not None)
+            parts.append(text)
+            if c is not None and v is not None:
+                verdicts[(c, name)] = v
+        rows.append(("| all cells | pooled | " if c is None else f"| {c[0]} | {c[1]} | ") + " | ".join(parts) + " |")
     return rows, verdicts
 
 
@@ -191,7 +197,8 @@ def main():
         rows, verdicts = table(res, cells, hold, chosen, BASE)
         ok = adopts(verdicts)
         if ok and c == "alpha" and chosen.endswith("=auto"):
-            others = [t for t in tags if t != chosen]
+            # auto must beat both fixed values: today's (the baseline) and the other one.
+            others = [t for t in tags if t != chosen] + [BASE]
             ok = all(mean_change(res, cells, hold, chosen, t) < 0 for t in others)
         lines += [f"Held-out seeds {a.holdout_seeds}: `--{c} {chosen.split('=')[1]}` − `{base_label}`", ""] + rows
         lines += ["", f"Verdict: **{'becomes the default' if ok else 'stays off'}** "

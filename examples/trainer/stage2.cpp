@@ -115,12 +115,12 @@ Stage2Result train_gaussians(const Dataset& d, Nodes& nodes, NodeObjective& obje
       gq[k] = g.node_rotations[k];
     }
     if (o.hold_unobserved) {
-      // The photometric gradient of frame t reaches only frame t's poses (the render reads them
-      // alone): clear it at the nodes whose track is unobserved at t.
-      for (int i = 0; i < N; ++i) {
-        const std::size_t at = sz(t) * N + sz(i);
-        if (nodes.visible[at] != 0) continue;
-        for (std::size_t c = 0; c < 3; ++c) gx[at * 3 + c] = gq[at * 3 + c] = 0.0;
+      // Cleared at every unobserved (frame, node), not only at frame t: a Gaussian is skinned from
+      // its reference frame to t (DQB of the poses at t relative to those at t_ref), so one render
+      // reaches the poses of the reference frames too.
+      for (std::size_t s = 0; s < nodes.visible.size(); ++s) {
+        if (nodes.visible[s] != 0) continue;
+        for (std::size_t c = 0; c < 3; ++c) gx[s * 3 + c] = gq[s * 3 + c] = 0.0;
       }
     }
     if (o.confidence_every > 0 && it > 0 && it % o.confidence_every == 0) objective.update_confidences(nodes);

@@ -37,7 +37,8 @@ struct Stage2Options {
   // hold (--stage2-unobserved hold): no photometric gradient reaches node i's pose at frame t
   // when its track is unobserved there (Nodes::visible[t][i] == 0), so that only the
   // regularisers move the nodes where no observation carries evidence; move (false): the
-  // photometric gradient reaches every node at the rendered frame.
+  // photometric gradient reaches every pose the render reads (the rendered frame's and the
+  // Gaussians' reference frames').
   bool hold_unobserved = false;
   int confidence_every = 50;
   // Density control: prune every prune_every iterations in [prune_from, iterations - prune_tail).
