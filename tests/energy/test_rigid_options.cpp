@@ -1,6 +1,7 @@
-// The rigid energies' penalties and stop-gradient (E24; CarapOptions / ArapOptions::penalty,
-// ::stop_gradient, ::penalty_eps): each penalty against the energy written out here in plain
-// loops (its own rotation matrix, its own sums), C-ARAP and ARAP, sum and mean, each part alone;
+// The rigid energies' penalties, stop-gradient and frame (E24; CarapOptions / ArapOptions::penalty,
+// ::stop_gradient, ::penalty_eps, ::frame): each penalty and frame against the energy written out
+// here in plain loops (its own rotation matrix, its own sums), C-ARAP and ARAP, sum and mean,
+// each part alone; the neighbour's frame against the row's frame on the reversed graph;
 // the stop-gradient by two identities (the held row's and the held neighbour's gradients add up
 // to the full one; holding the neighbour equals a graph whose neighbours are constant copies);
 // sqrt_weighted's zero-weight edges (m λ sqrt(ε) each, no gradient); torch's exact zeros on a
@@ -36,7 +37,8 @@ double rigid_reference(const Scene<double>& s, const smg::CarapOptions& o, bool 
       o.normalization == smg::Normalization::mean ? (pairs * edges > 0 ? o.weight / double(pairs * edges) : 0.0)
                                                   : o.weight;
   auto d_of = [&](Index t, Index i, Index j) {
-    const Eigen::Matrix3d R = s.rot(t, i).normalized().toRotationMatrix();
+    const Index f = o.frame == smg::RigidFrame::neighbor ? j : i;  // whose rotation (E24)
+    const Eigen::Matrix3d R = s.rot(t, f).normalized().toRotationMatrix();
     return Eigen::Vector3d(R.transpose() * (s.pos(t, j) - s.pos(t, i)));
   };
   double e = 0;
@@ -108,8 +110,10 @@ TEST_CASE("rigid penalties: C-ARAP and ARAP equal the written-out (E24), each pa
   for (const smg::Penalty penalty : smg::kPenalties)
     for (const smg::Normalization nm : {smg::Normalization::sum, smg::Normalization::mean})
       for (const int parts : {0, 1, 2})  // both parts, vector part alone, length part alone
-        for (const bool plain : {false, true}) {
+        for (const bool plain : {false, true})
+          for (const smg::RigidFrame frame : smg::kRigidFrames) {
           CAPTURE(smg::to_string(penalty));
+          CAPTURE(smg::to_string(frame));
           CAPTURE(nm == smg::Normalization::mean);
           CAPTURE(parts);
           CAPTURE(plain);
@@ -121,6 +125,7 @@ TEST_CASE("rigid penalties: C-ARAP and ARAP equal the written-out (E24), each pa
           a.gaps = {{1, 1.0}, {3, 0.5}};
           a.weight = 0.9;
           a.penalty_eps = 1e-4;  // large enough to matter in the value
+          a.frame = frame;
           smg::CarapOptions o = smg::carap_options_for_arap(a);  // α = 1: the reference's ARAP
           double e = 0;
           if (plain) {
@@ -238,6 +243,86 @@ TEST_CASE("rigid norm: a still window has energy 0 and a gradient of exactly 0, 
   CHECK(std::all_of(r.gr.begin(), r.gr.end(), [](double v) { return v == 0.0; }));
 }
 
+namespace {
+// The graph with every edge i -> j (weight w) reversed to j -> i (weight w), in (i, slot) order;
+// K grows to the largest in-degree.
+Scene<double> reversed(const Scene<double>& s) {
+  std::vector<std::vector<std::pair<std::int32_t, double>>> in(static_cast<std::size_t>(s.N));
+  for (Index i = 0; i < s.N; ++i)
+    for (Index k = 0; k < s.K; ++k) {
+      const std::int32_t j = s.idx[static_cast<std::size_t>(i * s.K + k)];
+      if (j < 0) break;
+      in[static_cast<std::size_t>(j)].emplace_back(static_cast<std::int32_t>(i), s.w[static_cast<std::size_t>(i * s.K + k)]);
+    }
+  Index K = 1;
+  for (const auto& v : in) K = std::max<Index>(K, static_cast<Index>(v.size()));
+  Scene<double> r = s;
+  r.K = K;
+  r.idx.assign(static_cast<std::size_t>(s.N * K), -1);
+  r.w.assign(static_cast<std::size_t>(s.N * K), 0.0);
+  for (Index j = 0; j < s.N; ++j)
+    for (std::size_t a = 0; a < in[static_cast<std::size_t>(j)].size(); ++a) {
+      r.idx[static_cast<std::size_t>(j * K) + a] = in[static_cast<std::size_t>(j)][a].first;
+      r.w[static_cast<std::size_t>(j * K) + a] = in[static_cast<std::size_t>(j)][a].second;
+    }
+  return r;
+}
+}  // namespace
+
+TEST_CASE("rigid frame: the neighbour's frame on a graph equals the row's frame on the reversed graph") {
+  // ‖R_jᵀ(x_j − x_i)‖ terms of edge i -> j are the row-frame terms of edge j -> i (the sign of d
+  // cancels in every difference): energy, position and rotation gradients agree for every
+  // penalty and stop-gradient (a held neighbour of i -> j is the held row of j -> i). Without
+  // confidences: C-ARAP's weight reads the neighbour's confidence, which reversing would move.
+  SMG_TEST_RNG(rng, 4306);
+  const Scene<double> s = smg::test::random_scene(7, 13, 4, rng);
+  const Scene<double> r = reversed(s);
+  for (const smg::Penalty penalty : smg::kPenalties)
+    for (const smg::StopGradient hold : smg::kStopGradients)
+      for (const int threads : {1, 3}) {
+        CAPTURE(smg::to_string(penalty));
+        CAPTURE(smg::to_string(hold));
+        smg::CarapOptions o;
+        o.penalty = penalty;
+        o.gaps = {{1, 1.0}, {2, 0.4}, {5, 0.2}};
+        o.penalty_eps = 1e-6;
+        o.stop_gradient = hold;
+        o.frame = smg::RigidFrame::neighbor;
+        const RigidOut a = rigid_run(s, o, false, threads);
+        o.frame = smg::RigidFrame::row;
+        o.stop_gradient = hold == smg::StopGradient::row        ? smg::StopGradient::neighbor
+                          : hold == smg::StopGradient::neighbor ? smg::StopGradient::row
+                                                                : hold;
+        const RigidOut b = rigid_run(r, o, false, threads);
+        CHECK(a.energy > 0);
+        CHECK(std::abs(a.energy - b.energy) <= 1e-13 * a.energy);
+        CHECK(smg::test::relative_error(a.gx, b.gx) < 1e-13);
+        CHECK(smg::test::relative_error(a.gr, b.gr) < 1e-13);
+        // ... and not the row's frame on the same graph.
+        const RigidOut c = rigid_run(s, o, false, threads);
+        CHECK(smg::test::relative_error(a.gr, c.gr) > 1e-3);
+      }
+}
+
+TEST_CASE("rigid frame: bit-identical for any thread count, and the gradient of the rotations reaches the neighbours") {
+  SMG_TEST_RNG(rng, 4307);
+  const Scene<double> s = smg::test::random_scene(70, 9, 5, rng);  // several blocks of frames
+  smg::CarapOptions o;
+  o.frame = smg::RigidFrame::neighbor;
+  o.gaps = {{1, 1.0}, {4, 0.5}};
+  const RigidOut one = rigid_run(s, o, true, 1), four = rigid_run(s, o, true, 4);
+  CHECK(one.energy == four.energy);
+  CHECK(one.gx == four.gx);
+  CHECK(one.gr == four.gr);
+  // A node nobody lists as a neighbour gets no rotation gradient in the neighbour's frame.
+  Scene<double> lone = s;
+  for (Index k = 0; k < lone.N * lone.K; ++k)
+    if (lone.idx[static_cast<std::size_t>(k)] == 0) lone.w[static_cast<std::size_t>(k)] = 0.0;
+  const RigidOut z = rigid_run(lone, o, true, 2);
+  for (Index t = 0; t < s.T; ++t)
+    for (int c = 0; c < 3; ++c) CHECK(z.gr[static_cast<std::size_t>(t * s.N * 3 + c)] == 0.0);
+}
+
 TEST_CASE("rigid options: validation names the option; one fused call holds one endpoint") {
   smg::CarapOptions o;
   o.penalty = static_cast<smg::Penalty>(7);
@@ -258,4 +343,11 @@ TEST_CASE("rigid options: validation names the option; one fused call holds one 
   CHECK(std::string(st.message()).rfind("RegularizerOptions: carap.stop_gradient (row) and arap.stop_gradient (none) differ", 0) == 0);
   r.arap.stop_gradient = smg::StopGradient::row;
   CHECK(smg::validate_options(r));
+  r.arap.frame = smg::RigidFrame::neighbor;
+  CHECK(std::string(smg::validate_options(r).message()).rfind("RegularizerOptions: carap.frame (row) and arap.frame (neighbor) differ", 0) == 0);
+  r.carap.frame = smg::RigidFrame::neighbor;
+  CHECK(smg::validate_options(r));
+  o = {};
+  o.frame = static_cast<smg::RigidFrame>(2);
+  CHECK(std::string(smg::validate_options(o).message()) == "CarapOptions.frame must be row or neighbor, got 2");
 }

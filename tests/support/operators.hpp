@@ -288,6 +288,20 @@ struct WithPenalty : Base, TermOperator<WithPenalty<Base, P>> {
     return o;
   }
 };
+// C-ARAP in the neighbour's frame (E24, MoSca's local coordinates): a variant of the term, as
+// WithPenalty's, so that central differences, AutoDiffScalar, float, threads and the hard cases
+// run on it by the list.
+struct CarapNeighborFrame : Carap, TermOperator<CarapNeighborFrame> {
+  using TermOperator<CarapNeighborFrame>::run;
+  using TermOperator<CarapNeighborFrame>::validate;
+  static constexpr const char* name = "carap_frame_neighbor";
+  static constexpr const char* term = nullptr;
+  static RegularizerOptions options() {
+    RegularizerOptions o = Carap::options();
+    o.carap.frame = RigidFrame::neighbor;
+    return o;
+  }
+};
 // The operators' optional bool traits, false where an operator does not declare one; the generic
 // tests read them instead of a name:
 //   still_floor: its energy on a still trajectory is a constant above 0 (sqrt_weighted's
@@ -365,6 +379,7 @@ struct Regularizers {
 // fused step that has none fails test_regularizers.cpp's "every term on the list".
 using Operators = decltype(std::tuple_cat(std::tuple<Confidences, Carap, Arap, CarapDirected, Lrm, Accel, Angle, Relrot>{},
                                           PenaltyOperators<Accel>{}, PenaltyOperators<Carap>{},
+                                          std::tuple<CarapNeighborFrame>{},
                                           PenaltyOperators<Angle>{}, PenaltyOperators<Relrot>{},
                                           std::tuple<Regularizers>{}));
 

@@ -287,6 +287,49 @@ def test_mosca_arap_float64(reduce, square, detach):
     assert _rel(gq, rgq) <= 1e-7
 
 
+@pytest.mark.parametrize("stop", ["none", "neighbor", "row"])
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+def test_rigid_frame_neighbor_is_moscas_local_coordinate(stop, dtype):
+    # smg's ARAP with frame="neighbor" (E24) on MoSca's own rows (no reversed graph): d = R_j^T
+    # (x_j − x_i) = −ℓ, the same norms; detach_nn (x_j held) is stop_gradient="neighbor",
+    # detach_self (x_i held) "row". Sum over the shifts, both parts, against the plain-torch
+    # reading of get_local_coord and compute_arap.
+    xyz, q, ti, mask, _ = mosca_scene(T=12, M=48, K=10, seed=3, levels=False)
+    M, K = ti.shape
+    w_rows = mask.double() / (mask.double().sum(-1, keepdim=True) + 1e-6)
+    keep = mask & (ti != torch.arange(M)[:, None])  # smg refuses self edges (each adds exactly 0)
+    D = int(keep.sum(-1).max())
+    idx = torch.full((M, D), -1, dtype=torch.int64)
+    w = torch.zeros((M, D), dtype=dtype)
+    for i in range(M):
+        js = ti[i][keep[i]]
+        idx[i, :js.numel()] = js
+        w[i, :js.numel()] = w_rows[i][keep[i]].to(dtype)
+    x = xyz.detach().clone().to(dtype).requires_grad_()
+    r = q.detach().clone().to(dtype).requires_grad_()
+    e = smg.regularizers(x, r, (idx, w), confidence=False, carap=False, lrm=False,
+                         arap=dict(frame="neighbor", penalty="norm", stop_gradient=stop, gaps=SHIFTS,
+                                   gap_weights=GAMMAS, lambda_c=1.0, lambda_l=0.5)).total
+    e.backward()
+    x64 = xyz.detach().clone().requires_grad_()
+    r64 = q.detach().clone().requires_grad_()
+    R = quaternion_to_matrix(F.normalize(r64, dim=-1))
+    local = mosca_local_coord_torch(x64, R, torch.arange(M)[:, None].expand_as(ti), ti,
+                                    detach_self=stop == "row", detach_nn=stop == "neighbor")
+    c, l = mosca_shift_losses_torch(local, w_rows, SHIFTS, GAMMAS, "sum", False)
+    ref = c + 0.5 * l
+    ref.backward()
+    tol_e, tol_g = (1e-12, 1e-10) if dtype == torch.float64 else (1e-5, 1e-4)
+    assert float(ref) > 0
+    assert abs(float(e) - float(ref)) <= tol_e * float(ref)
+    assert _rel(x.grad.double(), x64.grad) <= tol_g
+    assert _rel(r.grad.double(), r64.grad) <= tol_g
+    # ... and the row's frame is another energy.
+    other = smg.regularizers(xyz, q, (idx, w.double()), confidence=False, carap=False, lrm=False,
+                             arap=dict(penalty="norm", gaps=SHIFTS, gap_weights=GAMMAS, lambda_l=0.5)).total
+    assert abs(float(other) - float(ref)) > 1e-3 * float(ref)
+
+
 @pytest.mark.parametrize("lam", [(-1.0, 2.5), (0.0, 1.0), (3.0, 0.0), (-2.0, -0.5)])
 def test_mosca_arap_any_loss_weights(lam):
     # Backward forms λc = g_coord, λl = g_len in one pass (two where one is negative): any

@@ -339,7 +339,8 @@ def test_regularizers_follow_the_term_list():
     # The C++ defaults, as the separate operators' wrappers have them.
     assert smg.REGULARIZER_DEFAULTS["carap"] == dict(alpha=0.6, lambda_c=1.0, lambda_l=1.0, gaps=(1, 2, 4),
                                                    gap_weights=None, normalize=False, weight=1.0,
-                                                   penalty="squared", stop_gradient="none", penalty_eps=1e-20)
+                                                   penalty="squared", stop_gradient="none", penalty_eps=1e-20,
+                                                   frame="row")
     assert smg.REGULARIZER_DEFAULTS["angle"]["penalty"] == "norm"
     assert smg.REGULARIZER_DEFAULTS["accel"]["form"] == "acceleration"
     assert smg.REGULARIZER_DEFAULTS["accel"]["penalty"] == "squared"

@@ -233,11 +233,13 @@ Status carap(smg::detail::NonDeducedT<PositionsView<const S>> positions, smg::de
   const Index T = positions.frames(), N = positions.nodes(), K = graph.k();
   if (Status s = validate_options(options); !s) return s;
   // The separate kernels compute (E9) as the paper writes it; the other penalties and the
-  // stop-gradient (E24) are the fused step's (smg::cuda::regularizers, cuda/rigid.cuh).
-  if (options.penalty != Penalty::squared || options.stop_gradient != StopGradient::none)
+  // stop-gradient and the neighbour's frame (E24) are the fused step's (smg::cuda::regularizers,
+  // cuda/rigid.cuh).
+  if (options.penalty != Penalty::squared || options.stop_gradient != StopGradient::none ||
+      options.frame != RigidFrame::row)
     return Status::error(
-        "options: the separate CUDA carap/arap compute penalty=squared, stop_gradient=none only; "
-        "use smg::cuda::regularizers for the others");
+        "options: the separate CUDA carap/arap compute penalty=squared, stop_gradient=none, "
+        "frame=row only; use smg::cuda::regularizers for the others");
   if (rotations.frames() != T || rotations.nodes() != N)
     return Status::error("rotations: expected shape [T][N][4] of positions");
   if (confidence.data() && (confidence.frames() != T || confidence.nodes() != N))

@@ -3,7 +3,8 @@
 // the thread evaluates each out-edge n -> j of frame t (d^t, the d^{t±δ} of every gap of both
 // energies, their pair terms (E9) and one back-propagation (E10)): −F into x_n^t's gradient, the
 // rotation part into R_n^t's; then each in-edge i -> n again (from the ReverseGraph, in
-// increasing slot order) for its +F into x_n^t's gradient. Every (frame, edge) is evaluated
+// increasing slot order) for its +F into x_n^t's gradient. With the neighbour's frame (E24) an
+// edge's rotation part belongs to its head, so R_n^t's comes from the in-edges instead. Every (frame, edge) is evaluated
 // twice, by its tail and by its head, instead of keeping the 11·T·N·K scalars of per-slot
 // scratch the separate carap kernels keep: on a GPU the arithmetic is cheap and the scratch
 // traffic is not. Every equation is the CPU's element functions' (elements/carap.hpp, common.hpp's
@@ -39,6 +40,7 @@ struct FusedRigidConstants {
   Penalty penalty[2] = {Penalty::squared, Penalty::squared};  // per energy (E24)
   double eps[2] = {0.0, 0.0};                                 // penalty_eps per energy
   StopGradient stop = StopGradient::none;  // one for both (validate_options(RegularizerOptions))
+  RigidFrame frame = RigidFrame::row;      // one for both, as stop
   bool keep_zero = false;  // sqrt_weighted: a zero-weight edge still adds m λ sqrt(ε)
   int n_gaps = 0;
   int delta[2 * GapList::kCapacity] = {};
@@ -66,8 +68,8 @@ struct RigidGammas {
   }
 };
 
-// The rotated edge vector of edge i -> j at frame s (E8): R (row-major, from q_i^s), e = x_j − x_i,
-// d = Rᵀ e and ‖e‖ (= ‖d‖).
+// The rotated edge vector of edge i -> j at frame s (E8): R (row-major, from q_f^s, f the frame
+// owner: i, or j with the neighbour's frame, E24), e = x_j − x_i, d = Rᵀ e and ‖e‖ (= ‖d‖).
 template <class S>
 struct RigidEdge {
   S R[9];
@@ -77,9 +79,9 @@ struct RigidEdge {
 template <class S>
 SMG_HOST_DEVICE inline void fused_rigid_edge_at(PositionsView<const S> x,
                                                 QuaternionsView<const S> q, Index s, Index i,
-                                                Index j, RigidEdge<S>& r) {
+                                                Index j, Index f, RigidEdge<S>& r) {
   using std::sqrt;
-  smg::detail::rotation_from_wxyz(q.ptr(s, i), r.R);
+  smg::detail::rotation_from_wxyz(q.ptr(s, f), r.R);
   const S* xi = x.ptr(s, i);
   const S* xj = x.ptr(s, j);
   r.ex = xj[0] - xi[0];
@@ -91,7 +93,8 @@ SMG_HOST_DEVICE inline void fused_rigid_edge_at(PositionsView<const S> x,
 
 // One edge i -> j (graph weight w > 0) at frame t in both rigid energies: adds to energy[en] the
 // terms of the pairs (t, t + δ) (the pairs frame t owns) when energy is not null; with `grad`,
-// writes F = ∂E/∂x_j^t (−F is ∂E/∂x_i^t) and Rg, the right-tangent gradient of R_i^t, from every
+// writes F = ∂E/∂x_j^t (−F is ∂E/∂x_i^t) and Rg, the right-tangent gradient of the frame
+// owner's R^t (R_i^t, or R_j^t with the neighbour's frame), from every
 // pair containing frame t: (t, t + δ) weighted at t and (t − δ, t) weighted at t − δ (E7, E9,
 // E10). conf: c [T][N] (row-major) or null (c ≡ 1).
 template <class S>
@@ -102,8 +105,9 @@ SMG_HOST_DEVICE inline void fused_rigid_edge(const FusedRigidConstants<S>& c,
                                              bool grad, S* energy, S* F, S* Rg) {
   using L = Literal<S>;
   const Index T = x.frames(), N = x.nodes();
+  const Index f = c.frame == RigidFrame::neighbor ? j : i;
   RigidEdge<S> e0;
-  fused_rigid_edge_at(x, q, t, i, j, e0);
+  fused_rigid_edge_at(x, q, t, i, j, f, e0);
   // w̃ (E7) of this edge at frame u, per energy.
   auto weight = [&](Index u, int en) {
     return en == 0 ? confidence_edge_weight(w, c.alpha, conf ? conf[u * N + j] : S(1))
@@ -124,7 +128,7 @@ SMG_HOST_DEVICE inline void fused_rigid_edge(const FusedRigidConstants<S>& c,
     S px, py, pz, pq;
     if (t + delta < T) {  // pair (t, t + δ), weighted at t: its energy belongs to frame t
       RigidEdge<S> es;
-      fused_rigid_edge_at(x, q, t + delta, i, j, es);
+      fused_rigid_edge_at(x, q, t + delta, i, j, f, es);
       for (int en = 0; en < 2; ++en) {
         const L gm = gamma.v[en][g];
         if (gm == L(0)) continue;
@@ -139,7 +143,7 @@ SMG_HOST_DEVICE inline void fused_rigid_edge(const FusedRigidConstants<S>& c,
     }
     if (grad && t - delta >= 0) {  // pair (t − δ, t), weighted at t − δ
       RigidEdge<S> ep;
-      fused_rigid_edge_at(x, q, t - delta, i, j, ep);
+      fused_rigid_edge_at(x, q, t - delta, i, j, f, ep);
       for (int en = 0; en < 2; ++en) {
         const L gm = gamma.v[en][g];
         if (gm == L(0)) continue;
@@ -159,8 +163,9 @@ SMG_HOST_DEVICE inline void fused_rigid_edge(const FusedRigidConstants<S>& c,
 }
 
 // Element (t, n): node n at frame t as the tail of its out-edges (their energies into
-// energy[2], −F and the rotation parts) and, when the position gradient is wanted, as the head
-// of its in-edges (+F, in the ReverseGraph's increasing slot order). Adds x_n^t's gradient to
+// energy[2], −F and, in the row's frame, the rotation parts) and, when the position gradient
+// or (in the neighbour's frame) the rotation gradient is wanted, as the head of its in-edges
+// (+F, the rotation parts; in the ReverseGraph's increasing slot order). Adds x_n^t's gradient to
 // grad_x [T][N][3] and R_n^t's to grad_tangent [T][N][3] or grad_raw [T][N][4] (Q5); each may be
 // null. Only this element writes those rows.
 template <class S, class I>
@@ -173,6 +178,7 @@ SMG_HOST_DEVICE inline void fused_rigid_node_at(
   const bool want_r = grad_tangent != nullptr || grad_raw != nullptr;
   const bool grad = grad_x != nullptr || want_r;
   const RigidGammas<S> gamma(c);
+  const bool nbr_frame = c.frame == RigidFrame::neighbor;
   S g[3] = {S(0), S(0), S(0)}, r[3] = {S(0), S(0), S(0)};
   for (Index k = 0; k < K; ++k) {
     const Index j = graph.indices(n, k);
@@ -185,20 +191,26 @@ SMG_HOST_DEVICE inline void fused_rigid_node_at(
     if (!grad) continue;
     for (int a = 0; a < 3; ++a) {
       if (c.stop != StopGradient::row) g[a] -= F[a];  // a held row gets no position gradient
-      r[a] += Rg[a];
+      if (!nbr_frame) r[a] += Rg[a];
     }
   }
-  if (grad_x != nullptr) {
-    // As a neighbour (a held neighbour gets none).
-    const std::int32_t in_end = c.stop != StopGradient::neighbor ? rev_offsets[n + 1] : rev_offsets[n];
-    for (std::int32_t a = rev_offsets[n]; a < in_end; ++a) {
+  // As a neighbour: +F (a held neighbour gets none) and, in the neighbour's frame, the rotation
+  // part.
+  const bool in_x = grad_x != nullptr && c.stop != StopGradient::neighbor;
+  const bool in_r = want_r && nbr_frame;
+  if (in_x || in_r)
+    for (std::int32_t a = rev_offsets[n]; a < rev_offsets[n + 1]; ++a) {
       const Index slot = rev_entries[a], i = slot / K, k = slot - i * K;
       const S w = graph.weights(i, k);
       if (!(w > S(0)) && !(c.keep_zero && w == S(0))) continue;
       S F[3], Rg[3];
       fused_rigid_edge(c, gamma, x, q, conf, t, i, n, w, true, static_cast<S*>(nullptr), F, Rg);
-      for (int b = 0; b < 3; ++b) g[b] += F[b];
+      for (int b = 0; b < 3; ++b) {
+        if (in_x) g[b] += F[b];
+        if (in_r) r[b] += Rg[b];
+      }
     }
+  if (grad_x != nullptr) {
     S* dst = grad_x + (t * N + n) * 3;
     for (int b = 0; b < 3; ++b) dst[b] += g[b];
   }
@@ -230,6 +242,7 @@ FusedRigidConstants<S> fused_rigid_constants(const RegularizerOptions& o, Index 
   c.eps[0] = o.carap.penalty_eps;
   c.eps[1] = o.arap.penalty_eps;
   c.stop = o.terms.carap ? o.carap.stop_gradient : o.arap.stop_gradient;
+  c.frame = o.terms.carap ? o.carap.frame : o.arap.frame;
   for (int en = 0; en < 2; ++en) {
     if (!on[en]) continue;
     if (c.penalty[en] == Penalty::sqrt_weighted) c.keep_zero = true;

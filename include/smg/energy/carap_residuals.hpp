@@ -53,13 +53,15 @@ inline Index carap_residual_count(const NeighborsView<S, I>& graph, Index frames
 // Normalization::mean (counting them is O(N K): compute it once and pass it to
 // carap_residual_block when evaluating many blocks).
 // The residual forms (E17) and the directed reading (E20) are of the squared energy only: r
-// with ‖r‖² = E exists for penalty=squared, and the stop-gradient (E24) is a gradient rule, not a
-// residual (both are the fused step's options).
+// with ‖r‖² = E exists for penalty=squared, the stop-gradient (E24) is a gradient rule, not a
+// residual, and the Jacobians are written for the row's frame (all three are the fused step's
+// options).
 template <class S, class I>
 inline double carap_residual_scale(const NeighborsView<S, I>& graph, Index frames,
                                    const CarapOptions& o) {
-  SMG_ASSERT(o.penalty == Penalty::squared && o.stop_gradient == StopGradient::none,
-             "carap residuals: penalty=squared and stop_gradient=none only (E24)");
+  SMG_ASSERT(o.penalty == Penalty::squared && o.stop_gradient == StopGradient::none &&
+                 o.frame == RigidFrame::row,
+             "carap residuals: penalty=squared, stop_gradient=none and frame=row only (E24)");
   double scale = o.weight;
   if (o.normalization == Normalization::mean) {
     const Index terms = carap_term_count(graph, frames, o.gaps);

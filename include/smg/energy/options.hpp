@@ -121,6 +121,15 @@ constexpr const char* to_string(StopGradient g) {
   return g == StopGradient::row ? "row" : g == StopGradient::neighbor ? "neighbor" : "none";
 }
 
+// The rigid energies' frame (E24): whose rotation expresses edge i -> j, d = R_fᵀ(x_j − x_i).
+// row: f = i, the paper's (E8); neighbor: f = j, as MoSca's ARAP writes its local coordinates
+// (ℓ_ik = R_jᵀ(x_i − x_j), j = topo_ind[i, k]: −d, the same norms). With neighbor, edge i -> j's
+// rotation gradient goes to R_j.
+enum class RigidFrame { row, neighbor };
+// The values and their names ("row", "neighbor"), as the bindings spell them.
+inline constexpr RigidFrame kRigidFrames[] = {RigidFrame::row, RigidFrame::neighbor};
+constexpr const char* to_string(RigidFrame f) { return f == RigidFrame::neighbor ? "neighbor" : "row"; }
+
 // C-ARAP, equation (E9). Weights w̃_ij^t = w_ij (α + (1 − α) c_{t,j}) (E7).
 struct CarapOptions {
   double alpha = 0.6;     // α in [0, 1]: lower bound of the confidence factor
@@ -132,6 +141,7 @@ struct CarapOptions {
   Penalty penalty = Penalty::squared;                // (E24): each part of (E9) under (E22)
   StopGradient stop_gradient = StopGradient::none;   // (E24): an endpoint's position held
   double penalty_eps = 1e-20;  // ε of sqrt_weighted (length²), finite and > 0; read by it only
+  RigidFrame frame = RigidFrame::row;  // (E24): R_i (the paper's d, E8) or the neighbour's R_j
 };
 
 // Plain ARAP (ablations): C-ARAP with every confidence 1 and α = 1, i.e. w̃_ij^t = w_ij.
@@ -144,6 +154,7 @@ struct ArapOptions {
   Penalty penalty = Penalty::squared;
   StopGradient stop_gradient = StopGradient::none;
   double penalty_eps = 1e-20;
+  RigidFrame frame = RigidFrame::row;
 };
 
 // LRM, equations (E11)-(E16).
@@ -172,6 +183,7 @@ constexpr const char* to_string(AccelForm f) {
 constexpr const auto& enum_values(AccelForm) { return kAccelForms; }
 constexpr const auto& enum_values(Penalty) { return kPenalties; }
 constexpr const auto& enum_values(StopGradient) { return kStopGradients; }
+constexpr const auto& enum_values(RigidFrame) { return kRigidFrames; }
 
 namespace detail {
 // SFINAE: O is T or const T (the visitors below take both).
@@ -215,6 +227,7 @@ void for_each_rigidity_option(O& o, F&& f) {
   f("gaps", o.gaps);
   f("stop_gradient", o.stop_gradient);
   for_each_penalty_option(o, f);
+  f("frame", o.frame);
 }
 }  // namespace detail
 template <class O, class F, detail::IfOptions<O, CarapOptions> = 0>
@@ -305,14 +318,14 @@ inline Status check_penalty_options(const char* what, const Options& o) {
   return first_error({check_nonneg(what, "weight", o.weight), check_enum(what, "penalty", o.penalty),
                       check_positive(what, "penalty_eps", o.penalty_eps)});
 }
-// The checks C-ARAP and plain ARAP share: λc, λl >= 0, the gap list, a listed stop-gradient, and
-// the penalty's.
+// The checks C-ARAP and plain ARAP share: λc, λl >= 0, the gap list, a listed stop-gradient and
+// frame, and the penalty's.
 template <class Options>
 inline Status check_rigidity_options(const char* what, const Options& o) {
   return first_error({check_nonneg(what, "lambda_c", o.lambda_c),
                       check_nonneg(what, "lambda_l", o.lambda_l), check_gaps(what, o.gaps),
                       check_enum(what, "stop_gradient", o.stop_gradient),
-                      check_penalty_options(what, o)});
+                      check_penalty_options(what, o), check_enum(what, "frame", o.frame)});
 }
 }  // namespace detail
 
@@ -351,6 +364,7 @@ inline CarapOptions carap_options_for_arap(const ArapOptions& o) {
   c.penalty = o.penalty;
   c.stop_gradient = o.stop_gradient;
   c.penalty_eps = o.penalty_eps;
+  c.frame = o.frame;
   return c;
 }
 

@@ -128,14 +128,17 @@ inline Status validate_options(const RegularizerOptions& o) {
   for_each_term(o, [&](const char*, bool on, const auto& term) {
     if (on && first) first = validate_options(term);
   });
-  // The rigid term back-propagates C-ARAP's and ARAP's d-gradients together (E10), so one
-  // call holds the same endpoint for both.
-  if (first && o.terms.carap && o.terms.arap && o.carap.stop_gradient != o.arap.stop_gradient)
-    return Status::error(std::string("RegularizerOptions: carap.stop_gradient (") +
-                         to_string(o.carap.stop_gradient) + ") and arap.stop_gradient (" +
-                         to_string(o.arap.stop_gradient) +
-                         ") differ; one fused call back-propagates both rigid energies together: "
-                         "call them separately");
+  // The rigid term computes d once for C-ARAP and ARAP (E8) and back-propagates their
+  // d-gradients together (E10), so one call expresses both in one frame and holds one endpoint.
+  auto same = [&](const char* name, auto a, auto b) {
+    if (first && o.terms.carap && o.terms.arap && a != b)
+      first = Status::error(std::string("RegularizerOptions: carap.") + name + " (" + to_string(a) +
+                            ") and arap." + name + " (" + to_string(b) +
+                            ") differ; one fused call computes both rigid energies together: "
+                            "call them separately");
+  };
+  same("stop_gradient", o.carap.stop_gradient, o.arap.stop_gradient);
+  same("frame", o.carap.frame, o.arap.frame);
   return first;
 }
 

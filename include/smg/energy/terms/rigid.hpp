@@ -1,5 +1,5 @@
 // smg/energy/terms/rigid.hpp — C-ARAP (E7)-(E10) and plain ARAP ((E9) with c ≡ 1, α = 1), each
-// under its penalty and stop-gradient (E24), as one term of the regulariser driver (energy/block.hpp has the concept). One term for both because
+// under its penalty, stop-gradient and frame (E24), as one term of the regulariser driver (energy/block.hpp has the concept). One term for both because
 // they share the expensive part: d_ij^t = R_i^tᵀ (x_j^t − x_i^t) (E8) is computed once per
 // (frame, edge) and reused by every gap of both energies, and their d-gradients are summed
 // before one back-propagation (E10). The per-element maths is elements/carap.hpp's; the vectorised
@@ -200,6 +200,7 @@ struct RigidTerm : TermDefaults {
   Penalty penalty[2] = {Penalty::squared, Penalty::squared};  // per energy (E24)
   S eps[2] = {S(0), S(0)};                                    // penalty_eps per energy
   StopGradient stop = StopGradient::none;  // one for both (validate_options(RegularizerOptions))
+  RigidFrame frame = RigidFrame::row;      // one for both, as stop
   bool keep_zero = false;  // sqrt_weighted: a zero-weight edge still adds m λ sqrt(ε)
   Index max_delta = 0;
   bool want_rotations = false;  // the caller wants the rotation gradient
@@ -227,6 +228,7 @@ struct RigidTerm : TermDefaults {
       penalty[energy] = o.penalty;
       eps[energy] = S(o.penalty_eps);
       stop = o.stop_gradient;
+      frame = o.frame;
       keep_zero = keep_zero || (has_energy[energy] && o.penalty == Penalty::sqrt_weighted);
     };
     if (carap) {
@@ -258,11 +260,13 @@ struct RigidTerm : TermDefaults {
   bool rotation_gradient() const { return want_rotations; }
   Index n_gaps() const { return static_cast<Index>(gaps.size()); }
   // 16 flattened [edge][frame] arrays, a mask and four P arrays (after max δ zeros) per gap, the
-  // node's rotations [9][span] and gradient rows [3][span] twice.
+  // node's rotations [9][span] and gradient rows [3][span] twice; with the neighbour's frame, each
+  // edge's rotations [edge][9][frame] instead of the node's.
   Index slot_scalars(const BlockPlan& p) const {
     const Index M = p.M();
     return 16 * BlockPlan::chunk(M) + BlockPlan::chunk(n_gaps() * M) +
-           BlockPlan::chunk(n_gaps() * 4 * (M + p.G)) + BlockPlan::chunk(9 * p.span) +
+           BlockPlan::chunk(n_gaps() * 4 * (M + p.G)) +
+           BlockPlan::chunk(frame == RigidFrame::neighbor ? 9 * M : 9 * p.span) +
            2 * BlockPlan::chunk(3 * p.span);
   }
   void bind(const BlockPlan&, S*, const NeighborsView<S, I>&) {}
@@ -290,7 +294,8 @@ struct RigidTerm : TermDefaults {
     k.Gx = cur.take(M), k.Gy = cur.take(M), k.Gz = cur.take(M), k.H = cur.take(M);
     k.masks = cur.take(n_gaps() * M);
     k.pbase = cur.take(n_gaps() * 4 * (M + p.G));
-    k.R = cur.take(9 * p.span), k.Fi = cur.take(3 * p.span), k.Ri = cur.take(3 * p.span);
+    k.R = cur.take(frame == RigidFrame::neighbor ? 9 * M : 9 * p.span);
+    k.Fi = cur.take(3 * p.span), k.Ri = cur.take(3 * p.span);
     if (v.grad()) std::fill(k.pbase, k.pbase + n_gaps() * 4 * (M + p.G), S(0));
     // γ_δ where the pair's earlier frame is owned and its later frame exists, else 0.
     for (Index g = 0; g < n_gaps(); ++g) {
@@ -340,19 +345,27 @@ struct RigidTerm : TermDefaults {
     }
     if (m_e == 0) return;
     const Index m = m_e * ne;
-    for (Index l = 0; l < ne; ++l) {
-      S Rl[9] = {S(0), S(0), S(0), S(0), S(0), S(0), S(0), S(0), S(0)};
-      if (l < nr) rotation_from_wxyz(v.q.ptr(t0 + l, i), Rl);
-      for (int c = 0; c < 9; ++c) R[c * ne + l] = Rl[c];
-    }
+    // The frame owners' rotations, [9][ne] each (padding frames zero): node i's once (row), or
+    // each edge's neighbour's at R + 9·e·ne (neighbor).
+    const bool nbr_frame = frame == RigidFrame::neighbor;
+    auto rotations_of = [&](Index f, S* dst) {
+      for (Index l = 0; l < ne; ++l) {
+        S Rl[9] = {S(0), S(0), S(0), S(0), S(0), S(0), S(0), S(0), S(0)};
+        if (l < nr) rotation_from_wxyz(v.q.ptr(t0 + l, f), Rl);
+        for (int c = 0; c < 9; ++c) dst[c * ne + l] = Rl[c];
+      }
+    };
+    if (!nbr_frame) rotations_of(i, R);
+    auto R_of = [&](Index e) { return nbr_frame ? R + 9 * e * ne : R; };
     const S* Xi = Xb + i * n4;
     const bool has[2] = {has_energy[0], has_energy[1]};
     // e = x_j − x_i and d = Rᵀ e (E8) once per (frame, edge); the pair weights w̃ at the earlier
     // frame (E7): C-ARAP's with the confidences, ARAP's with c = 1 and α = 1.
     for (Index e = 0; e < m_e; ++e) {
       const Index j = k.nbr[static_cast<std::size_t>(e)], o = e * ne;
-      carap_loops::edge_frames(ne, R, Xi, Xb + j * n4, Ex + o, Ey + o, Ez + o, Dx + o, Dy + o,
-                               Dz + o);
+      if (nbr_frame) rotations_of(j, R + 9 * o);
+      carap_loops::edge_frames(ne, R_of(e), Xi, Xb + j * n4, Ex + o, Ey + o, Ez + o, Dx + o,
+                               Dy + o, Dz + o);
       const S w = k.wgt[static_cast<std::size_t>(e)];
       const S* cj = Xb + j * n4 + 3 * ne;
       if (has[0])
@@ -431,29 +444,34 @@ struct RigidTerm : TermDefaults {
     // E24) gets no position gradient, the rotation still does.
     const bool x_nbr = want_x && stop != StopGradient::neighbor;
     const bool x_row = want_x && stop != StopGradient::row;
-    for (Index l = 0; l < 3 * ne; ++l) Fi[l] = Ri[l] = S(0);
-    for (Index e = 0; e < m_e; ++e) {
-      const Index o = e * ne;
-      carap_loops::backprop(ne, R, Gx + o, Gy + o, Gz + o, H + o, InvLen + o, Ex + o, Ey + o,
-                            Ez + o, Dx + o, Dy + o, Dz + o, Fi, Ri);
-      if (x_nbr)
-        carap_loops::add3(ne, GBx + k.nbr[static_cast<std::size_t>(e)] * n3, Gx + o, Gy + o,
-                          Gz + o);
-    }
-    if (x_row) carap_loops::sub(n3, GBx + i * n3, Fi);
-    // The rotation gradient of node i reaches only node i's rows: owned frames straight into
-    // the caller's rows (no other block writes them), the overlap into the spill.
-    if (want_r)
+    // A frame owner's rotation gradient Ri [3][ne] into its rows: owned frames straight into the
+    // caller's rows (no other block writes them, and this block visits nodes in order), the
+    // overlap into the spill.
+    auto rotation_rows = [&](Index f) {
       for (Index l = 0; l < nr; ++l) {
         if (l < nown) {
-          v.rot->add(t0 + l, i, Ri + l, ne);
+          v.rot->add(t0 + l, f, Ri + l, ne);
         } else {
-          S* dst = v.rot->spill_r(v.b) + (l - nown) * N * 3 + 3 * i;
+          S* dst = v.rot->spill_r(v.b) + (l - nown) * N * 3 + 3 * f;
           dst[0] += Ri[l];
           dst[1] += Ri[ne + l];
           dst[2] += Ri[2 * ne + l];
         }
       }
+    };
+    for (Index l = 0; l < 3 * ne; ++l) Fi[l] = Ri[l] = S(0);
+    for (Index e = 0; e < m_e; ++e) {
+      const Index o = e * ne, j = k.nbr[static_cast<std::size_t>(e)];
+      carap_loops::backprop(ne, R_of(e), Gx + o, Gy + o, Gz + o, H + o, InvLen + o, Ex + o,
+                            Ey + o, Ez + o, Dx + o, Dy + o, Dz + o, Fi, Ri);
+      if (x_nbr) carap_loops::add3(ne, GBx + j * n3, Gx + o, Gy + o, Gz + o);
+      if (nbr_frame && want_r) {  // this edge's rotation part is R_j's (E24)
+        rotation_rows(j);
+        for (Index l = 0; l < 3 * ne; ++l) Ri[l] = S(0);
+      }
+    }
+    if (x_row) carap_loops::sub(n3, GBx + i * n3, Fi);
+    if (want_r && !nbr_frame) rotation_rows(i);  // every edge's rotation part is R_i's
   }
 };
 
