@@ -19,7 +19,8 @@ and the masked test PSNR. The protocol:
      also beats both fixed values there.
 It writes the tables and verdicts between <!-- ladder:defaults-study --> and
 <!-- /ladder:defaults-study --> of the results page. A run whose metrics.json exists is not
-repeated (delete OUT to start over), so a study can be run in parts (--phase design first).
+repeated (delete OUT to start over), so a study can be run in parts (--phase design first); a short
+canary run first checks that the trainer still computes what made them (ladder_report.check_cache).
 Usage: scripts/defaults_study.py [--candidates "stage2-unobserved w-accel alpha"]
                                  [--scenes "standard occluder bending"] [--failures "off typical double"]
                                  [--seeds "0 1 2 3 4"] [--holdout-seeds "5 6 7 8 9"] [--phase design|both]

@@ -22,7 +22,8 @@ Usage: scripts/failure_study.py [--seeds "0 1 2 3 4"] [--holdout-seeds "5 6 7 8 
                                 [--out build/failure_study] [--doc docs/results.md]
                                 [--trainer build/release/examples/smg_trainer]
 Without --trainer it first builds the trainer into build/release (scripts/build_trainer.sh).
-A run whose metrics.json exists is not repeated (delete OUT to start over)."""
+A run whose metrics.json exists is not repeated (delete OUT to start over); a short canary run
+first checks that the trainer still computes what made them (ladder_report.check_cache)."""
 import concurrent.futures
 import datetime
 import json

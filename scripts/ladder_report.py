@@ -75,11 +75,71 @@ def fmt(mu, half, nd):
     return f"{mu:.{nd}f}" if math.isnan(half) else f"{mu:.{nd}f} ± {half:.{nd}f}"
 
 
+# The canary: a short run whose figures stand for the trainer's behaviour. The studies keep their
+# runs in OUT across sessions and pair a cached baseline with new runs of a candidate, which is only
+# sound when both came from a trainer that computes the same thing; a binary's hash cannot tell
+# (rebuilding in another folder changes it, not the results), its figures can (every run is
+# bitwise reproducible at --threads 1).
+CANARY_ARGS = ["--scene", "standard", "--tracker-failures", "typical", "--seed", "0", "--threads", "1",
+               "--stage2-iters", "20", "--no-pictures", "--no-view", "--no-image-eval", "--no-ply", "--quiet"]
+
+
+def canary_figures(m, prefix=""):
+    """The numeric leaves of a metrics.json as {"a.b": value}, without timings and paths."""
+    out = {}
+    for k, v in m.items():
+        key = prefix + k
+        if k.startswith("seconds") or k in ("out", "threads"):
+            continue
+        if isinstance(v, dict):
+            out.update(canary_figures(v, key + "."))
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            out[key] = v
+    return out
+
+
+def canary_diff(old, new):
+    """The first key (sorted) whose figure differs or exists in one only, with both values; None
+    when the two are the same."""
+    for k in sorted(set(old) | set(new)):
+        if old.get(k) != new.get(k):
+            return f"{k}: {old.get(k)} then, {new.get(k)} now"
+    return None
+
+
+def check_cache(trainer, out, run=None):
+    """Runs the canary with `trainer` and compares its figures with those OUT/canary.json recorded
+    when OUT's first runs were made; exits naming the first difference (OUT's runs came from a
+    trainer that computes something else). Without OUT/canary.json, records it (the runs already in
+    OUT are taken to be this trainer's). Returns "recorded" or "same". `run(cmd)` runs a command
+    (tests pass their own)."""
+    import shutil
+    import subprocess
+    run = run or (lambda cmd: subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL))
+    os.makedirs(out, exist_ok=True)
+    tmp = os.path.join(out, ".canary_run")
+    shutil.rmtree(tmp, ignore_errors=True)
+    run([trainer] + CANARY_ARGS + ["--out", tmp])
+    now = canary_figures(json.load(open(os.path.join(tmp, "metrics.json"))))
+    shutil.rmtree(tmp, ignore_errors=True)
+    path = os.path.join(out, "canary.json")
+    if not os.path.exists(path):
+        with open(path, "w") as f:
+            json.dump(now, f, indent=1, sort_keys=True)
+        return "recorded"
+    diff = canary_diff(json.load(open(path)), now)
+    if diff:
+        sys.exit(f"{os.path.basename(sys.argv[0])}: {out} holds runs of a trainer that computes something "
+                 f"else: the canary run differs ({diff}); delete {out} or pass another --out")
+    return "same"
+
+
 def study_arguments(default_out, extra=None):
     """The command line the stage-1 studies share (scripts/carap_study.py, scripts/failure_study.py):
     parses it and returns it, with --trainer resolved: without it the trainer is first built into
     build/release (scripts/build_trainer.sh, as scripts/ladder.sh does) and that binary is used.
-    `extra(parser)`, when given, adds a study's own arguments."""
+    `extra(parser)`, when given, adds a study's own arguments. Then the canary (check_cache):
+    OUT's cached runs are reused only when the trainer still computes what made them."""
     import subprocess
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", default="0 1 2 3 4")
@@ -96,6 +156,7 @@ def study_arguments(default_out, extra=None):
         subprocess.run([os.path.join(root, "scripts", "build_trainer.sh")], check=True)
         a.trainer = os.path.join(root, os.environ.get("SMG_BUILD_DIR") or "build/release",
                                  "examples", "smg_trainer")
+    check_cache(a.trainer, a.out)
     return a
 
 

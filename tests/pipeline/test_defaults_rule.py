@@ -1,8 +1,12 @@
 #!/usr/bin/env python3
 """scripts/defaults_study.py's rule on hand-made runs: a candidate becomes the default only when it
-is never worse beyond noise (query EPE or masked PSNR) in any cell and better (query EPE) in one."""
+is never worse beyond noise (query EPE or masked PSNR) in any cell and better (query EPE) in one.
+And the studies' canary (scripts/ladder_report.py check_cache) with a stand-in trainer: recorded on
+first use, accepted while the figures stay the same, refused naming the key when one changes."""
+import json
 import os
 import sys
+import tempfile
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts"))
 import defaults_study as ds  # noqa: E402
@@ -49,4 +53,41 @@ res = runs({a: (0.0, 0.0), b: (0.0, 0.0)})
 _, v = ds.table(res, [a, b], seeds, "c", ds.BASE)
 assert not ds.adopts(v), v
 assert abs(ds.mean_change(runs({a: (-0.002, 0.0), b: (0.0, 0.0)}), [a, b], seeds, "c", ds.BASE) + 1.0) < 1e-9
+
+# The canary: timings, paths and threads are not figures; nested figures are.
+import ladder_report as lr  # noqa: E402
+m = {"seconds_total": 9.5, "out": "x", "threads": 1, "test_psnr": None, "quiet": True,
+     "epe_query": {"stage2": {"all": {"epe": 0.0665, "samples": 8192}}}, "nodes": 400}
+assert lr.canary_figures(m) == {"epe_query.stage2.all.epe": 0.0665, "epe_query.stage2.all.samples": 8192,
+                                "nodes": 400}, lr.canary_figures(m)
+assert lr.canary_diff({"a": 1.0}, {"a": 1.0}) is None
+assert lr.canary_diff({"a": 1.0, "b": 2}, {"a": 1.0, "b": 3}) == "b: 2 then, 3 now"
+assert lr.canary_diff({"a": 1.0}, {}) == "a: 1.0 then, None now"
+figures = {"value": 0.0665}
+
+
+def fake_trainer(cmd):
+    """Stands in for smg_trainer: writes metrics.json into --out with the current figures."""
+    assert cmd[1:1 + len(lr.CANARY_ARGS)] == lr.CANARY_ARGS, cmd
+    d = cmd[cmd.index("--out") + 1]
+    os.makedirs(d, exist_ok=True)
+    with open(os.path.join(d, "metrics.json"), "w") as f:
+        json.dump({"epe_query": {"stage2": {"all": {"epe": figures["value"]}}}, "seconds_total": 1.0}, f)
+
+
+with tempfile.TemporaryDirectory() as out:
+    assert lr.check_cache("smg_trainer", out, fake_trainer) == "recorded"
+    assert os.path.exists(os.path.join(out, "canary.json"))
+    assert not os.path.exists(os.path.join(out, ".canary_run")), "the canary's run folder is removed"
+    assert lr.check_cache("smg_trainer", out, fake_trainer) == "same"
+    figures["value"] = 0.0666
+    try:
+        lr.check_cache("smg_trainer", out, fake_trainer)
+        raise AssertionError("a changed canary must be refused")
+    except SystemExit as e:
+        msg = str(e)
+        assert "canary run differs (epe_query.stage2.all.epe: 0.0665 then, 0.0666 now)" in msg, msg
+        assert f"delete {out} or pass another --out" in msg, msg
+    # Refused, nothing overwritten: the record is still the first trainer's.
+    assert json.load(open(os.path.join(out, "canary.json"))) == {"epe_query.stage2.all.epe": 0.0665}
 print("defaults_study rule: ok")
