@@ -219,6 +219,14 @@ void for_each_penalty_option(O& o, F&& f) {
   f("penalty", o.penalty);
   f("penalty_eps", o.penalty_eps);
 }
+// The fields of the trajectory terms, smoothness (E21) and rotation angles (E23) (as
+// check_trajectory_options checks them).
+template <class O, class F>
+void for_each_trajectory_option(O& o, F&& f) {
+  f("form", o.form);
+  f("confidence_weighted", o.confidence_weighted);
+  for_each_penalty_option(o, f);
+}
 // The fields C-ARAP and plain ARAP share (as check_rigidity_options checks them).
 template <class O, class F>
 void for_each_rigidity_option(O& o, F&& f) {
@@ -317,6 +325,11 @@ template <class Options>
 inline Status check_penalty_options(const char* what, const Options& o) {
   return first_error({check_nonneg(what, "weight", o.weight), check_enum(what, "penalty", o.penalty),
                       check_positive(what, "penalty_eps", o.penalty_eps)});
+}
+// The checks of the trajectory terms: a listed form, and the penalty's.
+template <class Options>
+inline Status check_trajectory_options(const char* what, const Options& o) {
+  return first_error({check_enum(what, "form", o.form), check_penalty_options(what, o)});
 }
 // The checks C-ARAP and plain ARAP share: λc, λl >= 0, the gap list, a listed stop-gradient and
 // frame, and the penalty's.

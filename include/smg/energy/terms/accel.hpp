@@ -38,14 +38,11 @@ struct AccelOptions {
 
 template <class O, class F, detail::IfOptions<O, AccelOptions> = 0>
 void for_each_option(O& o, F&& f) {
-  f("form", o.form);
-  f("confidence_weighted", o.confidence_weighted);
-  detail::for_each_penalty_option(o, f);
+  detail::for_each_trajectory_option(o, f);
 }
 
 inline Status validate_options(const AccelOptions& o) {
-  return detail::first_error({detail::check_enum("AccelOptions", "form", o.form),
-                              detail::check_penalty_options("AccelOptions", o)});
+  return detail::check_trajectory_options("AccelOptions", o);
 }
 
 // Checks the arguments of accel(): `confidence` [T][N] may be empty (all 1; read only with

@@ -43,14 +43,11 @@ struct AngleOptions {
 
 template <class O, class F, detail::IfOptions<O, AngleOptions> = 0>
 void for_each_option(O& o, F&& f) {
-  f("form", o.form);
-  f("confidence_weighted", o.confidence_weighted);
-  detail::for_each_penalty_option(o, f);
+  detail::for_each_trajectory_option(o, f);
 }
 
 inline Status validate_options(const AngleOptions& o) {
-  return detail::first_error({detail::check_enum("AngleOptions", "form", o.form),
-                              detail::check_penalty_options("AngleOptions", o)});
+  return detail::check_trajectory_options("AngleOptions", o);
 }
 
 // Checks the arguments of angle(): rotations [T][N][4] (nonzero, normalised on entry);
