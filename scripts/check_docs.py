@@ -1074,7 +1074,7 @@ for inc in list(reached):
 if '#include "smg/energy/regularizers.hpp"' not in umbrella:
     problem("include/smg/energy.hpp", 1, "does not include smg/energy/regularizers.hpp (the term list)")
 # The list: the confidences (the member ConfidenceTerm<S, I> of RegularizerTermSet) and one line
-# X(name, Options, Term, on, rot) of SMG_REGULARIZER_TERMS per energy term.
+# X(name, Options, Term, on) of SMG_REGULARIZER_TERMS per energy term.
 term_set = term_list_hpp[term_list_hpp.find("#define SMG_REGULARIZER_TERMS(X)"):]
 term_set = term_set[:term_set.find("\n\n")]
 term_set += "".join(re.findall(r"\n  \w+Term<S, I> \w+;", term_list_hpp))

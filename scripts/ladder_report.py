@@ -117,7 +117,7 @@ def check_cache(trainer, out, run=None):
     import subprocess
     run = run or (lambda cmd: subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL))
     os.makedirs(out, exist_ok=True)
-    tmp = os.path.join(out, ".canary_run")
+    tmp = os.path.join(out, f".canary_run_{os.getpid()}")  # two studies may share OUT
     shutil.rmtree(tmp, ignore_errors=True)
     run([trainer] + CANARY_ARGS + ["--out", tmp])
     now = canary_figures(json.load(open(os.path.join(tmp, "metrics.json"))))

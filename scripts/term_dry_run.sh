@@ -429,7 +429,7 @@ def edit(path, anchor, text, where="after", old=None):
 
 L = "include/smg/energy/term_list.hpp"
 edit(L, '#include "smg/energy/terms/confidence.hpp"', '#include "smg/energy/terms/dryrun.hpp"\n')
-edit(L, "  X(relrot,", "  X(dryrun, DryrunOptions, DryrunTerm, false, false) /* (@LABEL@), throwaway */ \\\n", "before")
+edit(L, "  X(relrot,", "  X(dryrun, DryrunOptions, DryrunTerm, false) /* (@LABEL@), throwaway */ \\\n", "before")
 
 edit("include/smg/energy/regularizers.hpp", '#include "smg/energy/confidence.hpp"', '#include "smg/energy/dryrun.hpp"\n')
 

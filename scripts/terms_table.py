@@ -72,7 +72,7 @@ def member(struct):
 def entries():
     """The term list: (flag, options struct, term struct) per entry, the confidences first
     (written by hand in term_list.hpp: ConfidenceOptions, ConfidenceTerm), then one per line of
-    SMG_REGULARIZER_TERMS, X(name, Options, Term, on, rot)."""
+    SMG_REGULARIZER_TERMS, X(name, Options, Term, on)."""
     lst = block(read("include/smg/energy/term_list.hpp"), "#define SMG_REGULARIZER_TERMS(X)", "\n\n")
     return [("confidence", "ConfidenceOptions", "ConfidenceTerm")] + re.findall(
         r"^\s*X\((\w+),\s*(\w+),\s*(\w+),", lst, re.M)

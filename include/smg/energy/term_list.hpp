@@ -17,6 +17,7 @@
 
 #include "smg/core/config.hpp"
 
+#include <cstdint>
 #include <sstream>
 #include <string>
 #include <tuple>
@@ -41,15 +42,16 @@
 //   Term      its term, a template <S, I> of energy/terms/ (one term may serve two entries, as
 //             RigidTerm serves C-ARAP and ARAP, which share d (E8); it reads both entries)
 //   on        whether a default RegularizerOptions computes it
-//   rot       whether it reads the rotations (the caller must give them)
+// Whether a term reads the rotations is its own reads_rotations() (the term concept,
+// energy/block.hpp), not a column: one statement of it.
 #define SMG_REGULARIZER_TERMS(X)                                                            \
-  /* name   Options        Term        on     rot                                        */ \
-  X(carap,  CarapOptions,  RigidTerm,  true,  true)  /* (E9), weights (E7) with c          */ \
-  X(arap,   ArapOptions,   RigidTerm,  false, true)  /* (E9) with c ≡ 1, α = 1 (ablations) */ \
-  X(lrm,    LrmOptions,    LrmTerm,    true,  false) /* (E14), weights (E7) with c         */ \
-  X(accel,  AccelOptions,  AccelTerm,  false, false) /* (E21), trajectory smoothness       */ \
-  X(angle,  AngleOptions,  AngleTerm,  false, true)  /* (E23), rotation-angle vel. / acc.  */ \
-  X(relrot, RelrotOptions, RelrotTerm, false, true)  /* (E25), relative rotations, edges   */
+  /* name   Options        Term        on                                                */ \
+  X(carap,  CarapOptions,  RigidTerm,  true)  /* (E9), weights (E7) with c                 */ \
+  X(arap,   ArapOptions,   RigidTerm,  false) /* (E9) with c ≡ 1, α = 1 (ablations)        */ \
+  X(lrm,    LrmOptions,    LrmTerm,    true)  /* (E14), weights (E7) with c                */ \
+  X(accel,  AccelOptions,  AccelTerm,  false) /* (E21), trajectory smoothness              */ \
+  X(angle,  AngleOptions,  AngleTerm,  false) /* (E23), rotation-angle velocity / accel.   */ \
+  X(relrot, RelrotOptions, RelrotTerm, false) /* (E25), relative rotations along the edges */
 
 namespace smg {
 
@@ -57,15 +59,17 @@ namespace smg {
 // use c ≡ 1 (as carap() and lrm() do with an empty confidence view), or the caller's c.
 struct RegularizerTerms {
   bool confidence = true;  // c_{t,i} (E6); written to the `confidence` output when given
-#define SMG_TERM_FLAG_(name, Options, Term, on, rot) bool name = on;
+#define SMG_TERM_FLAG_(name, Options, Term, on) bool name = on;
   SMG_REGULARIZER_TERMS(SMG_TERM_FLAG_)
 #undef SMG_TERM_FLAG_
 };
 
-// Whether a term that is on reads the rotations (so the caller must give them).
+// Whether a term that is on reads the rotations (so the caller must give them): its term says
+// (reads_rotations(), known without options).
 inline bool reads_rotations(const RegularizerTerms& t) {
   bool r = false;
-#define SMG_TERM_READS_(name, Options, Term, on, rot) r = r || ((rot) && t.name);
+#define SMG_TERM_READS_(name, Options, Term, on) \
+  r = r || (t.name && detail::Term<double, std::int32_t>().reads_rotations());
   SMG_REGULARIZER_TERMS(SMG_TERM_READS_)
 #undef SMG_TERM_READS_
   return r;
@@ -75,7 +79,7 @@ inline bool reads_rotations(const RegularizerTerms& t) {
 struct RegularizerOptions {
   RegularizerTerms terms;
   ConfidenceOptions confidence;
-#define SMG_TERM_OPTIONS_(name, Options, Term, on, rot) Options name;
+#define SMG_TERM_OPTIONS_(name, Options, Term, on) Options name;
   SMG_REGULARIZER_TERMS(SMG_TERM_OPTIONS_)
 #undef SMG_TERM_OPTIONS_
 };
@@ -87,7 +91,7 @@ struct RegularizerOptions {
 template <class RO, class F, detail::IfOptions<RO, RegularizerOptions> = 0>
 void for_each_term(RO& o, F&& f) {
   f("confidence", o.terms.confidence, o.confidence);
-#define SMG_TERM_VISIT_(name, Options, Term, on, rot) f(#name, o.terms.name, o.name);
+#define SMG_TERM_VISIT_(name, Options, Term, on) f(#name, o.terms.name, o.name);
   SMG_REGULARIZER_TERMS(SMG_TERM_VISIT_)
 #undef SMG_TERM_VISIT_
 }
@@ -97,7 +101,7 @@ void for_each_term(RO& o, F&& f) {
 // order: the torch CUDA glue reads it as a tensor of each_energy's length.
 template <class S>
 struct RegularizerResult {
-#define SMG_TERM_ENERGY_(name, Options, Term, on, rot) Accumulator<S> name = Accumulator<S>(0);
+#define SMG_TERM_ENERGY_(name, Options, Term, on) Accumulator<S> name = Accumulator<S>(0);
   SMG_REGULARIZER_TERMS(SMG_TERM_ENERGY_)
 #undef SMG_TERM_ENERGY_
 
@@ -106,7 +110,7 @@ struct RegularizerResult {
   // and the tests follow it.
   template <class F, class... R>
   static void each_energy(F&& f, R&... r) {
-#define SMG_TERM_EACH_(name, Options, Term, on, rot) f(#name, r.name...);
+#define SMG_TERM_EACH_(name, Options, Term, on) f(#name, r.name...);
     SMG_REGULARIZER_TERMS(SMG_TERM_EACH_)
 #undef SMG_TERM_EACH_
   }
@@ -173,7 +177,7 @@ inline namespace SMG_ISA_NAMESPACE {
 template <class S, class I>
 struct RegularizerTermSet {
 // Term names a template: (Term)<S, I> would not parse.
-#define SMG_TERM_TYPE_(name, Options, Term, on, rot) , Term<S, I>  // NOLINT(bugprone-macro-parentheses)
+#define SMG_TERM_TYPE_(name, Options, Term, on) , Term<S, I>  // NOLINT(bugprone-macro-parentheses)
   using Energies =
       typename TupleOf<typename UniqueTypes<TypeList<> SMG_REGULARIZER_TERMS(SMG_TERM_TYPE_)>::type>::type;
 #undef SMG_TERM_TYPE_
