@@ -19,7 +19,8 @@
 #
 # --jobs J runs J trainers at once, each with nproc/J threads (results do not depend on the thread
 # count). A run whose OUT/<variant>_s<seed>/metrics.json exists with the same flags is not run
-# again, so an interrupted ladder resumes; --report-only only rewrites the page.
+# again, so an interrupted ladder resumes, as long as a short canary run shows the trainer still
+# computes what made them; --report-only only rewrites the page.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seeds="0 1 2 3 4"
@@ -61,6 +62,10 @@ if [[ $report_only == 0 ]]; then
   build=${SMG_BUILD_DIR:-build/release}
   threads=$(( $(nproc) / jobs )); (( threads >= 1 )) || threads=1
   mkdir -p "$out"
+  # The runs kept in OUT are reused only while the trainer still computes what made them: the
+  # studies' canary (scripts/ladder_report.py check_cache; stops naming the figure that differs).
+  python3 -c 'import sys; sys.path.insert(0, "scripts"); import ladder_report as r; r.check_cache(sys.argv[1], sys.argv[2])' \
+    "$build/examples/smg_trainer" "$out"
   todo=()
   for seed in $seeds; do
     for v in $variants; do
