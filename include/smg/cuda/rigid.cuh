@@ -4,8 +4,8 @@
 // energies, their pair terms (E9) and one back-propagation (E10)): −F into x_n^t's gradient, the
 // rotation part into R_n^t's; then each in-edge i -> n again (from the ReverseGraph, in
 // increasing slot order) for its +F into x_n^t's gradient. With the neighbour's frame (E24) an
-// edge's rotation part belongs to its head, so R_n^t's comes from the in-edges instead. Every (frame, edge) is evaluated
-// twice, by its tail and by its head, instead of keeping the 11·T·N·K scalars of per-slot
+// edge's rotation part belongs to its head, so R_n^t's comes from the in-edges instead. Every
+// (frame, edge) is evaluated twice, by its tail and by its head, instead of keeping the 11·T·N·K scalars of per-slot
 // scratch the separate carap kernels keep: on a GPU the arithmetic is cheap and the scratch
 // traffic is not. Every equation is the CPU's element functions' (elements/carap.hpp, common.hpp's
 // confidence_edge_weight). Host-device: a host loop runs the same steps (the CUDA host suite).

@@ -220,6 +220,19 @@ struct BlockView {
   Index n4() const { return 4 * ne; }
   Index n3() const { return 3 * ne; }
   bool grad() const { return want_x || want_r; }
+  // Adds a right-tangent rotation gradient g (3 values, stride st) of node n at block frame l: an
+  // owned frame straight into the caller's rows (the block owns every node's row at its frames),
+  // a frame of the overlap into the block's rotation spill. Every rotation term writes through it.
+  void add_rotation(Index l, Index n, const S* g, Index st = 1) const {
+    if (l < nown) {
+      rot->add(t0 + l, n, g, st);
+    } else {
+      S* dst = rot->spill_r(b) + (l - nown) * plan->N * 3 + 3 * n;
+      dst[0] += g[0];
+      dst[1] += g[st];
+      dst[2] += g[2 * st];
+    }
+  }
 };
 
 // What a term is set up for (setup(), called by RegularizerTermSet): T frames, N nodes, K

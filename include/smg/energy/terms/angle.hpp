@@ -234,7 +234,7 @@ struct AngleTerm : ScratchFreeRotationTerm, FormState {
   // frames: owned ones into the caller's rows, the overlap into the block's rotation spill.
   template <class E>
   void node(const BlockView<S, I>& v, Block&, Index i, E& energy) const {
-    const Index t0 = v.t0, N = v.plan->N;
+    const Index t0 = v.t0;
     const S* c = v.Xb + i * v.n4() + 3 * v.ne;
     const BlockWeight w{c, t0, weighted};
     const int ord = static_cast<int>(order);
@@ -249,15 +249,7 @@ struct AngleTerm : ScratchFreeRotationTerm, FormState {
       angle_at<S>(t0 + l, i, v.q, ord, penalty, L(scale_d), L(eps_d), w, t0, u_hi, l < v.nown,
                   g, el);
       e += Acc(el);
-      if (!v.want_r) continue;
-      if (l < v.nown) {
-        v.rot->add(t0 + l, i, g, 1);
-      } else {
-        S* dst = v.rot->spill_r(v.b) + (l - v.nown) * N * 3 + 3 * i;
-        dst[0] += g[0];
-        dst[1] += g[1];
-        dst[2] += g[2];
-      }
+      if (v.want_r) v.add_rotation(l, i, g);
     }
     energy.angle += e;
   }

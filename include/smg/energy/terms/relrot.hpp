@@ -239,20 +239,6 @@ struct RelrotTerm : ScratchFreeRotationTerm {
   }
   static Acc& energy_of(RegularizerResult<S>& r) { return r.relrot; }
 
-  // Rotation gradient h (tangent, 3 values) of node j at block frame l: an owned frame straight
-  // into the caller's rows (the block owns every node's row at that frame), the overlap into the
-  // block's rotation spill.
-  static void add_rotation(const BlockView<S, I>& v, Index l, Index j, const S* h) {
-    if (l < v.nown) {
-      v.rot->add(v.t0 + l, j, h, 1);
-    } else {
-      S* dst = v.rot->spill_r(v.b) + (l - v.nown) * v.plan->N * 3 + 3 * j;
-      dst[0] += h[0];
-      dst[1] += h[1];
-      dst[2] += h[2];
-    }
-  }
-
   // The terms of node i's out-edges whose earlier frame the block owns; both ends' rotation
   // gradients (scattered to the neighbours' rows: the block owns its frames' rows of every node).
   template <class E>
@@ -280,16 +266,16 @@ struct RelrotTerm : ScratchFreeRotationTerm {
         for (int c = 0; c < 4; ++c) Gi[c] -= G[c];
         S h[3];
         relrot_tangent(aj, bj, G, h);
-        add_rotation(v, l + 1, j, h);
+        v.add_rotation(l + 1, j, h);
         for (S& c : h) c = -c;
-        add_rotation(v, l, j, h);
+        v.add_rotation(l, j, h);
       }
       if (!want_r) continue;
       S h[3];
       relrot_tangent(ai, bi, Gi, h);
-      add_rotation(v, l + 1, i, h);
+      v.add_rotation(l + 1, i, h);
       for (S& c : h) c = -c;
-      add_rotation(v, l, i, h);
+      v.add_rotation(l, i, h);
     }
     energy.relrot += e;
   }

@@ -316,7 +316,7 @@ struct RigidTerm : TermDefaults {
   template <class E>
   void node(const BlockView<S, I>& v, Block& k, Index i, E& energy) const {
     const BlockPlan& plan = *v.plan;
-    const Index K = plan.K, N = plan.N, ne = v.ne, nr = v.nr, nown = v.nown, t0 = v.t0;
+    const Index K = plan.K, ne = v.ne, nr = v.nr, nown = v.nown, t0 = v.t0;
     const Index n4 = v.n4(), n3 = v.n3();
     const bool grad = v.grad(), want_x = v.want_x, want_r = v.want_r;
     // Members copied to locals: loads through `this` inside the loops would block
@@ -444,20 +444,10 @@ struct RigidTerm : TermDefaults {
     // E24) gets no position gradient, the rotation still does.
     const bool x_nbr = want_x && stop != StopGradient::neighbor;
     const bool x_row = want_x && stop != StopGradient::row;
-    // A frame owner's rotation gradient Ri [3][ne] into its rows: owned frames straight into the
-    // caller's rows (no other block writes them, and this block visits nodes in order), the
-    // overlap into the spill.
+    // A frame owner's rotation gradient Ri [3][ne] into its rows (this block visits nodes in
+    // order, so the sums do not depend on threads).
     auto rotation_rows = [&](Index f) {
-      for (Index l = 0; l < nr; ++l) {
-        if (l < nown) {
-          v.rot->add(t0 + l, f, Ri + l, ne);
-        } else {
-          S* dst = v.rot->spill_r(v.b) + (l - nown) * N * 3 + 3 * f;
-          dst[0] += Ri[l];
-          dst[1] += Ri[ne + l];
-          dst[2] += Ri[2 * ne + l];
-        }
-      }
+      for (Index l = 0; l < nr; ++l) v.add_rotation(l, f, Ri + l, ne);
     };
     for (Index l = 0; l < 3 * ne; ++l) Fi[l] = Ri[l] = S(0);
     for (Index e = 0; e < m_e; ++e) {
