@@ -129,8 +129,9 @@ def check_cache(trainer, out, run=None):
         return "recorded"
     diff = canary_diff(json.load(open(path)), now)
     if diff:
-        sys.exit(f"{os.path.basename(sys.argv[0])}: {out} holds runs of a trainer that computes something "
-                 f"else: the canary run differs ({diff}); delete {out} or pass another --out")
+        # Named by the folder, not the program: scripts/ladder.sh calls this through python3 -c.
+        sys.exit(f"canary: {out} holds runs of a trainer that computes something else: the canary run "
+                 f"differs ({diff}); delete {out} or pass another --out")
     return "same"
 
 
