@@ -2,7 +2,9 @@
 """scripts/defaults_study.py's rule on hand-made runs: a candidate becomes the default only when it
 is never worse beyond noise (query EPE or masked PSNR) in any cell and better (query EPE) in one.
 And the studies' canary (scripts/ladder_report.py check_cache) with a stand-in trainer: recorded on
-first use, accepted while the figures stay the same, refused naming the key when one changes."""
+first use, accepted while the figures stay the same, refused naming the key when one changes. And the
+whole study with a stand-in trainer: the held-out seeds run only the baseline and the value the design
+seeds chose."""
 import json
 import os
 import sys
@@ -90,4 +92,43 @@ with tempfile.TemporaryDirectory() as out:
         assert f"delete {out} or pass another --out" in msg, msg
     # Refused, nothing overwritten: the record is still the first trainer's.
     assert json.load(open(os.path.join(out, "canary.json"))) == {"epe_query.stage2.all.epe": 0.0665}
+
+# The whole study (main) with a stand-in trainer whose figures depend on its flags: --w-accel 0.1
+# lowers the query EPE by 3 mm, 0.3 by 1 mm, --stage2-unobserved hold raises it by 1 mm.
+STAND_IN = """#!/usr/bin/env python3
+import json, os, sys
+a = sys.argv[1:]
+flag = lambda k: a[a.index(k) + 1] if k in a else None
+seed = int(flag("--seed"))
+epe = 0.05 + 1e-4 * (seed % 3) - {None: 0, "0.1": 0.003, "0.3": 0.001}[flag("--w-accel")]
+epe += 0.001 if flag("--stage2-unobserved") == "hold" else 0.0
+os.makedirs(flag("--out"), exist_ok=True)
+m = {"epe_query": {"stage2": {"all": {"epe": epe}, "visible": {"epe": epe}}},
+     "test_psnr_masked": 25.0 + 0.01 * seed, "stage2_iterations": 7}
+json.dump(m, open(os.path.join(flag("--out"), "metrics.json"), "w"))
+"""
+with tempfile.TemporaryDirectory() as tmp:
+    trainer = os.path.join(tmp, "stand_in_trainer")
+    with open(trainer, "w") as f:
+        f.write(STAND_IN.replace("#!/usr/bin/env python3", "#!" + sys.executable))
+    os.chmod(trainer, 0o755)
+    out, doc = os.path.join(tmp, "out"), os.path.join(tmp, "results.md")
+    argv = sys.argv
+    sys.argv = ["defaults_study.py", "--candidates", "w-accel stage2-unobserved", "--scenes", "standard occluder",
+                "--failures", "off", "--seeds", "0 1 2", "--holdout-seeds", "5 6 7", "--phase", "both",
+                "--jobs", "2", "--trainer", trainer, "--out", out, "--doc", doc]
+    ds.main()
+    sys.argv = argv
+    made = sorted(d for d in os.listdir(out) if not d.endswith(".json"))
+    held = sorted(d for d in made if d.endswith(("_s5", "_s6", "_s7")))
+    # Design seeds: the baseline and every value (4 tags x 2 cells x 3 seeds); held-out seeds: the
+    # baseline and 0.1 only (0.3 lost on the design seeds, hold raised the EPE: none chosen).
+    assert len(made) == 4 * 2 * 3 + 2 * 2 * 3, made
+    assert held == sorted(f"{sc}_off_{t}_s{sd}" for sc in ("standard", "occluder") for t in ("default", "w-accel_0.1")
+                          for sd in (5, 6, 7)), held
+    text = open(doc).read()
+    assert text.count("<!-- ladder:defaults-study -->") == 1, text
+    assert "Chosen on the design seeds: 0.1." in text and "Held-out seeds 5 6 7: `--w-accel 0.1`" in text, text
+    assert "Chosen on the design seeds: none (no value lowers the query EPE); the default stays move." in text, text
+    assert "Verdict: **becomes the default**" in text, text
 print("defaults_study rule: ok")
