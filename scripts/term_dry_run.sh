@@ -344,16 +344,8 @@ cat > include/smg/energy/dryrun.hpp <<'EOF'
 
 #include <cstdint>
 
-#include "smg/core/parallel.hpp"
-#include "smg/core/scalar.hpp"
-#include "smg/core/status.hpp"
-#include "smg/core/validate.hpp"
-#include "smg/core/views.hpp"
-#include "smg/energy/common.hpp"
-#include "smg/energy/driver.hpp"
-#include "smg/energy/options.hpp"
+#include "smg/energy/one_term.hpp"
 #include "smg/energy/terms/dryrun.hpp"
-#include "smg/energy/workspace.hpp"
 
 namespace smg {
 

@@ -21,6 +21,7 @@
 #include "smg/energy/lrm.hpp"
 #include "smg/energy/lrm_residuals.hpp"
 #include "smg/energy/elements/lrm.hpp"
+#include "smg/energy/one_term.hpp"
 #include "smg/energy/options.hpp"
 #include "smg/energy/regularizers.hpp"
 #include "smg/energy/terms/accel.hpp"

@@ -40,6 +40,18 @@ inline void add_quaternion_gradient_from_tangent(const S* q, const S* g_phi, S* 
   g_q[3] += f * (-y * a + x * b + w * c);
 }
 
+// Adds the right-tangent gradient g_phi[3] of rotation `item` (a flat index into [..][3] tangent
+// and [..][4] quaternion arrays; q[4] is that rotation) to whichever output the caller asked for:
+// the tangent gradient grad_tangent and/or, by (Q5), the raw-quaternion gradient grad_raw (each
+// may be null). The one place a term's element hands its rotation gradient to a caller's array.
+template <class S>
+SMG_HOST_DEVICE
+inline void add_rotation_gradient(const S* q, Index item, const S* g_phi, S* grad_tangent, S* grad_raw) {
+  if (grad_tangent != nullptr)
+    for (int c = 0; c < 3; ++c) grad_tangent[item * 3 + c] += g_phi[c];
+  if (grad_raw != nullptr) add_quaternion_gradient_from_tangent(q, g_phi, grad_raw + item * 4);  // (Q5)
+}
+
 // Adds the right-tangent gradient of one rotation to g_phi[3], given the raw-coordinate gradient
 // g_q[4] of the (possibly unnormalised) quaternion q[4]; the component of g_q along q is
 // ignored.  (Q3)

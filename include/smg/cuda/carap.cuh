@@ -202,10 +202,7 @@ __global__ void carap_gather_kernel(Index T, Index N, Index K, const std::int32_
         S g[3] = {S(0), S(0), S(0)};
         for (Index k = 0; k < K; ++k)
           for (int c = 0; c < 3; ++c) g[c] += own[(n * K + k) * 3 + c];
-        if (grad_tangent != nullptr)
-          for (int c = 0; c < 3; ++c) grad_tangent[item * 3 + c] += g[c];
-        if (grad_raw != nullptr)
-          add_quaternion_gradient_from_tangent(q.ptr(t, n), g, grad_raw + item * 4);  // (Q5)
+        add_rotation_gradient(q.ptr(t, n), item, g, grad_tangent, grad_raw);
       }
       if (kStaged) __syncthreads();
     }

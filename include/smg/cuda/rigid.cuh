@@ -214,10 +214,7 @@ SMG_HOST_DEVICE inline void fused_rigid_node_at(
     S* dst = grad_x + (t * N + n) * 3;
     for (int b = 0; b < 3; ++b) dst[b] += g[b];
   }
-  if (grad_tangent != nullptr)
-    for (int b = 0; b < 3; ++b) grad_tangent[(t * N + n) * 3 + b] += r[b];
-  if (grad_raw != nullptr)
-    add_quaternion_gradient_from_tangent(q.ptr(t, n), r, grad_raw + (t * N + n) * 4);  // (Q5)
+  add_rotation_gradient(q.ptr(t, n), t * N + n, r, grad_tangent, grad_raw);
 }
 
 // The rigid constants of a call over T frames; edge_count: Σ_i |N(i)| where the kernels read it

@@ -9,17 +9,8 @@
 
 #include <cstdint>
 
-#include "smg/core/parallel.hpp"
-#include "smg/core/rotation_gradient.hpp"
-#include "smg/core/scalar.hpp"
-#include "smg/core/validate.hpp"
-#include "smg/core/views.hpp"
-#include "smg/energy/common.hpp"
-#include "smg/energy/driver.hpp"
-#include "smg/energy/options.hpp"
+#include "smg/energy/one_term.hpp"
 #include "smg/energy/terms/angle.hpp"
-#include "smg/energy/validate.hpp"
-#include "smg/energy/workspace.hpp"
 
 namespace smg {
 

@@ -25,16 +25,9 @@
 
 #include <cstdint>
 
-#include "smg/core/parallel.hpp"
-#include "smg/core/validate.hpp"
-#include "smg/core/views.hpp"
-#include "smg/energy/driver.hpp"
+#include "smg/energy/one_term.hpp"
 #include "smg/energy/elements/confidence.hpp"
-#include "smg/energy/options.hpp"
 #include "smg/energy/terms/confidence.hpp"
-#include "smg/energy/validate.hpp"
-#include "smg/energy/workspace.hpp"
-#include "smg/graph/neighbors.hpp"
 
 namespace smg {
 

@@ -34,15 +34,13 @@ Status validate_confidence(detail::NonDeducedT<PositionsView<const S>> positions
                            FrameScalarsView<S> confidence, FrameScalarsView<S> motion = {},
                            FrameScalarsView<S> rigidity = {}) {
   const Index T = positions.frames(), N = positions.nodes();
-  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (visibility.data() != nullptr)
-    if (Status s = validate_visibility<std::uint8_t>(visibility, T, N, "visibility"); !s) return s;
-  if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  if (Status s = validate_optional_output(confidence, T, N, "confidence"); !s) return s;
-  if (Status s = validate_optional_output(motion, T, N, "motion"); !s) return s;
-  if (Status s = validate_optional_output(rigidity, T, N, "rigidity"); !s) return s;
-  return Status::ok();
+  return detail::first_error(
+      {validate_positions<S>(positions, -1, -1, "positions"),
+       visibility.data() != nullptr ? validate_visibility<std::uint8_t>(visibility, T, N, "visibility")
+                                    : Status::ok(),
+       validate_neighbors(graph, N, "graph"), validate_options(options),
+       validate_optional_output(confidence, T, N, "confidence"),
+       validate_optional_output(motion, T, N, "motion"), validate_optional_output(rigidity, T, N, "rigidity")});
 }
 
 // Checks the inputs and outputs of carap(). `confidence` [T][N] may be empty (all 1), and each
@@ -55,15 +53,11 @@ Status validate_carap(detail::NonDeducedT<PositionsView<const S>> positions,
                       const CarapOptions& options, PositionsView<S> grad_positions = {},
                       detail::NonDeducedT<RotationGradientView<S>> grad_rotations = {}) {
   const Index T = positions.frames(), N = positions.nodes();
-  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (Status s = validate_quaternions<S>(rotations, T, N, QuaternionNorm::normalize_on_entry,
-                                         "rotations");
-      !s)
-    return s;
-  if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
-  if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  return detail::validate_gradient_outputs<S>(grad_positions, grad_rotations, T, N);
+  return detail::first_error(
+      {validate_positions<S>(positions, -1, -1, "positions"),
+       validate_quaternions<S>(rotations, T, N, QuaternionNorm::normalize_on_entry, "rotations"),
+       validate_optional_confidence<S>(confidence, T, N), validate_neighbors(graph, N, "graph"),
+       validate_options(options), detail::validate_gradient_outputs<S>(grad_positions, grad_rotations, T, N)});
 }
 
 // Checks the inputs and outputs of arap().
@@ -86,13 +80,11 @@ Status validate_lrm(detail::NonDeducedT<PositionsView<const S>> positions,
                     const NeighborsView<S, I>& graph, const LrmOptions& options,
                     PositionsView<S> grad_positions = {}, TangentsView<S> omega = {}) {
   const Index T = positions.frames(), N = positions.nodes();
-  if (Status s = validate_positions<S>(positions, -1, -1, "positions"); !s) return s;
-  if (Status s = validate_optional_confidence<S>(confidence, T, N); !s) return s;
-  if (Status s = validate_neighbors(graph, N, "graph"); !s) return s;
-  if (Status s = validate_options(options); !s) return s;
-  if (Status s = validate_optional_output(grad_positions, T, N, "grad_positions"); !s) return s;
-  if (Status s = validate_optional_output(omega, T, N, "omega"); !s) return s;
-  return Status::ok();
+  return detail::first_error({validate_positions<S>(positions, -1, -1, "positions"),
+                              validate_optional_confidence<S>(confidence, T, N),
+                              validate_neighbors(graph, N, "graph"), validate_options(options),
+                              validate_optional_output(grad_positions, T, N, "grad_positions"),
+                              validate_optional_output(omega, T, N, "omega")});
 }
 
 // Checks the arguments of regularizers(); one line naming the bad argument. `rotations` may be

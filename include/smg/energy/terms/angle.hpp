@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "smg/core/rotation_gradient.hpp"
 #include "smg/core/scalar.hpp"
 #include "smg/core/views.hpp"
 #include "smg/energy/block.hpp"
@@ -190,10 +191,7 @@ struct AngleElement {
     S g[3] = {S(0), S(0), S(0)};
     angle_at<S>(t, i, q, order, penalty, k, eps, Weight{weighted ? conf : nullptr, N, i},
                 Index(0), T, true, g, energy);
-    if (grad_tangent != nullptr)
-      for (int d = 0; d < 3; ++d) grad_tangent[(t * N + i) * 3 + d] += g[d];
-    if (grad_raw != nullptr)
-      add_quaternion_gradient_from_tangent(q.ptr(t, i), g, grad_raw + (t * N + i) * 4);  // (Q5)
+    add_rotation_gradient(q.ptr(t, i), t * N + i, g, grad_tangent, grad_raw);
   }
 };
 

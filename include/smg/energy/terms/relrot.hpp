@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "smg/core/rotation_gradient.hpp"
 #include "smg/core/scalar.hpp"
 #include "smg/core/views.hpp"
 #include "smg/energy/block.hpp"
@@ -186,10 +187,7 @@ struct RelrotElement {
       for (int c = 0; c < 3; ++c) g[c] += own ? S(-h[c]) : h[c];
     }
     if (!want_r) return;
-    if (grad_tangent != nullptr)
-      for (int c = 0; c < 3; ++c) grad_tangent[(t * N + n) * 3 + c] += g[c];
-    if (grad_raw != nullptr)
-      add_quaternion_gradient_from_tangent(q.ptr(t, n), g, grad_raw + (t * N + n) * 4);  // (Q5)
+    add_rotation_gradient(q.ptr(t, n), t * N + n, g, grad_tangent, grad_raw);
   }
 };
 
