@@ -2,10 +2,16 @@
 """What smg_trainer turns on by default, chosen by one protocol (docs/results.md, "Defaults by
 evidence"; issue 47).
 
-Every candidate is a trainer flag with today's default (the baseline) and one or more other values:
-  stage2-unobserved  move (today) | hold: stage 2 leaves a node's unobserved frames to the regularisers
-  w-accel            0 (today) | 0.1 | 0.3: trajectory smoothness (E21)
-  alpha              0.6 (today, C-ARAP) | 1 (plain ARAP) | auto (the trainer's rule)
+Every candidate is a trainer flag with a baseline value (the trainer's default when the study began)
+and one or more other values:
+  stage2-unobserved  move (baseline) | hold: stage 2 leaves a node's unobserved frames to the regularisers
+  w-accel            0 (baseline) | 0.1 | 0.3: trajectory smoothness (E21)
+  alpha              0.6 (baseline, C-ARAP) | 1 (plain ARAP) | auto (the trainer's rule)
+Every run passes every candidate's flag: the baseline run all baseline values, a candidate's run
+the baseline values with its own value in place. So each candidate is judged against the same
+baseline, alone, and the runs (and the canary) do not depend on the trainer's defaults: the cache
+and the verdicts outlive a default the study changed. The chosen values together are what the
+ladder (scripts/ladder.sh) runs once they ship.
 Each value runs the full pipeline (stages 0-2, --threads 1) on every cell (scene x tracker-failure
 level) and seed, beside the baseline on the same cell and seed, and is scored by what users measure:
 the 3D EPE of the surface query tracks after stage 2 (all samples, truly visible and hidden ones)
@@ -40,13 +46,22 @@ from ladder_report import fmt, mean_ci, study_arguments, write_section  # noqa: 
 
 SCENES = ["standard", "occluder", "bending"]
 FAILURES = ["off", "typical", "double"]
-# candidate -> (baseline label, [(label, flags)]): the baseline runs with no flag (today's default).
+# candidate (a trainer flag) -> (baseline value, [other values]). The baseline values were the
+# trainer's defaults when the study began; they are passed explicitly, never left to the defaults.
 CANDIDATES = {
-    "stage2-unobserved": ("move", [("hold", ["--stage2-unobserved", "hold"])]),
-    "w-accel": ("0", [("0.1", ["--w-accel", "0.1"]), ("0.3", ["--w-accel", "0.3"])]),
-    "alpha": ("0.6", [("1", ["--alpha", "1"]), ("auto", ["--alpha", "auto"])]),
+    "stage2-unobserved": ("move", ["hold"]),
+    "w-accel": ("0", ["0.1", "0.3"]),
+    "alpha": ("0.6", ["1", "auto"]),
 }
-BASE = "default"
+BASE = "default"  # the baseline run's tag (its folder names keep it: OUT/<scene>_<failures>_default_s<seed>)
+
+
+def pinned(candidate=None, value=None):
+    """The flags of a run: every candidate at its baseline value, `candidate` at `value`."""
+    out = []
+    for c, (base, _) in CANDIDATES.items():
+        out += [f"--{c}", value if c == candidate else base]
+    return out
 
 
 def extra_arguments(ap):
@@ -147,17 +162,17 @@ def adopts(verdicts):
 
 
 def main():
-    a = study_arguments("build/defaults_study", extra_arguments)
+    a = study_arguments("build/defaults_study", extra_arguments, canary_flags=pinned())
     seeds, hold = a.seeds.split(), a.holdout_seeds.split()
     cands = a.candidates.split()
     for c in cands:
         if c not in CANDIDATES:
             sys.exit(f"defaults_study: --candidates: unknown candidate '{c}' (known: {' '.join(CANDIDATES)})")
     cells = [(s, f) for s in a.scenes.split() for f in a.failures.split()]
-    flags = {BASE: []}
+    flags = {BASE: pinned()}
     for c in cands:
-        for label, fl in CANDIDATES[c][1]:
-            flags[f"{c}={label}"] = fl
+        for value in CANDIDATES[c][1]:
+            flags[f"{c}={value}"] = pinned(c, value)
     os.makedirs(a.out, exist_ok=True)
     with concurrent.futures.ThreadPoolExecutor(a.jobs) as ex:
         def run_all(keys):
@@ -170,7 +185,7 @@ def main():
         res = run_all([cell + (sd, tag) for cell in cells for sd in seeds for tag in flags])
         chosen = {}
         for c in cands:
-            tags = [f"{c}={label}" for label, _ in CANDIDATES[c][1]]
+            tags = [f"{c}={value}" for value in CANDIDATES[c][1]]
             means = {t: mean_change(res, cells, seeds, t, BASE) for t in tags}
             best = min(tags, key=lambda t: means[t])
             chosen[c] = (tags, means, best if means[best] < 0 else None)
@@ -187,13 +202,15 @@ def main():
              f"--failures \"{a.failures}\" --seeds \"{a.seeds}\" --holdout-seeds \"{a.holdout_seeds}\" "
              f"--phase {a.phase}` on {datetime.date.today()} ({platform.machine()}, full pipeline, "
              f"{base_m.get('stage2_iterations')} stage-2 iterations, one thread per run). Each entry is the "
-             "paired change candidate − today's default over the seeds of the cell: mean ± 95 % interval "
+             "paired change candidate − baseline over the seeds of the cell (the baseline: the trainer's defaults when "
+             f"the study began, `{' '.join(pinned())}`, passed to every run with the candidate's own value in "
+             "place): mean ± 95 % interval "
              "(Student's t), the seeds on which the candidate is better, and a verdict where the interval "
              "excludes 0. Query EPE: the surface query tracks after stage 2 (all, truly visible, hidden samples).",
              ""]
     for c in cands:
         base_label = CANDIDATES[c][0]
-        lines += [f"**`--{c}`** (today: {base_label})", ""]
+        lines += [f"**`--{c}`** (baseline: {base_label})", ""]
         tags, means, best = chosen[c]
         for t in tags:
             rows, _ = table(res, cells, seeds, t, BASE)
@@ -210,11 +227,11 @@ def main():
         rows, verdicts = table(res, cells, hold, best, BASE)
         ok = adopts(verdicts)
         if ok and c == "alpha" and best.endswith("=auto"):
-            # auto must beat both fixed values: today's (the baseline) and the other one.
+            # auto must beat both fixed values: the baseline's and the other one.
             others = [t for t in tags if t != best] + [BASE]
             ok = all(mean_change(res, cells, hold, best, t) < 0 for t in others)
         lines += [f"Held-out seeds {a.holdout_seeds}: `--{c} {best.split('=')[1]}` − `{base_label}`", ""] + rows
-        lines += ["", f"Verdict: **{'becomes the default' if ok else 'stays off'}** "
+        lines += ["", f"Verdict: **{'becomes the default' if ok else 'not adopted'}** "
                       f"({'never worse beyond noise and better somewhere' if ok else 'the rule is not met'}).", ""]
     lines.append("<!-- /ladder:defaults-study -->")
     write_section(a.doc, "defaults-study", "\n".join(lines) + "\n")

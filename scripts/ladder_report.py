@@ -107,19 +107,22 @@ def canary_diff(old, new):
     return None
 
 
-def check_cache(trainer, out, run=None):
+def check_cache(trainer, out, run=None, flags=()):
     """Runs the canary with `trainer` and compares its figures with those OUT/canary.json recorded
     when OUT's first runs were made; exits naming the first difference (OUT's runs came from a
     trainer that computes something else). Without OUT/canary.json, records it (the runs already in
     OUT are taken to be this trainer's). Returns "recorded" or "same". `run(cmd)` runs a command
-    (tests pass their own)."""
+    (tests pass their own). `flags` go to the canary run too: a study whose runs pass every setting
+    it depends on (scripts/defaults_study.py) pins them, so that its cache outlives a change of the
+    trainer's defaults; without them the canary runs at the defaults, and a changed default refuses
+    the cache, as it must for runs made at the defaults."""
     import shutil
     import subprocess
     run = run or (lambda cmd: subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL))
     os.makedirs(out, exist_ok=True)
     tmp = os.path.join(out, f".canary_run_{os.getpid()}")  # two studies may share OUT
     shutil.rmtree(tmp, ignore_errors=True)
-    run([trainer] + CANARY_ARGS + ["--out", tmp])
+    run([trainer] + CANARY_ARGS + list(flags) + ["--out", tmp])
     now = canary_figures(json.load(open(os.path.join(tmp, "metrics.json"))))
     shutil.rmtree(tmp, ignore_errors=True)
     path = os.path.join(out, "canary.json")
@@ -135,12 +138,13 @@ def check_cache(trainer, out, run=None):
     return "same"
 
 
-def study_arguments(default_out, extra=None):
+def study_arguments(default_out, extra=None, canary_flags=()):
     """The command line the stage-1 studies share (scripts/carap_study.py, scripts/failure_study.py):
     parses it and returns it, with --trainer resolved: without it the trainer is first built into
     build/release (scripts/build_trainer.sh, as scripts/ladder.sh does) and that binary is used.
     `extra(parser)`, when given, adds a study's own arguments. Then the canary (check_cache):
-    OUT's cached runs are reused only when the trainer still computes what made them."""
+    OUT's cached runs are reused only when the trainer still computes what made them (`canary_flags`:
+    the settings the study pins, as check_cache's `flags`)."""
     import subprocess
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", default="0 1 2 3 4")
@@ -157,7 +161,7 @@ def study_arguments(default_out, extra=None):
         subprocess.run([os.path.join(root, "scripts", "build_trainer.sh")], check=True)
         a.trainer = os.path.join(root, os.environ.get("SMG_BUILD_DIR") or "build/release",
                                  "examples", "smg_trainer")
-    check_cache(a.trainer, a.out)
+    check_cache(a.trainer, a.out, flags=canary_flags)
     return a
 
 

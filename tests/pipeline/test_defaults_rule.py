@@ -82,6 +82,10 @@ with tempfile.TemporaryDirectory() as out:
     assert os.path.exists(os.path.join(out, "canary.json"))
     assert [f for f in os.listdir(out) if f.startswith(".canary_run")] == [], "the canary run folder is removed"
     assert lr.check_cache("smg_trainer", out, fake_trainer) == "same"
+    seen = []
+    assert lr.check_cache("smg_trainer", out, lambda cmd: (seen.append(cmd), fake_trainer(cmd)),
+                          flags=["--w-accel", "0"]) == "same"
+    assert seen[0][1 + len(lr.CANARY_ARGS):][:3] == ["--w-accel", "0", "--out"], seen
     figures["value"] = 0.0666
     try:
         lr.check_cache("smg_trainer", out, fake_trainer)
@@ -94,13 +98,18 @@ with tempfile.TemporaryDirectory() as out:
     assert json.load(open(os.path.join(out, "canary.json"))) == {"epe_query.stage2.all.epe": 0.0665}
 
 # The whole study (main) with a stand-in trainer whose figures depend on its flags: --w-accel 0.1
-# lowers the query EPE by 3 mm, 0.3 by 1 mm, --stage2-unobserved hold raises it by 1 mm.
+# lowers the query EPE by 3 mm, 0.3 by 1 mm, --stage2-unobserved hold raises it by 1 mm. It refuses
+# a run (the canary's included) that leaves a candidate's flag to the trainer's defaults: the study
+# pins every candidate, so that its cache outlives a default it changed.
 STAND_IN = """#!/usr/bin/env python3
 import json, os, sys
 a = sys.argv[1:]
 flag = lambda k: a[a.index(k) + 1] if k in a else None
+for k in ("--w-accel", "--stage2-unobserved", "--alpha"):
+    if a.count(k) != 1:
+        sys.exit(f"stand-in: {k} given {a.count(k)} times, not once: {a}")
 seed = int(flag("--seed"))
-epe = 0.05 + 1e-4 * (seed % 3) - {None: 0, "0.1": 0.003, "0.3": 0.001}[flag("--w-accel")]
+epe = 0.05 + 1e-4 * (seed % 3) - {"0": 0, "0.1": 0.003, "0.3": 0.001}[flag("--w-accel")]
 epe += 0.001 if flag("--stage2-unobserved") == "hold" else 0.0
 os.makedirs(flag("--out"), exist_ok=True)
 m = {"epe_query": {"stage2": {"all": {"epe": epe}, "visible": {"epe": epe}}},
@@ -131,4 +140,6 @@ with tempfile.TemporaryDirectory() as tmp:
     assert "Chosen on the design seeds: 0.1." in text and "Held-out seeds 5 6 7: `--w-accel 0.1`" in text, text
     assert "Chosen on the design seeds: none (no value lowers the query EPE); the default stays move." in text, text
     assert "Verdict: **becomes the default**" in text, text
+    assert "`--stage2-unobserved move --w-accel 0 --alpha 0.6`" in text, text
+    assert ds.pinned("w-accel", "0.1") == ["--stage2-unobserved", "move", "--w-accel", "0.1", "--alpha", "0.6"]
 print("defaults_study rule: ok")
