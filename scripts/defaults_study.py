@@ -23,15 +23,24 @@ and the masked test PSNR. The protocol:
      query-EPE change lies above 0, or that of the masked-PSNR change below 0) and it is better
      somewhere (an interval of the query-EPE change below 0). For alpha, auto is kept only when it
      also beats both fixed values there.
-It writes the tables and verdicts between <!-- ladder:defaults-study --> and
-<!-- /ladder:defaults-study --> of the results page. A run whose metrics.json exists is not
-repeated (delete OUT to start over), so a study can be run in parts (--phase design first); a short
-canary run first checks that the trainer still computes what made them (ladder_report.check_cache).
+It writes each candidate's tables and verdict between <!-- ladder:defaults-study-CANDIDATE --> and
+<!-- /ladder:defaults-study-CANDIDATE --> of the results page, so candidates can be studied apart.
+Every run's figures (what the tables read of its metrics.json) go at once into the record
+(--record, docs/data/defaults_study.json, committed), with the canary of the trainer that made
+them: a run found in OUT or in the record is not repeated, so a study runs in parts (--phase design
+first), across sessions and clones, and anyone can rewrite the tables from the record. A short
+canary run first checks that the trainer still computes what made them (ladder_report.check_cache);
+a record made by another trainer is refused, naming the figure.
+--alpha auto picks C-ARAP at alpha 0.6 (the baseline) or plain ARAP from signals the trainer measures
+before stage 1 (pipeline.cpp, choose_carap; failure_study.picks_carap follows it): where the
+baseline run's signals say C-ARAP, the auto run is the baseline run, bit for bit (checked on every
+invocation with the canary), so only the runs where it picks plain ARAP are made.
 Usage: scripts/defaults_study.py [--candidates "stage2-unobserved w-accel alpha"]
                                  [--scenes "standard occluder bending"] [--failures "off typical double"]
                                  [--seeds "0 1 2 3 4"] [--holdout-seeds "5 6 7 8 9"] [--phase design|both]
                                  [--jobs 2] [--out build/defaults_study] [--doc docs/results.md]
                                  [--trainer build/release/examples/smg_trainer]
+                                 [--record docs/data/defaults_study.json | --record ""]
 Without --trainer it first builds the trainer into build/release (scripts/build_trainer.sh)."""
 import concurrent.futures
 import datetime
@@ -40,9 +49,14 @@ import os
 import platform
 import subprocess
 import sys
+import threading
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from ladder_report import fmt, mean_ci, study_arguments, write_section  # noqa: E402
+from failure_study import picks_carap  # noqa: E402
+from ladder_report import (CANARY_ARGS, canary_diff, canary_figures, fmt, mean_ci, study_arguments,  # noqa: E402
+                           write_section)
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 SCENES = ["standard", "occluder", "bending"]
 FAILURES = ["off", "typical", "double"]
@@ -54,6 +68,7 @@ CANDIDATES = {
     "alpha": ("0.6", ["1", "auto"]),
 }
 BASE = "default"  # the baseline run's tag (its folder names keep it: OUT/<scene>_<failures>_default_s<seed>)
+AUTO = "alpha=auto"
 
 
 def pinned(candidate=None, value=None):
@@ -71,17 +86,109 @@ def extra_arguments(ap):
     ap.add_argument("--holdout-seeds", default="5 6 7 8 9", help="the seeds the choice is confirmed on")
     ap.add_argument("--phase", choices=["design", "both"], default="both",
                     help="design: run and report the design seeds only")
+    ap.add_argument("--record", default=os.path.join(ROOT, "docs", "data", "defaults_study.json"),
+                    help="the committed record of every run's figures ('' for none)")
 
 
-def run(trainer, out, scene, failures, seed, tag, flags):
-    """metrics.json of one full-pipeline run (tag names the flags; BASE runs none)."""
-    d = os.path.join(out, f"{scene}_{failures}_{tag}_s{seed}")
-    path = os.path.join(d, "metrics.json")
+def summary(m):
+    """What the study reads of a run's metrics.json, as the record keeps it: the query EPE after
+    stage 2 by part, the masked PSNR, the stage-2 iterations, the time, the signals and the rule's
+    pick (--alpha auto)."""
+    s2 = m["epe_query"]["stage2"]
+    keep = {"epe_query": {"stage2": {p: {"epe": s2[p].get("epe")} for p in ("all", "visible", "hidden") if p in s2}},
+            "test_psnr_masked": m.get("test_psnr_masked")}
+    for k in ("stage2_iterations", "seconds_total", "signals", "rigidity"):
+        if k in m:
+            keep[k] = m[k]
+    return keep
+
+
+class Record:
+    """The record (--record): {"canary": figures, "runs": {run folder name: summary}}. Runs are
+    added as they finish and the file is rewritten whole each time (atomically), so a study cut
+    short keeps every run it finished. path None: no record."""
+
+    def __init__(self, path):
+        self.path, self.lock = path, threading.Lock()
+        self.data = {"canary": None, "runs": {}}
+        if path and os.path.exists(path):
+            try:
+                self.data = json.load(open(path))
+                assert isinstance(self.data.get("runs"), dict)
+                self.data["runs"] = {k: summary(v) for k, v in self.data["runs"].items()}
+            except (ValueError, AssertionError, KeyError, TypeError, AttributeError):
+                sys.exit(f"defaults_study: --record {path}: not a record this script wrote (delete it or pass another)")
+
+    def get(self, name):
+        return self.data["runs"].get(name)
+
+    def add(self, name, m):
+        with self.lock:
+            self.data["runs"][name] = summary(m)
+            self.save()
+
+    def save(self):
+        if not self.path:
+            return
+        os.makedirs(os.path.dirname(os.path.abspath(self.path)), exist_ok=True)
+        # One line per run (sorted), so that a commit's diff shows the runs it adds.
+        runs = sorted(self.data["runs"].items())
+        lines = ['{"canary": ' + json.dumps(self.data["canary"], sort_keys=True) + ",", ' "runs": {']
+        lines += [f"  {json.dumps(k)}: {json.dumps(v, sort_keys=True)}" + ("," if i + 1 < len(runs) else "")
+                  for i, (k, v) in enumerate(runs)]
+        tmp = f"{self.path}.tmp{os.getpid()}"
+        with open(tmp, "w") as f:
+            f.write("\n".join(lines + [" }}"]) + "\n")
+        os.replace(tmp, self.path)
+
+
+def run(trainer, out, record, scene, failures, seed, tag, flags):
+    """The figures of one full-pipeline run (tag names the flags): from OUT's metrics.json, else
+    from the record, else run now and recorded."""
+    name = f"{scene}_{failures}_{tag}_s{seed}"
+    path = os.path.join(out, name, "metrics.json")
     if not os.path.exists(path):
+        if record.get(name) is not None:
+            return record.get(name)
         cmd = [trainer, "--scene", scene, "--tracker-failures", failures, "--seed", str(seed), "--threads", "1",
-               "--no-pictures", "--no-view", "--quiet", "--out", d] + flags
+               "--no-pictures", "--no-view", "--quiet", "--out", os.path.join(out, name)] + flags
         subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    return json.load(open(path))
+    m = json.load(open(path))
+    if record.get(name) is None:
+        record.add(name, m)
+    return m
+
+
+def check_record(record, out):
+    """The record's runs pair with OUT's only when one trainer made both: the record keeps the canary
+    it was made with (OUT/canary.json, which check_cache has just compared with this trainer)."""
+    now = json.load(open(os.path.join(out, "canary.json")))
+    if record.data.get("canary") is None:
+        record.data["canary"] = now
+        return
+    diff = canary_diff(record.data["canary"], now)
+    if diff:
+        sys.exit(f"defaults_study: --record {record.path} holds runs of a trainer that computes something "
+                 f"else: the canary differs ({diff}); pass another --record, or --record '' to run without")
+
+
+def check_auto(trainer, out, run_cmd=None):
+    """Reusing the baseline run for --alpha auto where its rule picks C-ARAP is sound only while such
+    an auto run computes exactly what the baseline does: the canary with --alpha auto must then
+    equal the pinned canary in every figure. Returns the canary's pick ('carap' or 'arap')."""
+    import shutil
+    run_cmd = run_cmd or (lambda cmd: subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL))
+    tmp = os.path.join(out, f".canary_auto_{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    run_cmd([trainer] + CANARY_ARGS + pinned("alpha", "auto") + ["--out", tmp])
+    m = json.load(open(os.path.join(tmp, "metrics.json")))
+    shutil.rmtree(tmp, ignore_errors=True)
+    if m.get("rigidity") == "carap":
+        diff = canary_diff(json.load(open(os.path.join(out, "canary.json"))), canary_figures(m))
+        if diff:
+            sys.exit(f"defaults_study: --alpha auto picking C-ARAP computes something else than the baseline "
+                     f"({diff}): its runs cannot be taken from the baseline's")
+    return m.get("rigidity")
 
 
 def query(m, part="all"):
@@ -162,7 +269,21 @@ def adopts(verdicts):
 
 
 def main():
-    a = study_arguments("build/defaults_study", extra_arguments, canary_flags=pinned())
+    record = None
+
+    def seed_canary(a):
+        # A fresh OUT takes the record's canary, so that check_cache compares this trainer with the
+        # one that made the record's runs.
+        nonlocal record
+        record = Record(a.record or None)
+        canary = os.path.join(a.out, "canary.json")
+        if record.data.get("canary") is not None and not os.path.exists(canary):
+            os.makedirs(a.out, exist_ok=True)
+            with open(canary, "w") as f:
+                json.dump(record.data["canary"], f, indent=1, sort_keys=True)
+
+    a = study_arguments("build/defaults_study", extra_arguments, canary_flags=pinned(), before_check=seed_canary)
+    check_record(record, a.out)
     seeds, hold = a.seeds.split(), a.holdout_seeds.split()
     cands = a.candidates.split()
     for c in cands:
@@ -173,16 +294,30 @@ def main():
     for c in cands:
         for value in CANDIDATES[c][1]:
             flags[f"{c}={value}"] = pinned(c, value)
+    auto_reuse = AUTO in flags and check_auto(a.trainer, a.out) == "carap"
     os.makedirs(a.out, exist_ok=True)
     with concurrent.futures.ThreadPoolExecutor(a.jobs) as ex:
         def run_all(keys):
-            futs = {k: ex.submit(run, a.trainer, a.out, k[0], k[1], k[2], k[3].replace("=", "_"), flags[k[3]])
-                    for k in keys}
-            return {k: f.result() for k, f in futs.items()}
+            # --alpha auto's runs whose rule picks C-ARAP are the baseline's (check_auto), taken once
+            # the baseline has run; the rest run as they are.
+            later = [k for k in keys if k[3] == AUTO and auto_reuse]
+            futs = {k: ex.submit(run, a.trainer, a.out, record, k[0], k[1], k[2], k[3].replace("=", "_"),
+                                 flags[k[3]]) for k in keys if k not in later}
+            done = {k: f.result() for k, f in futs.items()}
+            for k in later:
+                base = done.get(k[:3] + (BASE,)) or res[k[:3] + (BASE,)]
+                if picks_carap(base):
+                    done[k] = base
+                else:
+                    futs[k] = ex.submit(run, a.trainer, a.out, record, k[0], k[1], k[2], k[3].replace("=", "_"),
+                                        flags[k[3]])
+            done.update({k: futs[k].result() for k in later if k not in done})
+            return done
         # Design seeds: every value of every candidate. The choice is made on them alone, and the
         # held-out seeds then run only the baseline and the chosen values (auto also needs the values
         # it must beat), so a value the design seeds rejected costs no held-out run.
-        res = run_all([cell + (sd, tag) for cell in cells for sd in seeds for tag in flags])
+        res = {}
+        res.update(run_all([cell + (sd, tag) for cell in cells for sd in seeds for tag in flags]))
         chosen = {}
         for c in cands:
             tags = [f"{c}={value}" for value in CANDIDATES[c][1]]
@@ -193,22 +328,23 @@ def main():
             held_tags = [BASE]
             for c, (tags, _, best) in chosen.items():
                 if best is not None:
-                    held_tags += tags if (c == "alpha" and best.endswith("=auto")) else [best]
+                    held_tags += tags if (c == "alpha" and best == AUTO) else [best]
             res.update(run_all([cell + (sd, tag) for cell in cells for sd in hold for tag in held_tags]))
 
     base_m = res[cells[0] + (seeds[0], BASE)]
-    lines = ["<!-- ladder:defaults-study -->",
-             f"Written by `scripts/defaults_study.py --candidates \"{a.candidates}\" --scenes \"{a.scenes}\" "
-             f"--failures \"{a.failures}\" --seeds \"{a.seeds}\" --holdout-seeds \"{a.holdout_seeds}\" "
-             f"--phase {a.phase}` on {datetime.date.today()} ({platform.machine()}, full pipeline, "
-             f"{base_m.get('stage2_iterations')} stage-2 iterations, one thread per run). Each entry is the "
-             "paired change candidate − baseline over the seeds of the cell (the baseline: the trainer's defaults when "
-             f"the study began, `{' '.join(pinned())}`, passed to every run with the candidate's own value in "
-             "place): mean ± 95 % interval "
-             "(Student's t), the seeds on which the candidate is better, and a verdict where the interval "
-             "excludes 0. Query EPE: the surface query tracks after stage 2 (all, truly visible, hidden samples).",
-             ""]
     for c in cands:
+        section = f"defaults-study-{c}"
+        lines = [f"<!-- ladder:{section} -->",
+                 f"Written by `scripts/defaults_study.py --candidates \"{c}\" --scenes \"{a.scenes}\" "
+                 f"--failures \"{a.failures}\" --seeds \"{a.seeds}\" --holdout-seeds \"{a.holdout_seeds}\" "
+                 f"--phase {a.phase}` on {datetime.date.today()} ({platform.machine()}, full pipeline, "
+                 f"{base_m.get('stage2_iterations')} stage-2 iterations, one thread per run). Each entry is the "
+                 "paired change candidate − baseline over the seeds of the cell (the baseline: the trainer's "
+                 f"defaults when the study began, `{' '.join(pinned())}`, passed to every run with the "
+                 "candidate's own value in place): mean ± 95 % interval (Student's t), the seeds on which the "
+                 "candidate is better, and a verdict where the interval excludes 0. Query EPE: the surface "
+                 "query tracks after stage 2 (all, truly visible, hidden samples).",
+                 ""]
         base_label = CANDIDATES[c][0]
         lines += [f"**`--{c}`** (baseline: {base_label})", ""]
         tags, means, best = chosen[c]
@@ -216,26 +352,32 @@ def main():
             rows, _ = table(res, cells, seeds, t, BASE)
             lines += [f"Design seeds {a.seeds}: `--{c} {t.split('=')[1]}` − `{base_label}` "
                       f"(query EPE over all cells {means[t]:+.2f} mm)", ""] + rows + [""]
+            if t == AUTO:
+                picked = sum(1 for cell in cells for sd in seeds if picks_carap(res[cell + (sd, BASE)]))
+                lines += [f"`--alpha auto` picked C-ARAP (the baseline) in {picked} of "
+                          f"{len(cells) * len(seeds)} runs.", ""]
         if best is None:
             lines += [f"Chosen on the design seeds: none (no value lowers the query EPE); the default stays "
                       f"{base_label}.", ""]
-            continue
-        lines += [f"Chosen on the design seeds: {best.split('=')[1]}.", ""]
-        if a.phase != "both":
-            lines += ["Not yet confirmed on held-out seeds (--phase design).", ""]
-            continue
-        rows, verdicts = table(res, cells, hold, best, BASE)
-        ok = adopts(verdicts)
-        if ok and c == "alpha" and best.endswith("=auto"):
-            # auto must beat both fixed values: the baseline's and the other one.
-            others = [t for t in tags if t != best] + [BASE]
-            ok = all(mean_change(res, cells, hold, best, t) < 0 for t in others)
-        lines += [f"Held-out seeds {a.holdout_seeds}: `--{c} {best.split('=')[1]}` − `{base_label}`", ""] + rows
-        lines += ["", f"Verdict: **{'becomes the default' if ok else 'not adopted'}** "
-                      f"({'never worse beyond noise and better somewhere' if ok else 'the rule is not met'}).", ""]
-    lines.append("<!-- /ladder:defaults-study -->")
-    write_section(a.doc, "defaults-study", "\n".join(lines) + "\n")
-    print("\n".join(lines))
+        else:
+            lines += [f"Chosen on the design seeds: {best.split('=')[1]}.", ""]
+            if a.phase != "both":
+                lines += ["Not yet confirmed on held-out seeds (--phase design).", ""]
+            else:
+                rows, verdicts = table(res, cells, hold, best, BASE)
+                ok = adopts(verdicts)
+                if ok and c == "alpha" and best == AUTO:
+                    # auto must beat both fixed values: the baseline's and the other one.
+                    others = [t for t in tags if t != best] + [BASE]
+                    ok = all(mean_change(res, cells, hold, best, t) < 0 for t in others)
+                lines += [f"Held-out seeds {a.holdout_seeds}: `--{c} {best.split('=')[1]}` − `{base_label}`", ""]
+                lines += rows + ["", f"Verdict: **{'becomes the default' if ok else 'not adopted'}** "
+                                     f"({'never worse beyond noise and better somewhere' if ok else 'the rule is not met'}).",
+                                 ""]
+        lines.append(f"<!-- /ladder:{section} -->")
+        write_section(a.doc, section, "\n".join(lines) + "\n")
+        print("\n".join(lines))
+    record.save()
 
 
 if __name__ == "__main__":

@@ -138,13 +138,15 @@ def check_cache(trainer, out, run=None, flags=()):
     return "same"
 
 
-def study_arguments(default_out, extra=None, canary_flags=()):
-    """The command line the stage-1 studies share (scripts/carap_study.py, scripts/failure_study.py):
-    parses it and returns it, with --trainer resolved: without it the trainer is first built into
-    build/release (scripts/build_trainer.sh, as scripts/ladder.sh does) and that binary is used.
-    `extra(parser)`, when given, adds a study's own arguments. Then the canary (check_cache):
-    OUT's cached runs are reused only when the trainer still computes what made them (`canary_flags`:
-    the settings the study pins, as check_cache's `flags`)."""
+def study_arguments(default_out, extra=None, canary_flags=(), before_check=None):
+    """The command line the studies share (scripts/carap_study.py, scripts/failure_study.py,
+    scripts/defaults_study.py): parses it and returns it, with --trainer resolved: without it the
+    trainer is first built into build/release (scripts/build_trainer.sh, as scripts/ladder.sh does)
+    and that binary is used. `extra(parser)`, when given, adds a study's own arguments. Then the
+    canary (check_cache): OUT's cached runs are reused only when the trainer still computes what
+    made them (`canary_flags`: the settings the study pins, as check_cache's `flags`);
+    `before_check(args)`, when given, runs just before it (a study with a committed record of runs
+    seeds OUT/canary.json from it)."""
     import subprocess
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", default="0 1 2 3 4")
@@ -161,6 +163,8 @@ def study_arguments(default_out, extra=None, canary_flags=()):
         subprocess.run([os.path.join(root, "scripts", "build_trainer.sh")], check=True)
         a.trainer = os.path.join(root, os.environ.get("SMG_BUILD_DIR") or "build/release",
                                  "examples", "smg_trainer")
+    if before_check:
+        before_check(a)
     check_cache(a.trainer, a.out, flags=canary_flags)
     return a
 

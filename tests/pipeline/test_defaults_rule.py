@@ -4,9 +4,12 @@ is never worse beyond noise (query EPE or masked PSNR) in any cell and better (q
 And the studies' canary (scripts/ladder_report.py check_cache) with a stand-in trainer: recorded on
 first use, accepted while the figures stay the same, refused naming the key when one changes. And the
 whole study with a stand-in trainer: the held-out seeds run only the baseline and the value the design
-seeds chose."""
+seeds chose; every run goes into the record, which a later study with an empty OUT reads instead of
+running again, and which a trainer computing something else may not extend; --alpha auto runs only
+where its rule picks plain ARAP, and not at all when picking C-ARAP stops equalling the baseline."""
 import json
 import os
+import shutil
 import sys
 import tempfile
 
@@ -109,37 +112,104 @@ for k in ("--w-accel", "--stage2-unobserved", "--alpha"):
     if a.count(k) != 1:
         sys.exit(f"stand-in: {k} given {a.count(k)} times, not once: {a}")
 seed = int(flag("--seed"))
+with open(os.environ["STAND_IN_LOG"], "a") as log:
+    log.write(" ".join(a) + "\\n")
 epe = 0.05 + 1e-4 * (seed % 3) - {"0": 0, "0.1": 0.003, "0.3": 0.001}[flag("--w-accel")]
 epe += 0.001 if flag("--stage2-unobserved") == "hold" else 0.0
+epe += 0.0005 if flag("--alpha") == "1" else 0.0
+epe += float(os.environ.get("STAND_IN_SHIFT", "0"))
+# The signals the --alpha auto rule reads: seeds 1, 4, 7 ... have many low-confidence samples.
+low = 0.25 if seed % 3 == 1 else 0.1
+m = {"test_psnr_masked": 25.0 + 0.01 * seed, "stage2_iterations": 7,
+     "signals": {"low_confidence": low, "visibility_flips": 0.01, "observed": 0.9, "rule_threshold": 0.19}}
+if flag("--alpha") == "auto":
+    m["alpha_auto"], m["rigidity"] = True, ("arap" if low >= 0.19 else "carap")
+    epe -= 0.002 if m["rigidity"] == "arap" else -float(os.environ.get("STAND_IN_AUTO_DRIFT", "0"))
+m["epe_query"] = {"stage2": {"all": {"epe": epe}, "visible": {"epe": epe}}}
 os.makedirs(flag("--out"), exist_ok=True)
-m = {"epe_query": {"stage2": {"all": {"epe": epe}, "visible": {"epe": epe}}},
-     "test_psnr_masked": 25.0 + 0.01 * seed, "stage2_iterations": 7}
 json.dump(m, open(os.path.join(flag("--out"), "metrics.json"), "w"))
 """
+
+
+def study(tmp, out, record, candidates, phase="both", expect_exit=None):
+    """Runs main() with the stand-in; returns the trainer calls it made (not the canary's)."""
+    log = os.path.join(tmp, "calls.log")
+    open(log, "w").close()
+    os.environ["STAND_IN_LOG"] = log
+    argv = sys.argv
+    sys.argv = ["defaults_study.py", "--candidates", candidates, "--scenes", "standard occluder",
+                "--failures", "off", "--seeds", "0 1 2", "--holdout-seeds", "5 6 7", "--phase", phase,
+                "--jobs", "2", "--trainer", os.path.join(tmp, "stand_in_trainer"), "--out", out,
+                "--doc", os.path.join(tmp, "results.md"), "--record", record]
+    try:
+        ds.main()
+        assert expect_exit is None, "main() should have refused: " + expect_exit
+    except SystemExit as e:
+        assert expect_exit is not None and expect_exit in str(e), e
+    finally:
+        sys.argv = argv
+    return [c for c in open(log).read().splitlines() if "--stage2-iters 20" not in c]
+
+
 with tempfile.TemporaryDirectory() as tmp:
     trainer = os.path.join(tmp, "stand_in_trainer")
     with open(trainer, "w") as f:
         f.write(STAND_IN.replace("#!/usr/bin/env python3", "#!" + sys.executable))
     os.chmod(trainer, 0o755)
-    out, doc = os.path.join(tmp, "out"), os.path.join(tmp, "results.md")
-    argv = sys.argv
-    sys.argv = ["defaults_study.py", "--candidates", "w-accel stage2-unobserved", "--scenes", "standard occluder",
-                "--failures", "off", "--seeds", "0 1 2", "--holdout-seeds", "5 6 7", "--phase", "both",
-                "--jobs", "2", "--trainer", trainer, "--out", out, "--doc", doc]
-    ds.main()
-    sys.argv = argv
+    out, doc, record = os.path.join(tmp, "out"), os.path.join(tmp, "results.md"), os.path.join(tmp, "rec.json")
+    calls = study(tmp, out, record, "w-accel stage2-unobserved")
     made = sorted(d for d in os.listdir(out) if not d.endswith(".json"))
     held = sorted(d for d in made if d.endswith(("_s5", "_s6", "_s7")))
     # Design seeds: the baseline and every value (4 tags x 2 cells x 3 seeds); held-out seeds: the
     # baseline and 0.1 only (0.3 lost on the design seeds, hold raised the EPE: none chosen).
-    assert len(made) == 4 * 2 * 3 + 2 * 2 * 3, made
+    assert len(made) == 4 * 2 * 3 + 2 * 2 * 3 == len(calls), (made, calls)
     assert held == sorted(f"{sc}_off_{t}_s{sd}" for sc in ("standard", "occluder") for t in ("default", "w-accel_0.1")
                           for sd in (5, 6, 7)), held
     text = open(doc).read()
-    assert text.count("<!-- ladder:defaults-study -->") == 1, text
+    # One section per candidate, so that a later study of another candidate leaves these alone.
+    assert text.count("<!-- ladder:defaults-study-w-accel -->") == 1, text
+    assert text.count("<!-- /ladder:defaults-study-stage2-unobserved -->") == 1, text
     assert "Chosen on the design seeds: 0.1." in text and "Held-out seeds 5 6 7: `--w-accel 0.1`" in text, text
     assert "Chosen on the design seeds: none (no value lowers the query EPE); the default stays move." in text, text
     assert "Verdict: **becomes the default**" in text, text
     assert "`--stage2-unobserved move --w-accel 0 --alpha 0.6`" in text, text
     assert ds.pinned("w-accel", "0.1") == ["--stage2-unobserved", "move", "--w-accel", "0.1", "--alpha", "0.6"]
+    # The record holds every run (what the tables read) and the canary; a fresh OUT runs nothing.
+    rec = json.load(open(record))
+    assert sorted(rec["runs"]) == made and rec["canary"] == json.load(open(os.path.join(out, "canary.json"))), rec
+    assert rec["runs"]["standard_off_default_s0"]["epe_query"]["stage2"]["all"]["epe"] == 0.05, rec
+    shutil.rmtree(out)
+    before = open(doc).read()
+    assert study(tmp, out, record, "w-accel stage2-unobserved") == [], "the record's runs are not repeated"
+    assert open(doc).read() == before, "the same runs write the same tables"
+
+    # --alpha: auto runs only where its rule picks plain ARAP (seeds 1 and 7: 2 cells x 2 seeds); on
+    # the design seeds it lowers the EPE (-2 mm on one seed in three) and 1 raises it, so auto is
+    # chosen and the held-out seeds run the baseline (recorded already), 1 and auto.
+    calls = study(tmp, out, record, "alpha")
+    autos = sorted(c for c in calls if "--alpha auto" in c)
+    assert len(autos) == 4 and all(("--seed 1 " in c) or ("--seed 7 " in c) for c in autos), autos
+    assert len([c for c in calls if c.endswith("--alpha 1")]) == 2 * 6, calls
+    assert len([c for c in calls if "--alpha 0.6" in c]) == 0, "the baseline's runs come from the record"
+    text = open(doc).read()
+    assert text.count("<!-- ladder:defaults-study-alpha -->") == 1 and "Chosen on the design seeds: auto." in text
+    assert "`--alpha auto` picked C-ARAP (the baseline) in 4 of 6 runs." in text, text
+    assert "Chosen on the design seeds: 0.1." in text, "the other candidates' sections are left as they were"
+    # A trainer whose auto no longer equals the baseline when it picks C-ARAP: nothing is reused.
+    os.environ["STAND_IN_AUTO_DRIFT"] = "1e-6"
+    study(tmp, os.path.join(tmp, "out2"), record, "alpha", expect_exit="computes something else than the baseline")
+    del os.environ["STAND_IN_AUTO_DRIFT"]
+    # A trainer that computes something else may not extend the record (a fresh OUT takes the
+    # record's canary), and the record is left as it was.
+    rec = open(record).read()
+    os.environ["STAND_IN_SHIFT"] = "1e-6"
+    study(tmp, os.path.join(tmp, "out3"), record, "w-accel", expect_exit="computes something else")
+    del os.environ["STAND_IN_SHIFT"]
+    assert open(record).read() == rec
+    # A file that is not such a record is refused, naming it, and left as it was.
+    for bad in ("not json", '{"runs": []}', '{"canary": null, "runs": {"x": {"epe_query": 3}}}'):
+        other = os.path.join(tmp, "other.json")
+        open(other, "w").write(bad)
+        study(tmp, os.path.join(tmp, "out4"), other, "w-accel", expect_exit=f"--record {other}: not a record")
+        assert open(other).read() == bad
 print("defaults_study rule: ok")
