@@ -53,7 +53,7 @@ import threading
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from failure_study import picks_carap  # noqa: E402
-from ladder_report import (CANARY_ARGS, canary_diff, canary_figures, fmt, mean_ci, study_arguments,  # noqa: E402
+from ladder_report import (canary_diff, canary_figures, canary_run, fmt, mean_ci, study_arguments,  # noqa: E402
                            write_section)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -176,13 +176,7 @@ def check_auto(trainer, out, run_cmd=None):
     """Reusing the baseline run for --alpha auto where its rule picks C-ARAP is sound only while such
     an auto run computes exactly what the baseline does: the canary with --alpha auto must then
     equal the pinned canary in every figure. Returns the canary's pick ('carap' or 'arap')."""
-    import shutil
-    run_cmd = run_cmd or (lambda cmd: subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL))
-    tmp = os.path.join(out, f".canary_auto_{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    run_cmd([trainer] + CANARY_ARGS + pinned("alpha", "auto") + ["--out", tmp])
-    m = json.load(open(os.path.join(tmp, "metrics.json")))
-    shutil.rmtree(tmp, ignore_errors=True)
+    m = canary_run(trainer, out, pinned("alpha", "auto"), run_cmd)
     if m.get("rigidity") == "carap":
         diff = canary_diff(json.load(open(os.path.join(out, "canary.json"))), canary_figures(m))
         if diff:
