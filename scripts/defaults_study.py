@@ -6,7 +6,7 @@ Every candidate is a trainer flag with a baseline value (the trainer's default w
 and one or more other values:
   stage2-unobserved  move (baseline) | hold: stage 2 leaves a node's unobserved frames to the regularisers
   w-accel            0 (baseline) | 0.1 | 0.3: trajectory smoothness (E21)
-  alpha              0.6 (baseline, C-ARAP) | 1 (plain ARAP) | auto (the trainer's rule)
+  alpha              0.6 (baseline, C-ARAP) | 1 (plain ARAP, and LRM without confidences)
 Every run passes every candidate's flag: the baseline run all baseline values, a candidate's run
 the baseline values with its own value in place. So each candidate is judged against the same
 baseline, alone, and the runs (and the canary) do not depend on the trainer's defaults: the cache
@@ -21,8 +21,7 @@ and the masked test PSNR. The protocol:
   2. held-out seeds (--holdout-seeds), never used in step 1: the chosen value becomes the default
      only where, in every cell, it is never worse beyond noise (the paired 95 % interval of the
      query-EPE change lies above 0, or that of the masked-PSNR change below 0) and it is better
-     somewhere (an interval of the query-EPE change below 0). For alpha, auto is kept only when it
-     also beats both fixed values there.
+     somewhere (an interval of the query-EPE change below 0).
 It writes each candidate's tables and verdict between <!-- ladder:defaults-study-CANDIDATE --> and
 <!-- /ladder:defaults-study-CANDIDATE --> of the results page, so candidates can be studied apart.
 Every run's figures (what the tables read of its metrics.json) go at once into the record
@@ -31,10 +30,10 @@ them: a run found in OUT or in the record is not repeated, so a study runs in pa
 first), across sessions and clones, and anyone can rewrite the tables from the record. A short
 canary run first checks that the trainer still computes what made them (ladder_report.check_cache);
 a record made by another trainer is refused, naming the figure.
---alpha auto picks C-ARAP at alpha 0.6 (the baseline) or plain ARAP from signals the trainer measures
-before stage 1 (pipeline.cpp, choose_carap; failure_study.picks_carap follows it): where the
-baseline run's signals say C-ARAP, the auto run is the baseline run, bit for bit (checked on every
-invocation with the canary), so only the runs where it picks plain ARAP are made.
+alpha had a third value until 2026-11-29, auto (a rule in the trainer that picked C-ARAP or plain
+ARAP from signals seen before stage 1): the design seeds chose it, the held-out seeds rejected it,
+and it was removed from the trainer and from here (docs/results.md, "What the trainer sees before
+stage 1"). Its runs stay in the record (folder names *_alpha_auto_*), unread by this version.
 Usage: scripts/defaults_study.py [--candidates "stage2-unobserved w-accel alpha"]
                                  [--scenes "standard occluder bending"] [--failures "off typical double"]
                                  [--seeds "0 1 2 3 4"] [--holdout-seeds "5 6 7 8 9"] [--phase design|both]
@@ -52,9 +51,7 @@ import sys
 import threading
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from failure_study import picks_carap  # noqa: E402
-from ladder_report import (canary_diff, canary_figures, canary_run, fmt, mean_ci, study_arguments,  # noqa: E402
-                           write_section)
+from ladder_report import canary_diff, fmt, mean_ci, study_arguments, write_section  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -65,10 +62,9 @@ FAILURES = ["off", "typical", "double"]
 CANDIDATES = {
     "stage2-unobserved": ("move", ["hold"]),
     "w-accel": ("0", ["0.1", "0.3"]),
-    "alpha": ("0.6", ["1", "auto"]),
+    "alpha": ("0.6", ["1"]),
 }
 BASE = "default"  # the baseline run's tag (its folder names keep it: OUT/<scene>_<failures>_default_s<seed>)
-AUTO = "alpha=auto"
 
 
 def pinned(candidate=None, value=None):
@@ -92,8 +88,8 @@ def extra_arguments(ap):
 
 def summary(m):
     """What the study reads of a run's metrics.json, as the record keeps it: the query EPE after
-    stage 2 by part, the masked PSNR, the stage-2 iterations, the time, the signals and the rule's
-    pick (--alpha auto)."""
+    stage 2 by part, the masked PSNR, the stage-2 iterations, the time and the signals (and, in the
+    runs of the removed --alpha auto, the rigidity term it picked)."""
     s2 = m["epe_query"]["stage2"]
     keep = {"epe_query": {"stage2": {p: {"epe": s2[p].get("epe")} for p in ("all", "visible", "hidden") if p in s2}},
             "test_psnr_masked": m.get("test_psnr_masked")}
@@ -170,19 +166,6 @@ def check_record(record, out):
     if diff:
         sys.exit(f"defaults_study: --record {record.path} holds runs of a trainer that computes something "
                  f"else: the canary differs ({diff}); pass another --record, or --record '' to run without")
-
-
-def check_auto(trainer, out, run_cmd=None):
-    """Reusing the baseline run for --alpha auto where its rule picks C-ARAP is sound only while such
-    an auto run computes exactly what the baseline does: the canary with --alpha auto must then
-    equal the pinned canary in every figure. Returns the canary's pick ('carap' or 'arap')."""
-    m = canary_run(trainer, out, pinned("alpha", "auto"), run_cmd)
-    if m.get("rigidity") == "carap":
-        diff = canary_diff(json.load(open(os.path.join(out, "canary.json"))), canary_figures(m))
-        if diff:
-            sys.exit(f"defaults_study: --alpha auto picking C-ARAP computes something else than the baseline "
-                     f"({diff}): its runs cannot be taken from the baseline's")
-    return m.get("rigidity")
 
 
 def query(m, part="all"):
@@ -288,28 +271,15 @@ def main():
     for c in cands:
         for value in CANDIDATES[c][1]:
             flags[f"{c}={value}"] = pinned(c, value)
-    auto_reuse = AUTO in flags and check_auto(a.trainer, a.out) == "carap"
     os.makedirs(a.out, exist_ok=True)
     with concurrent.futures.ThreadPoolExecutor(a.jobs) as ex:
         def run_all(keys):
-            # --alpha auto's runs whose rule picks C-ARAP are the baseline's (check_auto), taken once
-            # the baseline has run; the rest run as they are.
-            later = [k for k in keys if k[3] == AUTO and auto_reuse]
             futs = {k: ex.submit(run, a.trainer, a.out, record, k[0], k[1], k[2], k[3].replace("=", "_"),
-                                 flags[k[3]]) for k in keys if k not in later}
-            done = {k: f.result() for k, f in futs.items()}
-            for k in later:
-                base = done.get(k[:3] + (BASE,)) or res[k[:3] + (BASE,)]
-                if picks_carap(base):
-                    done[k] = base
-                else:
-                    futs[k] = ex.submit(run, a.trainer, a.out, record, k[0], k[1], k[2], k[3].replace("=", "_"),
-                                        flags[k[3]])
-            done.update({k: futs[k].result() for k in later if k not in done})
-            return done
+                                 flags[k[3]]) for k in keys}
+            return {k: f.result() for k, f in futs.items()}
         # Design seeds: every value of every candidate. The choice is made on them alone, and the
-        # held-out seeds then run only the baseline and the chosen values (auto also needs the values
-        # it must beat), so a value the design seeds rejected costs no held-out run.
+        # held-out seeds then run only the baseline and the chosen values, so a value the design
+        # seeds rejected costs no held-out run.
         res = {}
         res.update(run_all([cell + (sd, tag) for cell in cells for sd in seeds for tag in flags]))
         chosen = {}
@@ -320,9 +290,7 @@ def main():
             chosen[c] = (tags, means, best if means[best] < 0 else None)
         if a.phase == "both":
             held_tags = [BASE]
-            for c, (tags, _, best) in chosen.items():
-                if best is not None:
-                    held_tags += tags if (c == "alpha" and best == AUTO) else [best]
+            held_tags += [best for _, _, best in chosen.values() if best is not None]
             res.update(run_all([cell + (sd, tag) for cell in cells for sd in hold for tag in held_tags]))
 
     base_m = res[cells[0] + (seeds[0], BASE)]
@@ -346,10 +314,6 @@ def main():
             rows, _ = table(res, cells, seeds, t, BASE)
             lines += [f"Design seeds {a.seeds}: `--{c} {t.split('=')[1]}` − `{base_label}` "
                       f"(query EPE over all cells {means[t]:+.2f} mm)", ""] + rows + [""]
-            if t == AUTO:
-                picked = sum(1 for cell in cells for sd in seeds if picks_carap(res[cell + (sd, BASE)]))
-                lines += [f"`--alpha auto` picked C-ARAP (the baseline) in {picked} of "
-                          f"{len(cells) * len(seeds)} runs.", ""]
         if best is None:
             lines += [f"Chosen on the design seeds: none (no value lowers the query EPE); the default stays "
                       f"{base_label}.", ""]
@@ -360,10 +324,6 @@ def main():
             else:
                 rows, verdicts = table(res, cells, hold, best, BASE)
                 ok = adopts(verdicts)
-                if ok and c == "alpha" and best == AUTO:
-                    # auto must beat both fixed values: the baseline's and the other one.
-                    others = [t for t in tags if t != best] + [BASE]
-                    ok = all(mean_change(res, cells, hold, best, t) < 0 for t in others)
                 lines += [f"Held-out seeds {a.holdout_seeds}: `--{c} {best.split('=')[1]}` − `{base_label}`", ""]
                 lines += rows + ["", f"Verdict: **{'becomes the default' if ok else 'not adopted'}** "
                                      f"({'never worse beyond noise and better somewhere' if ok else 'the rule is not met'}).",

@@ -8,15 +8,18 @@ For every scene (standard, occluder, bending) and tracker-failure level (off, ty
     (C-ARAP + LRM), smg-only (ARAP) and no-lrm (C-ARAP), the two pairs that isolate C-ARAP with and
     without LRM;
   * the full pipeline (default stage 2) of no-carap and full on the --stage2-scenes cells;
-  * stage 1 of no-carap, full and full with --alpha auto on the --holdout-seeds (the rule of
-    docs/results.md, "A rule from what the trainer sees", designed on --seeds, reported there).
+  * stage 1 of no-carap and full on the --holdout-seeds (seeds that no choice was made on).
+(Until 2026-11-29 it also ran full with --alpha auto on the held-out seeds: a rule that picked
+C-ARAP or plain ARAP from signals seen before stage 1. The defaults study removed it from the
+trainer (docs/results.md, "What the trainer sees before stage 1"); the page's tables that report
+it were written by that version of this script.)
 Every run is scored by the 3D EPE of the kQueryCount surface query tracks that --export-dycheck
 writes (metrics.json epe_query, after stage 1 and after stage 2: the metric Dycheck and
 Shape-of-Motion report) and by node EPE (the error of the node trajectories, a diagnostic).
 It writes, between the markers <!-- ladder:failure-study --> and <!-- /ladder:failure-study -->
 of the results page, the paired differences C-ARAP − ARAP per cell (mean ± 95 % interval over the
 seeds, and the seeds on which C-ARAP is better) by both metrics, the stage-2 table, the split of
-the node-EPE difference (node_epe_split_stage1), the run-time signals and the rule's held-out result.
+the node-EPE difference (node_epe_split_stage1), and the run-time signals beside C-ARAP − ARAP.
 Usage: scripts/failure_study.py [--seeds "0 1 2 3 4"] [--holdout-seeds "5 6 7 8 9"]
                                 [--stage2-scenes "occluder bending"] [--jobs 2]
                                 [--out build/failure_study] [--doc docs/results.md]
@@ -40,9 +43,6 @@ SCENES = ["standard", "occluder", "bending"]
 FAILURES = ["off", "typical", "double"]
 VARIANTS = ["no-carap", "full", "smg-only", "no-lrm"]
 # The node-EPE split (evaluate.hpp, node_error_split): groups whose contributions sum to the total.
-# The threshold of choose_carap (examples/trainer/pipeline.cpp): C-ARAP below this low-confidence share.
-# Only for a trainer whose metrics.json lacks signals.rule_threshold (rule_threshold below).
-RULE_THRESHOLD = 0.19
 SPLITS = [(("failed", "clean"), "failed reports \\| clean samples"),
           (("conf_low", "conf_mid", "conf_high"), "c < 0.3 \\| 0.3–0.7 \\| ≥ 0.7"),
           (("driving", "idle"), "nodes driving queries \\| driving none")]
@@ -50,23 +50,21 @@ SPLITS = [(("failed", "clean"), "failed reports \\| clean samples"),
 
 def extra_arguments(ap):
     ap.add_argument("--holdout-seeds", default="5 6 7 8 9",
-                    help="seeds the --alpha auto rule is reported on (never used to design it)")
+                    help="seeds that C-ARAP − ARAP is confirmed on (the design tables use --seeds)")
     ap.add_argument("--stage2-scenes", default="occluder bending",
                     help="scenes whose cells also run the full pipeline (stage 2)")
 
 
 def run(trainer, out, scene, failures, seed, variant, stage2=False):
-    """One run's metrics.json; variant 'auto' is full with --alpha auto."""
+    """One run's metrics.json."""
     tag = "_s2" if stage2 else ""
     d = os.path.join(out, f"{scene}_{failures}_{variant}{tag}_s{seed}")
     path = os.path.join(d, "metrics.json")
     if os.path.exists(path):
         return json.load(open(path))
     cmd = [trainer, "--scene", scene, "--tracker-failures", failures, "--seed", str(seed),
-           "--variant", "full" if variant == "auto" else variant,
+           "--variant", variant,
            "--threads", "1", "--no-pictures", "--no-view", "--quiet", "--out", d]
-    if variant == "auto":
-        cmd += ["--alpha", "auto"]
     if not stage2:
         cmd += ["--stage2-iters", "0", "--no-image-eval"]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
@@ -75,21 +73,9 @@ def run(trainer, out, scene, failures, seed, variant, stage2=False):
 
 def signal(m, k):
     """Run-time signal k of metrics.json `m` as a float: the trainer writes null (NaN) when no
-    node sample was observed, and its rule then keeps the default, C-ARAP."""
+    node sample was observed."""
     v = m["signals"].get(k)
     return float("nan") if v is None else float(v)
-
-
-def picks_carap(m):
-    """The trainer's --alpha auto rule (pipeline.cpp): C-ARAP unless the low-confidence share is at
-    least the threshold (NaN, nothing observed: C-ARAP)."""
-    return not (signal(m, "low_confidence") >= rule_threshold(m))
-
-
-def rule_threshold(m):
-    """The --alpha auto threshold of the trainer that wrote metrics.json `m` (signals.rule_threshold),
-    so that the study follows the trainer's rule; RULE_THRESHOLD where an older trainer lacks it."""
-    return m["signals"].get("rule_threshold", RULE_THRESHOLD)
 
 
 def q1(m):
@@ -142,7 +128,7 @@ def main():
     s2scenes = a.stage2_scenes.split()
     os.makedirs(a.out, exist_ok=True)
     keys = [(s, f, sd, v, False) for s in SCENES for f in FAILURES for sd in seeds for v in VARIANTS]
-    keys += [(s, f, sd, v, False) for s in SCENES for f in FAILURES for sd in hold for v in ("no-carap", "full", "auto")]
+    keys += [(s, f, sd, v, False) for s in SCENES for f in FAILURES for sd in hold for v in ("no-carap", "full")]
     keys += [(s, f, sd, v, True) for s in s2scenes for f in FAILURES for sd in seeds for v in ("no-carap", "full")]
     with concurrent.futures.ThreadPoolExecutor(a.jobs) as ex:
         futs = {k: ex.submit(run, a.trainer, a.out, *k) for k in keys}
@@ -214,13 +200,10 @@ def main():
             rows3.append(f"| {scene} | {fl} | {node} | " + " | ".join(parts) +
                          f" | {fmt(*mean_ci(dif['weighted']), 2)} | {qd} | {by_class} | {vis} |")
 
-    # 4. The run-time signals (no truth), and the rule.
+    # 4. The run-time signals (no truth) beside C-ARAP − ARAP on the design and held-out seeds.
     rows4 = ["| scene | failures | low-confidence share | visibility flips | observed share | C-ARAP − ARAP, query "
-             "EPE (mm), seeds " + " ".join(seeds) + " | auto − better fixed (mm), seeds " + " ".join(seeds) +
-             " | C-ARAP − ARAP (mm), held-out seeds " + " ".join(hold) + " | **auto − better fixed (mm), held out** | "
-             "auto chose C-ARAP (held out) |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    worst_auto = -1e9
+             "EPE (mm), seeds " + " ".join(seeds) + " | C-ARAP − ARAP (mm), held-out seeds " + " ".join(hold) + " |",
+             "|---|---|---:|---:|---:|---:|---:|"]
     for scene in SCENES:
         for fl in FAILURES:
             def mean_signal(k):
@@ -229,31 +212,9 @@ def main():
                 return mean_ci(xs)[0] if xs else float("nan")
             sig = {k: mean_signal(k) for k in ("low_confidence", "visibility_flips", "observed")}
             design = cell(res, scene, fl, seeds, "full", "no-carap", q1)
-
-            def vs_best(ss):
-                fixed = {v: mean_ci([q1(res[(scene, fl, sd, v, False)]) for sd in ss])[0] for v in ("full", "no-carap")}
-                best = min(fixed, key=fixed.get)
-                return cell(res, scene, fl, ss, "auto", best, q1)
-            # On the design seeds auto's run is the variant its rule picks from the signals (the rule
-            # reads them before stage 1 and the runs are deterministic): taken from those runs. On the
-            # held-out seeds the --alpha auto runs are real, and must equal the picked variant's.
-            for sd in seeds:
-                full = res[(scene, fl, sd, "full", False)]
-                pick = "full" if picks_carap(full) else "no-carap"
-                res[(scene, fl, sd, "auto", False)] = res[(scene, fl, sd, pick, False)]
-            for sd in hold:
-                auto = res[(scene, fl, sd, "auto", False)]
-                pick = "full" if auto.get("rigidity") == "carap" else "no-carap"
-                if auto["epe_query"] != res[(scene, fl, sd, pick, False)]["epe_query"]:
-                    sys.exit(f"failure_study.py: {scene}/{fl}/seed {sd}: the --alpha auto run differs from {pick}")
-            d_auto = vs_best(seeds)
             held = cell(res, scene, fl, hold, "full", "no-carap", q1)
-            h_auto = vs_best(hold)
-            worst_auto = max(worst_auto, h_auto[1])
-            chose = sum(1 for sd in hold if res[(scene, fl, sd, "auto", False)].get("rigidity") == "carap")
             rows4.append(f"| {scene} | {fl} | {sig['low_confidence']:.3f} | {sig['visibility_flips']:.3f} | "
-                         f"{sig['observed']:.3f} | {design[0]} | {d_auto[0]} | {held[0]} | {h_auto[0]} | "
-                         f"{chose}/{len(hold)} |")
+                         f"{sig['observed']:.3f} | {design[0]} | {held[0]} |")
 
     m0 = res[(SCENES[0], FAILURES[0], seeds[0], "full", False)]
     secs1 = sum(r["seconds_total"] for k, r in res.items() if not k[4]) / max(1, sum(1 for k in res if not k[4]))
@@ -277,11 +238,9 @@ def main():
             "**Where the node-EPE difference lives** (stage 1, full − no-carap): each group's contribution to "
             "the node-EPE difference (mean over the seeds; the groups of a column sum to the total), and the "
             "node EPE weighted by each node's skinning weight on the query points:\n\n" + "\n".join(rows3) + "\n\n"
-            "**The rule** (`--alpha auto`, docs/trainer.md): the signals are what the trainer sees before "
-            "stage 1 without any truth (means over the design seeds, full variant); 'better fixed' is the "
-            "better of C-ARAP and ARAP (with LRM) by mean query EPE over the same seeds, chosen with "
-            "hindsight:\n\n" + "\n".join(rows4) +
-            f"\n\nWorst held-out cell, auto − better fixed: {worst_auto:+.2f} mm.\n<!-- /ladder:failure-study -->\n")
+            "**What the trainer sees before stage 1** (metrics.json `signals`, no truth; means over the design "
+            "seeds, full variant) beside C-ARAP − ARAP (with LRM) on the design and the held-out seeds:\n\n" +
+            "\n".join(rows4) + "\n<!-- /ladder:failure-study -->\n")
     write_section(a.doc, "failure-study", text)
     print(text)
 

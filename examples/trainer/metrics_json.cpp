@@ -241,11 +241,8 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
     cli::JsonLine sj;
     sj.add("low_confidence", r.signals.low_confidence)
         .add("visibility_flips", r.signals.visibility_flips)
-        .add("observed", r.signals.observed)
-        .add("rule_threshold", kLowConfidenceShare);
+        .add("observed", r.signals.observed);
     j.add_raw("signals", sj.str());
-    if (r.rule_applied)
-      j.add("alpha_auto", true).add("rigidity", r.config.variant.rigidity == Rigidity::carap ? "carap" : "arap");
   }
   j.add("extent", r.data.extent);
   kind.lengths(j, r);

@@ -157,9 +157,6 @@ struct NodeLossOptions {
   // The regularisers (above): weights per node and frame, alpha (E7) of C-ARAP and LRM, the
   // gaps, LRM's Huber width and the confidence options (E6).
   smg::RegularizerOptions regularizers = default_node_regularizers();
-  // --alpha auto: the trainer picks C-ARAP (with its alpha) or plain ARAP for the rigidity term of
-  // a variant with C-ARAP from what it sees before stage 1 (pipeline.hpp, choose_carap).
-  bool alpha_auto = false;
   CarapReading carap_reading = CarapReading::symmetric;
   ConfidenceSource confidence_source = ConfidenceSource::estimate;
   // E6's visibility factor v_{t,i}: off computes the confidences as if every sample were

@@ -95,16 +95,6 @@ SceneSignals scene_signals(const Nodes& n, const std::vector<double>& c) {
   return s;
 }
 
-bool choose_carap(const SceneSignals& s) {
-  // Designed on seeds 0-4 of scripts/failure_study.py (45 paired runs, stage 1, query EPE): of the
-  // three signals only the low-confidence share correlates with C-ARAP − ARAP (Pearson 0.32; the
-  // visibility flips and the observed share about 0), and C-ARAP did worse where the share is
-  // high: when the confidence already distrusts many observed samples, C-ARAP's weight
-  // w (alpha + (1 − alpha) c) mostly lowers the rigidity of sound edges. The threshold is the one
-  // that minimised the summed query EPE on those seeds; seeds 5-9 report it (docs/results.md).
-  return !(s.low_confidence >= kLowConfidenceShare);  // NaN (nothing observed): the default, C-ARAP
-}
-
 namespace {
 
 // What only the procedural scene's truth can say, for the confidence diagnostics
@@ -204,17 +194,10 @@ void log_queries(const Progress& progress, const char* stage, int count, const Q
 TrainerResult run_stages(TrainerResult r, std::chrono::steady_clock::time_point start, const Progress& progress) {
   const smg::ParallelOptions par{r.config.threads, 0};
   const bool truth = r.data.truth.has_value();
-  // What the run sees of its scene before stage 1 (no truth), and the rule that reads it.
+  // What the run sees of its scene before stage 1, without truth (metrics.json: signals).
   const std::vector<double> c_lifted =
       node_confidences(r.nodes, r.nodes.positions, r.config.node_loss.regularizers.confidence, par);
   r.signals = scene_signals(r.nodes, c_lifted);
-  if (r.config.node_loss.alpha_auto && r.config.variant.rigidity == Rigidity::carap) {
-    r.rule_applied = true;
-    if (!choose_carap(r.signals)) r.config.variant.rigidity = Rigidity::arap;
-    progress.line("stage1", format("--alpha auto: low-confidence share %.3f, visibility flips %.3f -> %s",
-                                   r.signals.low_confidence, r.signals.visibility_flips,
-                                   r.config.variant.rigidity == Rigidity::carap ? "C-ARAP" : "plain ARAP"));
-  }
   const TrainerConfig& config = r.config;
 
   // Stage 1. What the truth can say of it is scored below, once the query tracks are known.

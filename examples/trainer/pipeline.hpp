@@ -52,8 +52,8 @@ void resolve_frames(TrainerConfig& config, int frames, const std::vector<std::ui
 // kReferenceExtent for a scene from disk (data_scene.hpp).
 void scale_lengths(TrainerConfig& config, double factor);
 
-// What a run can see of its scene before stage 1, without any truth (docs/results.md, "A rule
-// from what the trainer sees"): over the nodes' lifted trajectories,
+// What a run can see of its scene before stage 1, without any truth (docs/results.md, "What the
+// trainer sees before stage 1"): over the nodes' lifted trajectories,
 //   low_confidence: the share of observed samples whose confidence c (E6, of the lifted
 //     trajectories) is below 0.3;
 //   visibility_flips: the share of consecutive frame pairs (t-1, t) of a node whose observed
@@ -63,13 +63,6 @@ struct SceneSignals {
   double low_confidence = 0, visibility_flips = 0, observed = 0;
 };
 SceneSignals scene_signals(const Nodes& nodes, const std::vector<double>& confidence);
-
-// The rule of --alpha auto (docs/results.md, "A rule from what the trainer sees"): true when the
-// rigidity term should be C-ARAP, false for plain ARAP, from the signals alone.
-bool choose_carap(const SceneSignals& signals);
-// The low-confidence share at and above which choose_carap picks plain ARAP; metrics.json writes
-// it as signals.rule_threshold so that scripts/failure_study.py follows the same rule.
-inline constexpr double kLowConfidenceShare = 0.19;
 
 struct TrainerResult {
   Dataset data;
@@ -95,9 +88,6 @@ struct TrainerResult {
   // (procedural scenes with queries; evaluate.hpp, node_error_split).
   NodeErrorSplit node_split_stage1;
   SceneSignals signals;  // of the lifted trajectories (every run)
-  // With --alpha auto (NodeLossOptions::alpha_auto) on a variant with C-ARAP: what choose_carap
-  // picked (config.variant.rigidity is set to it before stage 1).
-  bool rule_applied = false;
   double seconds_dataset = 0, seconds_stage0 = 0, seconds_total = 0;
 
   // The configuration the stages ran with (frame lists resolved; lengths scaled for a scene from

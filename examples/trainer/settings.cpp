@@ -121,7 +121,7 @@ const std::vector<Setting>& settings() {
       {"w-accel", K::number, "weight of trajectory smoothness (squared node accelerations, E21, as MoSca and Shape-of-Motion); 0 = off", 0.0, 1e6, nullptr,
        [](const C& c) { return c.node_loss.regularizers.accel.weight; },
        [](C& c, double v) { c.node_loss.regularizers.accel.weight = v; }},
-      {"alpha", K::number, "confidence floor alpha of C-ARAP and LRM, E7; 1 makes C-ARAP plain ARAP; auto: C-ARAP or plain ARAP chosen by the trainer from the scene (docs/results.md)", 0.0, 1.0,
+      {"alpha", K::number, "confidence floor alpha of C-ARAP and LRM, E7; 1 makes C-ARAP plain ARAP", 0.0, 1.0,
        nullptr, [](const C& c) { return c.node_loss.regularizers.carap.alpha; },
        [](C& c, double v) { c.node_loss.regularizers.carap.alpha = c.node_loss.regularizers.lrm.alpha = v; }},
       {"carap-reading", K::choice,
@@ -196,12 +196,6 @@ std::vector<cli::FlagSpec> setting_flags() {
 void apply_settings(const cli::Args& args, TrainerConfig* config) {
   for (const Setting& s : settings()) {
     if (!s.set || !args.given(s.name)) continue;
-    // --alpha auto: the rule of docs/results.md ("A rule from what the trainer sees") picks C-ARAP
-    // (with the default alpha) or plain ARAP at run time.
-    if (std::string(s.name) == "alpha" && args.get(s.name) == "auto") {
-      config->node_loss.alpha_auto = true;
-      continue;
-    }
     double v = 0;
     switch (s.kind) {
       case K::integer: v = static_cast<double>(flags::int_in(args, s.name, static_cast<long long>(s.lo),

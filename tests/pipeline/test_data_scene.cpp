@@ -325,15 +325,6 @@ TEST_CASE("scene_signals: shares on a hand example") {
   CHECK(s.low_confidence == doctest::Approx(3.0 / 5));  // observed below 0.3: 0.1, 0.2 and 0.05 (0.5 is unobserved)
   CHECK(s.visibility_flips == doctest::Approx(2.0 / 4));
   CHECK_THROWS_AS(trainer::scene_signals(n, std::vector<double>(5, 0.5)), std::invalid_argument);
-  // --alpha auto's rule: C-ARAP unless the confidence distrusts a large share of the observations;
-  // with nothing observed (NaN) the default, C-ARAP.
-  trainer::SceneSignals sig;
-  sig.low_confidence = 0.10;
-  CHECK(trainer::choose_carap(sig));
-  sig.low_confidence = 0.25;
-  CHECK_FALSE(trainer::choose_carap(sig));
-  sig.low_confidence = std::nan("");
-  CHECK(trainer::choose_carap(sig));
 }
 
 TEST_CASE("query_track_error: EPE and thresholds on a hand example") {

@@ -42,6 +42,7 @@ TEST_CASE("smg_trainer: usage errors are one line on stderr and exit code 2") {
       {"--scene occluded", "scene"},
       {"--alpha 1.5", "--alpha must be in [0.000000, 1.000000], got 1.5"},
       {"--alpha nan", "--alpha"},
+      {"--alpha auto", "--alpha"},  // removed by the defaults study (docs/results.md)
       {"--carap-reading both", "carap-reading"},
       {"--confidence-from oracle", "confidence-from"},
       {"--confidence-visibility maybe", "confidence-visibility"},
