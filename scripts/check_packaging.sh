@@ -20,7 +20,11 @@ scripts/deps.sh cmake make g++ libeigen3-dev
 export CMAKE_BUILD_PARALLEL_LEVEL=${CMAKE_BUILD_PARALLEL_LEVEL:-$(nproc)}
 root=$(pwd)
 work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
+# The pip route runs in the background (below): on any exit its process tree is stopped before
+# the scratch folder it writes into is removed.
+pip_pid=
+kill_tree() { local c; for c in $(cat /proc/"$1"/task/*/children 2>/dev/null); do kill_tree "$c"; done; kill "$1" 2>/dev/null || true; }
+trap '[ -n "$pip_pid" ] && kill_tree "$pip_pid"; wait 2>/dev/null; rm -rf "$work"' EXIT
 
 cmake -S . -B "$work/build" -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_EXAMPLES=OFF -DSMG_BUILD_BENCH=OFF \
       -DSMG_BUILD_TORCH=OFF >/dev/null
@@ -52,6 +56,42 @@ run_block() {  # page name
 # A fresh copy of the tracked files: what a new clone has.
 mkdir -p "$work/fresh/smg" "$work/home"
 git ls-files -z | (cd "$root" && xargs -0 cp --parents -t "$work/fresh/smg")
+
+# 4. The pip route, as docs/torch.md shows it, in the fresh copy (the build's files stay there).
+# Cheaper than the documented default and the same route: CFLAGS=-g0 drops the -g that Debian's
+# Python adds, SMG_TORCH_OPT=-O1 replaces -O3 (setup.py), MAX_JOBS = the cores (ninja's jobs).
+# Measured on smg_torch_energy.cpp, CPU-seconds: 53 as documented, 36 with -g0, 24 with -g0 -O1.
+# setup.py compiles the C++ sources as one file (87 CPU-s for the module at -g0 -O1, against 143
+# as five), one compiler on one core: so the route runs in the background from here, beside
+# routes 1-3, which mostly keep one core busy, and its lines are printed at the end.
+pip_route() {
+  scripts/deps.sh python3-venv >/dev/null 2>&1 || true
+  if /usr/bin/python3 -c "import torch" >/dev/null 2>&1 && /usr/bin/python3 -m venv "$work/venv-probe" >/dev/null 2>&1; then
+    block=$(run_block docs/torch.md pip)
+    [ -n "$block" ] || { echo "packaging: docs/torch.md has no pip block" >&2; exit 1; }
+    t0=$(date +%s)
+    (cd "$work/fresh/smg" && HOME="$work/home" CFLAGS=-g0 SMG_TORCH_OPT=-O1 MAX_JOBS="$(nproc)" PYTHONPATH= \
+       bash -euo pipefail -c "$block") >"$work/pip.log" 2>&1 ||
+      { cat "$work/pip.log"; echo "packaging: docs/torch.md pip block failed" >&2; exit 1; }
+    where=$(cd "$work/fresh/smg" && PYTHONPATH= V/bin/python3 -c "import smg_torch; print(smg_torch.__file__)")
+    case "$where" in
+      "$work/fresh/smg/V/"*) ;;
+      *) echo "packaging: the venv imported smg_torch from $where, not from its own site-packages" >&2; exit 1 ;;
+    esac
+    if /usr/bin/python3 -c "import pytest" >/dev/null 2>&1; then
+      (cd "$work/fresh/smg" && PYTHONPATH= V/bin/python3 -m pytest -q -p no:cacheprovider tests/torch/test_energy.py) \
+        >"$work/pip-test.log" 2>&1 || { cat "$work/pip-test.log"; echo "packaging: tests/torch/test_energy.py failed against the pip-installed smg_torch" >&2; exit 1; }
+      tested=", tests/torch/test_energy.py: $(tail -n 1 "$work/pip-test.log")"
+    else
+      tested=" (python3-pytest missing: tests/torch/test_energy.py not run)"
+    fi
+    echo "packaging: docs/torch.md pip route (venv, --no-build-isolation, import smg_torch from $where): ok in $(( $(date +%s) - t0 ))s$tested"
+  else
+    echo "packaging: pip route skipped: /usr/bin/python3 lacks torch or venv (scripts/deps.sh python3-torch python3-venv)"
+  fi
+}
+(pip_route > "$work/pip.out" 2>&1) &
+pip_pid=$!
 
 block=$(run_block docs/quickstart.md find_package)
 [ -n "$block" ] || { echo "packaging: docs/quickstart.md has no find_package block" >&2; exit 1; }
@@ -88,31 +128,8 @@ cp examples/quickstart/energies.cpp "$work/fresh/my_project/main.cpp"
 "$work/fresh/my_project/main" | tail -n 1 | grep -qx "quickstart energies: ok"
 echo "packaging: README.md copied-headers route, as written: ok"
 
-# 4. The pip route, as docs/torch.md shows it, in the fresh copy (the build's files stay there).
-# Cheaper than the documented default and the same route: CFLAGS=-g0 drops the -g that Debian's
-# Python adds, SMG_TORCH_OPT=-O1 replaces -O3 (setup.py), MAX_JOBS = the cores (ninja's jobs).
-# Measured on smg_torch_energy.cpp, CPU-seconds: 53 as documented, 36 with -g0, 24 with -g0 -O1.
-scripts/deps.sh python3-venv >/dev/null 2>&1 || true
-if /usr/bin/python3 -c "import torch" >/dev/null 2>&1 && /usr/bin/python3 -m venv "$work/venv-probe" >/dev/null 2>&1; then
-  block=$(run_block docs/torch.md pip)
-  [ -n "$block" ] || { echo "packaging: docs/torch.md has no pip block" >&2; exit 1; }
-  t0=$(date +%s)
-  (cd "$work/fresh/smg" && HOME="$work/home" CFLAGS=-g0 SMG_TORCH_OPT=-O1 MAX_JOBS="$(nproc)" PYTHONPATH= \
-     bash -euo pipefail -c "$block") >"$work/pip.log" 2>&1 ||
-    { cat "$work/pip.log"; echo "packaging: docs/torch.md pip block failed" >&2; exit 1; }
-  where=$(cd "$work/fresh/smg" && PYTHONPATH= V/bin/python3 -c "import smg_torch; print(smg_torch.__file__)")
-  case "$where" in
-    "$work/fresh/smg/V/"*) ;;
-    *) echo "packaging: the venv imported smg_torch from $where, not from its own site-packages" >&2; exit 1 ;;
-  esac
-  if /usr/bin/python3 -c "import pytest" >/dev/null 2>&1; then
-    (cd "$work/fresh/smg" && PYTHONPATH= V/bin/python3 -m pytest -q -p no:cacheprovider tests/torch/test_energy.py) \
-      >"$work/pip-test.log" 2>&1 || { cat "$work/pip-test.log"; echo "packaging: tests/torch/test_energy.py failed against the pip-installed smg_torch" >&2; exit 1; }
-    tested=", tests/torch/test_energy.py: $(tail -n 1 "$work/pip-test.log")"
-  else
-    tested=" (python3-pytest missing: tests/torch/test_energy.py not run)"
-  fi
-  echo "packaging: docs/torch.md pip route (venv, --no-build-isolation, import smg_torch from $where): ok in $(( $(date +%s) - t0 ))s$tested"
-else
-  echo "packaging: pip route skipped: /usr/bin/python3 lacks torch or venv (scripts/deps.sh python3-torch python3-venv)"
-fi
+pip_rc=0
+wait "$pip_pid" || pip_rc=$?
+pip_pid=
+cat "$work/pip.out"
+exit "$pip_rc"
