@@ -26,26 +26,6 @@ pip_pid=
 kill_tree() { local c; for c in $(cat /proc/"$1"/task/*/children 2>/dev/null); do kill_tree "$c"; done; kill "$1" 2>/dev/null || true; }
 trap '[ -n "$pip_pid" ] && kill_tree "$pip_pid"; wait 2>/dev/null; rm -rf "$work"' EXIT
 
-cmake -S . -B "$work/build" -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_EXAMPLES=OFF -DSMG_BUILD_BENCH=OFF \
-      -DSMG_BUILD_TORCH=OFF >/dev/null
-cmake --install "$work/build" --prefix "$work/prefix" >/dev/null
-cmake -S tests/consumer -B "$work/consumer-installed" -DCMAKE_PREFIX_PATH="$work/prefix" >/dev/null
-cmake --build "$work/consumer-installed" >/dev/null
-"$work/consumer-installed/smg_consumer"
-echo "packaging: find_package(smg) after cmake --install: ok"
-
-cmake -S tests/consumer -B "$work/consumer-subdir" -DSMG_CONSUMER_USE_SUBDIRECTORY="$root" >/dev/null
-cmake --build "$work/consumer-subdir" >/dev/null
-"$work/consumer-subdir/smg_consumer"
-echo "packaging: add_subdirectory(smg): ok"
-
-mkdir -p "$work/copied"
-cp -r include "$work/copied/include"
-g++ -std=c++17 -Wall -Wextra -Wpedantic -Werror -I"$work/copied/include" -I/usr/include/eigen3 \
-    tests/consumer/main.cpp -o "$work/copied/smg_consumer" -pthread
-"$work/copied/smg_consumer"
-echo "packaging: copied include/ + Eigen: ok"
-
 # The command block after "<!-- run: NAME -->" in a markdown page.
 run_block() {  # page name
   awk -v mark="<!-- run: $2 -->" '
@@ -63,7 +43,8 @@ git ls-files -z | (cd "$root" && xargs -0 cp --parents -t "$work/fresh/smg")
 # Measured on smg_torch_energy.cpp, CPU-seconds: 53 as documented, 36 with -g0, 24 with -g0 -O1.
 # setup.py compiles the C++ sources as one file (87 CPU-s for the module at -g0 -O1, against 143
 # as five), one compiler on one core: so the route runs in the background from here, beside
-# routes 1-3, which mostly keep one core busy, and its lines are printed at the end.
+# routes 1-3, which mostly keep one core busy, and its lines are printed at the end. It starts
+# first: on its own it is the longest route (113 s in CI's stage 3, against about 35 s for the rest).
 pip_route() {
   scripts/deps.sh python3-venv >/dev/null 2>&1 || true
   if /usr/bin/python3 -c "import torch" >/dev/null 2>&1 && /usr/bin/python3 -m venv "$work/venv-probe" >/dev/null 2>&1; then
@@ -92,6 +73,27 @@ pip_route() {
 }
 (pip_route > "$work/pip.out" 2>&1) &
 pip_pid=$!
+
+cmake -S . -B "$work/build" -DSMG_BUILD_TESTS=OFF -DSMG_BUILD_EXAMPLES=OFF -DSMG_BUILD_BENCH=OFF \
+      -DSMG_BUILD_TORCH=OFF >/dev/null
+cmake --install "$work/build" --prefix "$work/prefix" >/dev/null
+cmake -S tests/consumer -B "$work/consumer-installed" -DCMAKE_PREFIX_PATH="$work/prefix" >/dev/null
+cmake --build "$work/consumer-installed" >/dev/null
+"$work/consumer-installed/smg_consumer"
+echo "packaging: find_package(smg) after cmake --install: ok"
+
+cmake -S tests/consumer -B "$work/consumer-subdir" -DSMG_CONSUMER_USE_SUBDIRECTORY="$root" >/dev/null
+cmake --build "$work/consumer-subdir" >/dev/null
+"$work/consumer-subdir/smg_consumer"
+echo "packaging: add_subdirectory(smg): ok"
+
+mkdir -p "$work/copied"
+cp -r include "$work/copied/include"
+g++ -std=c++17 -Wall -Wextra -Wpedantic -Werror -I"$work/copied/include" -I/usr/include/eigen3 \
+    tests/consumer/main.cpp -o "$work/copied/smg_consumer" -pthread
+"$work/copied/smg_consumer"
+echo "packaging: copied include/ + Eigen: ok"
+
 
 block=$(run_block docs/quickstart.md find_package)
 [ -n "$block" ] || { echo "packaging: docs/quickstart.md has no find_package block" >&2; exit 1; }
