@@ -107,21 +107,6 @@ def canary_diff(old, new):
     return None
 
 
-def canary_run(trainer, out, flags=(), run=None):
-    """The metrics.json of one canary run (CANARY_ARGS + `flags`) made in a scratch folder under OUT,
-    which is removed. `run(cmd)` runs a command (tests pass their own)."""
-    import shutil
-    import subprocess
-    run = run or (lambda cmd: subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL))
-    os.makedirs(out, exist_ok=True)
-    tmp = os.path.join(out, f".canary_run_{os.getpid()}")  # two studies may share OUT
-    shutil.rmtree(tmp, ignore_errors=True)
-    run([trainer] + CANARY_ARGS + list(flags) + ["--out", tmp])
-    m = json.load(open(os.path.join(tmp, "metrics.json")))
-    shutil.rmtree(tmp, ignore_errors=True)
-    return m
-
-
 def check_cache(trainer, out, run=None, flags=()):
     """Runs the canary with `trainer` and compares its figures with those OUT/canary.json recorded
     when OUT's first runs were made; exits naming the first difference (OUT's runs came from a
@@ -131,7 +116,15 @@ def check_cache(trainer, out, run=None, flags=()):
     it depends on (scripts/defaults_study.py) pins them, so that its cache outlives a change of the
     trainer's defaults; without them the canary runs at the defaults, and a changed default refuses
     the cache, as it must for runs made at the defaults."""
-    now = canary_figures(canary_run(trainer, out, flags, run))
+    import shutil
+    import subprocess
+    run = run or (lambda cmd: subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL))
+    os.makedirs(out, exist_ok=True)
+    tmp = os.path.join(out, f".canary_run_{os.getpid()}")  # two studies may share OUT
+    shutil.rmtree(tmp, ignore_errors=True)
+    run([trainer] + CANARY_ARGS + list(flags) + ["--out", tmp])
+    now = canary_figures(json.load(open(os.path.join(tmp, "metrics.json"))))
+    shutil.rmtree(tmp, ignore_errors=True)
     path = os.path.join(out, "canary.json")
     if not os.path.exists(path):
         with open(path, "w") as f:
