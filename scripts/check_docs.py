@@ -66,6 +66,11 @@ Usage: scripts/check_docs.py [REPO_ROOT]   (standard library only; exit 1 on any
     docs/performance.md is generated as a whole ((g)); its hand tables are its notes'.
 (f) also: a page that builds some targets into a folder it configures and then runs
     `ctest --test-dir` there with -R must build every program whose test -R selects.
+(o) drift between statements: a range right after the math pages it covers ("`docs/math/energy.md`
+    and `docs/math/terms/`, E1–E25") that starts at their first label must end at their last; no
+    sentence in README.md, docs/ or bench/notes/ says the fused CUDA step has not run on a GPU (or
+    is not measured) while bench/results/gpu/ holds a run of it; a figure stated on several pages
+    (scripts/test.sh's duration in README.md and docs/contributing.md) is the same on each.
 
 Prints one line per problem, "path:line: message", and exits 1 if there are any.
 """
@@ -1228,6 +1233,111 @@ for f in sorted(TEXT):
         for n in unmarked_tables(TEXT[f]):
             problem(f, n, "a table of figures outside a generated block without "
                           "'<!-- not generated: WHY -->' on the line above it")
+
+# ---------------------------------------------------------------------------------------------
+# (o) statements that drift apart from the code, the data or each other. Each check is narrow: it
+# names one kind of drift that happened, and says page:line.
+DRIFT_PAGES = sorted(f for f in TEXT if f.endswith(".md") and (
+    f == "README.md" or f.startswith("docs/") or f.startswith("bench/notes/")))
+
+
+def paragraphs(text):
+    """(first line number, [(line number, line)]) of each paragraph outside fenced blocks."""
+    para = []
+    for n, line in md_lines(text, strip_code=False):
+        if line.strip():
+            para.append((n, line))
+        elif para:
+            yield para
+            para = []
+    if para:
+        yield para
+
+
+def sentences(para):
+    """(line number, sentence) of a paragraph's sentences (split after '.', ';' or ':' + space)."""
+    text, starts = "", []
+    for n, line in para:
+        starts.append((len(text), n))
+        text += line.strip() + " "
+    pos = 0
+    for m in list(re.finditer(r"(?<=[.;])\s+", text)) + [None]:
+        end = m.start() if m else len(text)
+        chunk = text[pos:end].strip()
+        if chunk:
+            line = max(n for off, n in starts if off <= pos)
+            yield line, chunk
+        pos = m.end() if m else len(text)
+
+
+# (o1) A range right after the math pages it covers ("derivations in `docs/math/energy.md` and
+# `docs/math/terms/`, E1–E25"; "`docs/math/skin.md`, S1–S19") that starts at those pages' first
+# label of its prefix must end at their last: a label added to the pages must reach the range.
+MATH_REF = r"`?(?:docs/)?math/(?:terms/|[\w-]+\.md|[\w-]+/)`?\)?"
+WHOLE_RANGE = re.compile(r"((?:%s\s*(?:,\s*and|,|and)\s*)*%s)\s*,\s*(?:equations\s+)?([%s])(\d{1,2})"
+                         r"\s*[-–]\s*\2(\d{1,2})\b" % (MATH_REF, MATH_REF, PREFIXES))
+
+
+def math_pages_named(refs):
+    pages = set()
+    for m in re.finditer(r"math/(terms/|[\w-]+\.md|[\w-]+/)", refs):
+        name = m.group(1)
+        if name.endswith("/"):
+            pages.update(f for f in MATH if f.startswith("docs/math/" + name))
+        else:
+            pages.add("docs/math/" + name)
+    return pages
+
+
+for f in DRIFT_PAGES:
+    if f in MATH:
+        continue
+    for n, line in md_lines(TEXT[f], strip_code=False):
+        for m in WHOLE_RANGE.finditer(line):
+            pages = math_pages_named(m.group(1))
+            prefix, lo, hi = m.group(2), int(m.group(3)), int(m.group(4))
+            nums = sorted(int(l[1:]) for l, p in page_of.items() if l[0] == prefix and p in pages)
+            if nums and lo == nums[0] and hi != nums[-1]:
+                problem(f, n, "range %s%d–%s%d after %s: those pages define %s%d–%s%d (extend the range)"
+                        % (prefix, lo, prefix, hi, ", ".join(sorted(pages)), prefix, nums[0], prefix,
+                           nums[-1]))
+
+# (o2) The fused CUDA step said not to have run on a GPU (or not to be measured) while
+# bench/results/gpu/ holds a GPU run of it: a sentence that names the fused step on the GPU and
+# says it has not run, was written without a GPU or is not measured.
+FUSED_RUNS = sorted(f for f in TEXT if f.startswith("bench/results/gpu/")
+                    and re.search(r"fused[^\n]*\d\s*ms", TEXT[f], re.I))
+FUSED_CUDA = re.compile(r"fused (?:CUDA )?step|smg::cuda::regularizers", re.I)
+GPU_WORD = re.compile(r"CUDA|GPU|smg::cuda")
+NOT_RUN = re.compile(r"\b(?:has|have|had) not (?:yet )?(?:been )?(?:run|measured)\b|\bnot (?:yet )?run on "
+                     r"(?:a|the) GPU\b|\bwritten without a GPU\b|\bnot (?:yet )?measured\b|\bnever run\b",
+                     re.I)
+if FUSED_RUNS:
+    for f in DRIFT_PAGES:
+        for para in paragraphs(TEXT[f]):
+            for n, sentence in sentences(para):
+                if FUSED_CUDA.search(sentence) and GPU_WORD.search(sentence) and NOT_RUN.search(sentence):
+                    problem(f, n, "says the fused CUDA step has not run or is not measured ('%s'), but %s "
+                            "holds a GPU run of it" % (NOT_RUN.search(sentence).group(0), FUSED_RUNS[0]))
+
+# (o3) One figure stated on several pages must be the same figure everywhere: (what, pages, the
+# pattern whose group 1 is the figure, within a sentence).
+SAME_FIGURE = [
+    ("scripts/test.sh's duration", ("README.md", "docs/contributing.md"),
+     re.compile(r"`scripts/test\.sh`[^.`]*?(?:takes|:)\s+(?:about\s+)?(\d+(?:\s*[–-]\s*\d+)?)\s+minutes")),
+]
+for what, pages, pattern in SAME_FIGURE:
+    found = []  # (page, line, figure)
+    for f in pages:
+        for para in paragraphs(TEXT.get(f, "")):
+            for n, sentence in sentences(para):
+                for m in pattern.finditer(sentence):
+                    found.append((f, n, re.sub(r"\s*[–-]\s*", "–", m.group(1))))
+    for f, n, figure in found:
+        other = next(((g, k, x) for g, k, x in found if x != figure), None)
+        if other:
+            problem(f, n, "%s stated as %s here and as %s at %s:%d (state one figure)"
+                    % (what, figure, other[2], other[0], other[1]))
 
 if HELP_MISSING:
     print("check_docs: note: not built, so their flag values were not checked: %s (build/release/examples)"

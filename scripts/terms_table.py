@@ -93,7 +93,9 @@ def rows():
     # smg_torch.regularizers takes its term keywords from the list (`**terms`, checked against
     # REGULARIZER_TERMS, which _C reads from smg::for_each_term): then every term on the list has
     # its keyword. Otherwise (keywords written by hand) the ones its signature names.
-    function = block(torch_init, "def regularizers(", "\n\n\n")
+    # (regularizers() hands its checked keywords to _regularizers(), which smg_torch.compat also
+    # calls: the loop over the list is there.)
+    function = block(torch_init, "def regularizers(", "\n\n\n") + block(torch_init, "def _regularizers(", "\n\n\n")
     signature = block(function, "def regularizers(", ":\n")
     from_list = (re.search(r"\*\*terms\b", signature)
                  and re.search(r"\bfor \w+(?:, \w+)? in REGULARIZER_TERMS\b", function))

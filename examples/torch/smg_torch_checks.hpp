@@ -14,6 +14,7 @@
 #include <cstring>
 #include <initializer_list>
 #include <new>
+#include <sstream>
 #include <string>
 #include <utility>
 
@@ -98,8 +99,27 @@ inline void require_shape(const at::Tensor& t, const char* name, int64_t rank, i
     value_error(std::string(name) + ": expected shape " + layout + ", got " + shape_of(t));
 }
 
+// A dense (strided) tensor, else one error naming it: smg reads storage, and a sparse tensor's
+// own error ("reshape is not implemented for sparse tensors") names neither it nor the argument.
+inline void require_dense(const at::Tensor& t, const char* name) {
+  if (t.layout() == at::kStrided) return;
+  std::ostringstream layout;
+  layout << t.layout();
+  value_error(std::string(name) + ": a tensor of layout " + layout.str() +
+              "; smg takes dense (strided) tensors: pass .to_dense()");
+}
+
+// `t` as smg reads it: dense, its negative and conjugate bits resolved (torch._neg_view and
+// conj().imag give views whose storage holds the negated values: read raw, a gradient would
+// come out with the wrong sign). No copy when neither bit is set.
+inline at::Tensor dense_input(const at::Tensor& t, const char* name) {
+  require_dense(t, name);
+  return t.resolve_conj().resolve_neg();
+}
+
 // For the CPU-only operators (build_graph, render, _library_seconds, _accel).
 inline void require_cpu(const at::Tensor& t, const char* name) {
+  require_dense(t, name);
   if (t.is_cuda()) not_implemented(kCpuOnlyMessage);
   if (!t.device().is_cpu()) value_error(std::string(name) + ": expected a CPU tensor");
 }
@@ -135,10 +155,11 @@ inline void require_device(const at::Tensor& t, const char* name, const Referenc
               ", got " + t.device().str());
 }
 
-// `t` on the reference's device, made contiguous (a copy only when it was not).
+// `t` on the reference's device, dense_input, made contiguous (a copy only when it was not or a
+// bit was set).
 inline at::Tensor on_device(const at::Tensor& t, const char* name, const Reference& r) {
   require_device(t, name, r);
-  return t.contiguous();
+  return dense_input(t, name).contiguous();
 }
 
 // A float tensor of the reference's dtype and device with the given rank and last dimension.
@@ -197,13 +218,15 @@ inline at::Tensor visibility_input(const at::Tensor& v, const Reference& r, bool
   return (c != 0).to(at::kByte).contiguous();
 }
 
-// Checks an index vector [n] of any integer dtype on the reference's device; read as it is
-// (its range is checked by check_index_ranges, then it is converted to int32).
-inline void index_input(const at::Tensor& a, const char* name, const Reference& r) {
+// Checks an index vector [n] of any integer dtype on the reference's device and returns it as
+// dense_input (its range is checked by check_index_ranges, then it is converted to int32).
+inline at::Tensor index_input(const at::Tensor& a, const char* name, const Reference& r) {
   require_device(a, name, r);
-  if (a.dim() != 1) value_error(std::string(name) + ": expected shape [n], got " + shape_of(a));
-  if (at::isFloatingType(a.scalar_type()) || a.scalar_type() == at::kBool)
-    value_error(std::string(name) + ": dtype must be an integer type, got " + dtype_name(a.scalar_type()));
+  const at::Tensor d = dense_input(a, name);
+  if (d.dim() != 1) value_error(std::string(name) + ": expected shape [n], got " + shape_of(d));
+  if (at::isFloatingType(d.scalar_type()) || d.scalar_type() == at::kBool)
+    value_error(std::string(name) + ": dtype must be an integer type, got " + dtype_name(d.scalar_type()));
+  return d;
 }
 
 // Entries of an index tensor that must lie in [lo, hi) (hi named `bound`); `graph` for a

@@ -48,13 +48,13 @@ SkinInputs prepare(const at::Tensor& node_positions, const at::Tensor& node_quat
       value_error("point_quats: expected shape [P=" + std::to_string(in.P) + ", 4], got " +
                   shape_of(in.pq));
   }
-  index_input(t_ref, "t_ref", in.ref);
-  if (t_ref.numel() != in.P)
-    value_error("t_ref: expected shape [P=" + std::to_string(in.P) + "], got " + shape_of(t_ref));
-  index_input(t_query, "t_query", in.ref);
-  in.t_ref = t_ref;
-  in.t_query = t_query;
-  in.Q = t_query.numel();
+  const at::Tensor t_ref_in = index_input(t_ref, "t_ref", in.ref);
+  if (t_ref_in.numel() != in.P)
+    value_error("t_ref: expected shape [P=" + std::to_string(in.P) + "], got " + shape_of(t_ref_in));
+  const at::Tensor t_query_in = index_input(t_query, "t_query", in.ref);
+  in.t_ref = t_ref_in;
+  in.t_query = t_query_in;
+  in.Q = t_query_in.numel();
   return in;
 }
 
@@ -105,10 +105,10 @@ py::tuple dqb_forward(const at::Tensor& node_positions, const at::Tensor& node_q
   if (in.g.n != in.N)
     value_error("graph.indices: expected shape [N=" + std::to_string(in.N) + ", K], got " +
                 shape_of(indices));
-  index_input(anchor, "anchor", in.ref);
-  if (anchor.numel() != in.P)
-    value_error("anchor: expected shape [P=" + std::to_string(in.P) + "], got " + shape_of(anchor));
-  in.anchor = anchor;
+  const at::Tensor anchor_in = index_input(anchor, "anchor", in.ref);
+  if (anchor_in.numel() != in.P)
+    value_error("anchor: expected shape [P=" + std::to_string(in.P) + "], got " + shape_of(anchor_in));
+  in.anchor = anchor_in;
   in.sigma = float_input(sigma, "sigma", in.ref, 1, -1, "[N]");
   if (in.sigma.size(0) != in.N)
     value_error("sigma: expected shape [N=" + std::to_string(in.N) + "], got " + shape_of(in.sigma));

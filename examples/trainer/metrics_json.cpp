@@ -34,6 +34,21 @@ void add_carap_settings(cli::JsonLine& j, const NodeLossOptions& nl) {
       .add("confidence_visibility", nl.confidence_visibility);
 }
 
+// The stage-1 weights (--w-data, --w-rigidity, --w-lrm, --w-accel; case.json's w_*), each only
+// when set to other than the trainer's default, as stage2_unobserved below: a default run's keys
+// stay as they were, so the studies' canaries (scripts/ladder_report.py, check_cache), which
+// compare every number of a default run's metrics.json with a record, still match.
+void add_weights(cli::JsonLine& j, const NodeLossOptions& nl) {
+  const NodeLossOptions defaults;
+  const auto add = [&](const char* key, double value, double default_value) {
+    if (value != default_value) j.add(key, value);
+  };
+  add("w_data", nl.data_weight, defaults.data_weight);
+  add("w_rigidity", nl.regularizers.carap.weight, defaults.regularizers.carap.weight);
+  add("w_lrm", nl.regularizers.lrm.weight, defaults.regularizers.lrm.weight);
+  add("w_accel", nl.regularizers.accel.weight, defaults.regularizers.accel.weight);
+}
+
 void add_confidence(cli::JsonLine& j, const std::string& suffix, const ConfidenceDiagnostics& d) {
   j.add("conf_spearman_error" + suffix, d.spearman_error)
       .add("conf_spearman_observation" + suffix, d.spearman_observation)
@@ -227,6 +242,7 @@ std::string metrics_json(const TrainerResult& r, const RunRecord& run) {
   if (!cfg.image_eval) j.add("image_eval", false);  // --no-image-eval: no image metrics below
   kind.images(j, r, run);
   add_carap_settings(j, cfg.node_loss);
+  add_weights(j, cfg.node_loss);
   kind.evaluation(j, r, run);
   if (r.query_stage1.scored) {
     const std::vector<std::string>& names = truth_or_empty(r.data).scene.class_names;  // none from disk

@@ -60,7 +60,8 @@ TEST_CASE("smg_trainer: a tiny run writes metrics.json and the pictures") {
   const fs::path out = fs::temp_directory_path() / "smg_test_pipeline_trainer_out";
   fs::remove_all(out);
   const Run r = run("--quick --stage1-iters 20 --stage2-iters 10 --frames 6 --width 48 --height 36 --tracks 200 "
-                    "--threads 2 --scene occluder --alpha 0.5 --carap-reading directed --confidence-from lifted --out " +
+                    "--threads 2 --scene occluder --alpha 0.5 --carap-reading directed --confidence-from lifted "
+                    "--w-accel 0.1 --w-lrm 0.2 --out " +
                     out.string());
   CAPTURE(r.err);
   REQUIRE(r.code == 0);
@@ -71,10 +72,17 @@ TEST_CASE("smg_trainer: a tiny run writes metrics.json and the pictures") {
                           "\"confidence_from\":\"lifted\"", "\"conf_spearman_error\":", "\"conf_weight_directed_low\":",
                           "\"program\":\"smg_trainer\"", "\"variant\":\"full\"", "\"T\":6", "\"width\":48",
                           "\"height\":36", "\"threads\":2", "\"test_psnr\":", "\"epe\":", "\"epe_stage1\":",
-                          "\"epe_lifted\":", "\"stage1_iterations\":20", "\"stage2_iterations\":10"}) {
+                          "\"epe_lifted\":", "\"stage1_iterations\":20", "\"stage2_iterations\":10",
+                          "\"w_accel\":0.1", "\"w_lrm\":0.2"}) {
     const std::string k = key;
     CAPTURE(k);
     CHECK(metrics.find(key) != std::string::npos);
+  }
+  // A weight at its default is left out (a default run's keys stay as they were).
+  for (const char* key : {"\"w_data\":", "\"w_rigidity\":", "\"stage2_unobserved\":"}) {
+    const std::string k = key;
+    CAPTURE(k);
+    CHECK(metrics.find(key) == std::string::npos);
   }
   CHECK(metrics.find("nan") == std::string::npos);
   // stdout's last line is the same JSON line.

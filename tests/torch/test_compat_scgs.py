@@ -325,7 +325,7 @@ def test_scgs_arap_adaptive_weights_with_far_neighbours_are_refused():
     assert bool(torch.isnan(w).any()) and bool(torch.isfinite(w).any())
     with pytest.raises(RuntimeError, match="non-finite"):
         cal_arap_error_torch(seq, ii, jj, nn, weight=w)
-    with pytest.raises(ValueError, match="weight: has a NaN"):
+    with pytest.raises(ValueError, match=r"weight\[\d+, \d+\] is nan"):
         scgs_arap(seq, ii, jj, nn, weight=w)
 
 
@@ -357,7 +357,7 @@ _N = torch.tensor([0, 0, 0, 0, 0])
     ((torch.zeros(2, 5, 3, dtype=torch.float16), _I, _J, _N), "nodes_sequence: dtype must be float32"),
     ((torch.rand(1, 5, 3), _I, _J, _N), "nodes_sequence: needs Nt >= 2"),
     ((torch.rand(2, 0, 3), _I[:0], _J[:0], _N[:0]), "nodes_sequence: has no nodes"),
-    ((torch.full((2, 5, 3), float("nan")), _I, _J, _N), "nodes_sequence: has a NaN"),
+    ((torch.full((2, 5, 3), float("nan")), _I, _J, _N), r"nodes_sequence\[0, 0\] has a NaN"),
     ((_X, _I, _J, _N, 0), "K: expected an int >= 1"),
     ((_X, _I, _J, _N, 2.0), "K: expected an int >= 1"),
     ((_X, [0, 1], _J, _N), "ii: expected a torch.Tensor"),
@@ -371,9 +371,8 @@ _N = torch.tensor([0, 0, 0, 0, 0])
     ((_X, torch.tensor([0, 0]), torch.tensor([1, 2]), torch.tensor([3, 3])), "nn: a slot"),
     ((_X, _I, _J, _N, 10, torch.ones(5, 9)), r"weight: expected shape \[Nv, K\] = \[5, 10\]"),
     ((_X, _I, _J, _N, 10, torch.ones(5, 10, dtype=torch.int64)), "weight: dtype must be float32"),
-    ((_X, _I, _J, _N, 10, [[1.0] * 10] * 5), "weight: expected a torch.Tensor or None"),
-    ((_X, _I, _J, _N, 10, torch.full((5, 10), float("inf"))), "weight: has a NaN or infinite"),
-    ((_X, _I, _J, _N, 10, -torch.ones(5, 10)), "weight: negative on an edge"),
+    ((_X, _I, _J, _N, 10, [[1.0] * 10] * 5), "weight: expected a torch.Tensor"),
+    ((_X, _I, _J, _N, 10, torch.full((5, 10), float("inf"))), r"weight\[0, 0\] is inf"),
 ])
 def test_scgs_arap_refuses_bad_arguments(args, match):
     with pytest.raises(ValueError, match=match):

@@ -34,6 +34,7 @@ they are narrowed: a ValueError names the argument.
 from __future__ import annotations
 
 import collections
+import functools
 import inspect
 import os
 from typing import NamedTuple, Optional, Sequence, Tuple, Union
@@ -143,10 +144,30 @@ def _scale(grad_output, g):
     return None if g is None else grad_output * g
 
 
+def _first_order(op: str):
+    """The backward of an smg_torch Function: smg's kernels give first derivatives only. Under
+    create_graph=True (autograd runs a backward with grad mode on only then) it raises at once,
+    naming the operator the caller called (`op`, or ctx.op where one Function serves several),
+    instead of returning a gradient with no graph: torch's once_differentiable catches only a
+    grad_output that requires grad, so a gradient penalty through smg silently lost smg's
+    second-order part. Otherwise the backward runs under no_grad, as once_differentiable's does."""
+    def wrap(backward):
+        @functools.wraps(backward)
+        def run(ctx, *grads):
+            if torch.is_grad_enabled():
+                raise RuntimeError(f"smg_torch.{getattr(ctx, 'op', op)}: no second-order gradient: its backward ran "
+                                   "with create_graph=True (a gradient penalty or a Hessian through it); smg's "
+                                   "kernels give first derivatives only, so differentiate it once (create_graph=False)")
+            with torch.no_grad():
+                return backward(ctx, *grads)
+        return run
+    return wrap
+
+
 class _CarapFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx, positions, quats, idx, w, confidence, plain, alpha, lambda_c, lambda_l, gaps,
-                gap_weights, normalize, validate):
+                gap_weights, normalize, validate, op=None):
         need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
         args = (positions.detach(), quats.detach(), idx, w.detach())
         if not plain:
@@ -154,13 +175,14 @@ class _CarapFunction(torch.autograd.Function):
         args += (lambda_c, lambda_l, gaps, gap_weights, normalize, need_x, need_q, validate)
         e, gx, gq = (_C.arap if plain else _C.carap)(*args)
         ctx.grads = (gx, gq)
+        ctx.op = op or ("arap" if plain else "carap")  # the caller's operator, for _first_order
         return e
 
     @staticmethod
-    @torch.autograd.function.once_differentiable
+    @_first_order("carap")
     def backward(ctx, grad_output):
         gx, gq = ctx.grads
-        return (_scale(grad_output, gx), _scale(grad_output, gq)) + (None,) * 11
+        return (_scale(grad_output, gx), _scale(grad_output, gq)) + (None,) * 12
 
 
 def carap(positions: torch.Tensor, quats: torch.Tensor, g: GraphLike,
@@ -205,7 +227,7 @@ class _LrmFunction(torch.autograd.Function):
         return e
 
     @staticmethod
-    @torch.autograd.function.once_differentiable
+    @_first_order("lrm")
     def backward(ctx, grad_output):
         return (_scale(grad_output, ctx.grad),) + (None,) * 8
 
@@ -280,8 +302,9 @@ def _term_options(name, value):
 
 class _RegularizersFunction(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, positions, quats, idx, w, visibility, terms, opts, validate):
+    def forward(ctx, positions, quats, idx, w, visibility, terms, opts, validate, op):
         need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
+        ctx.op = op  # the caller's operator, for _first_order's message
         e, c, gx, gq = _C.regularizers(
             positions.detach(), None if quats is None else quats.detach(), idx, w.detach(),
             visibility, terms, opts, need_x, need_q and quats is not None, validate)
@@ -293,10 +316,10 @@ class _RegularizersFunction(torch.autograd.Function):
         return total, e, c
 
     @staticmethod
-    @torch.autograd.function.once_differentiable
+    @_first_order("regularizers")
     def backward(ctx, grad_total, grad_e, grad_c):
         gx, gq = ctx.grads
-        return (_scale(grad_total, gx), _scale(grad_total, gq)) + (None,) * 6
+        return (_scale(grad_total, gx), _scale(grad_total, gq)) + (None,) * 7
 
 
 def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: GraphLike,
@@ -326,13 +349,19 @@ def regularizers(positions: torch.Tensor, quats: Optional[torch.Tensor], g: Grap
         if key not in REGULARIZER_TERMS:
             raise TypeError(f"regularizers() got an unexpected keyword argument {key!r} "
                             f"(terms: {', '.join(REGULARIZER_TERMS)})")
+    return _regularizers(positions, quats, g, visibility, bool(validate), terms, "regularizers")
+
+
+def _regularizers(positions, quats, g, visibility, validate, terms, op) -> Regularizers:
+    """regularizers() for a caller `op` (smg_torch.compat's calls name themselves in the
+    second-order refusal): terms as regularizers' keywords, already checked."""
     idx, w = _graph(g)
     _check(positions=positions, quats=quats, indices=idx, weights=w, visibility=visibility)
     on, opts = {}, {}
     for name, default in REGULARIZER_TERMS.items():
         on[name], opts[name] = _term_options(name, terms.get(name, default))
     total, e, c = _RegularizersFunction.apply(positions, quats, idx, w, visibility, on, opts,
-                                              bool(validate))
+                                              bool(validate), op)
     energies = dict(zip(_REGULARIZER_ENERGIES, e))
     return Regularizers(total=total, confidence=c if on.get("confidence") else None, **energies)
 
@@ -381,7 +410,7 @@ class _DqbFunction(torch.autograd.Function):
         return out_x, out_q
 
     @staticmethod
-    @torch.autograd.function.once_differentiable
+    @_first_order("dqb")
     def backward(ctx, grad_x, grad_q):
         xs, qs, ps, pqs = (None if t is None else t.detach() for t in ctx.saved_tensors)
         t_ref, t_query, drivers, weights, lbs, validate = ctx.inputs
@@ -435,7 +464,7 @@ class _RenderFunction(torch.autograd.Function):
         return img, alpha, depth
 
     @staticmethod
-    @torch.autograd.function.once_differentiable
+    @_first_order("render")
     def backward(ctx, grad_image, grad_alpha, grad_depth):
         params = tuple(t.detach() for t in ctx.saved_tensors)
         grads = _C.render_backward(ctx.state, *params, grad_image, grad_alpha, grad_depth)

@@ -13,12 +13,14 @@ sqrt_weighted penalty (E24) and the relative-rotation term (E25).
 """
 from __future__ import annotations
 
+import math
+import numbers
 from typing import Optional, Sequence, Tuple
 
 import torch
 
-from . import (_REGULARIZER_ENERGIES, REGULARIZER_DEFAULTS, REGULARIZER_TERMS, _C, _scale, _term_options,
-               arap, has_cuda, regularizers)
+from . import (_REGULARIZER_ENERGIES, REGULARIZER_DEFAULTS, REGULARIZER_TERMS, _C, _CarapFunction, _first_order,
+               _regularizers, _scale, _term_options, has_cuda, memory_limit)
 
 __all__ = ["som_accel", "mosca_arap", "mosca_vel_acc", "scgs_arap", "d3dgs_losses"]
 
@@ -28,6 +30,56 @@ _SOM_ACCEL = dict(REGULARIZER_DEFAULTS["accel"], form="acceleration", penalty="n
                   confidence_weighted=False, normalize=True, weight=1.0)
 # On CUDA tensors: the fused step with smoothness alone (no term reads the empty graph).
 _OFF = dict(confidence=False, carap=False, arap=False, lrm=False)
+
+
+def _dense(name, t):
+    """t as smg reads it: a torch.Tensor, dense (strided), its negative and conjugate bits
+    resolved (torch._neg_view and conj().imag are views whose storage holds the negated values;
+    resolve_neg is differentiable, so autograd still reaches the caller's tensor). Else one error
+    naming the argument (a sparse tensor's own error names neither)."""
+    if not isinstance(t, torch.Tensor):
+        raise ValueError(f"{name}: expected a torch.Tensor, got {type(t).__name__}")
+    if t.layout != torch.strided:
+        raise ValueError(f"{name}: a tensor of layout {t.layout}; pass a dense (strided) tensor (.to_dense())")
+    return t.resolve_conj().resolve_neg()
+
+
+def _index_of(flat, shape):
+    """The caller's index "[i, j, ...]" of entry `flat` of a tensor of this shape."""
+    out = []
+    for n in reversed(shape):
+        out.append(flat % n)
+        flat //= n
+    return "[" + ", ".join(str(i) for i in reversed(out)) + "]"
+
+
+def _check_vectors(name, t, quaternions=False):
+    """Refuses, before any work, the first vector (the last dim: a point or a quaternion) with a
+    NaN or infinite coordinate, or, for quaternions, the zero quaternion (it has no rotation),
+    naming it by the caller's index: `node_quat[3, 17] is the zero quaternion`."""
+    x = t.detach()
+    # Fast path: one reduction, no [..] mask, when the sum is finite (no NaN or inf; a finite sum
+    # that overflows only sends it to the full scan below).
+    bad = None if bool(torch.isfinite(x.sum())) else ~torch.isfinite(x).all(-1)
+    what = "has a NaN or infinite coordinate"
+    if quaternions and (bad is None or not bool(bad.any())):
+        bad = (x == 0).all(-1)
+        what = "is the zero quaternion"
+    if bad is not None and bool(bad.any()):
+        flat = int(bad.reshape(-1).nonzero()[0])
+        row = x.reshape(-1, x.shape[-1])[flat].tolist()
+        raise ValueError(f"{name}{_index_of(flat, tuple(bad.shape))} {what}: {row}")
+
+
+def _check_finite(name, t):
+    """Refuses the first NaN or infinite entry of t, by the caller's index."""
+    x = t.detach()
+    if bool(torch.isfinite(x.sum())):  # the fast path of _check_vectors
+        return
+    bad = ~torch.isfinite(x)
+    if bool(bad.any()):
+        flat = int(bad.reshape(-1).nonzero()[0])
+        raise ValueError(f"{name}{_index_of(flat, tuple(x.shape))} is {float(x.reshape(-1)[flat])}")
 
 
 def _check_floats(name, t):
@@ -53,7 +105,7 @@ class _AccelFunction(torch.autograd.Function):
         return e
 
     @staticmethod
-    @torch.autograd.function.once_differentiable
+    @_first_order("compat.som_accel")
     def backward(ctx, grad_output):
         return _scale(grad_output, ctx.grad), None
 
@@ -84,8 +136,7 @@ def som_accel(transls: torch.Tensor) -> torch.Tensor:
     gradients are formed per element inside smg's loop. On CPU, smg's scratch is kept between
     calls (one workspace per thread and dtype, as a trainer keeps one; it only grows): at T = 3
     it is about 7 times the input (76 MiB for G·B = 320 000 float32 trajectories)."""
-    if not isinstance(transls, torch.Tensor):
-        raise ValueError(f"transls: expected a torch.Tensor, got {type(transls).__name__}")
+    transls = _dense("transls", transls)
     if transls.dim() < 3:
         raise ValueError(f"transls: expected shape [K, T, 3] or [K, T, ..., 3], got {list(transls.shape)}")
     if transls.shape[-1] != 3:
@@ -99,6 +150,7 @@ def som_accel(transls: torch.Tensor) -> torch.Tensor:
     if transls.numel() == 0:
         raise ValueError(f"transls: has an empty dim, shape {list(transls.shape)} (Shape of Motion's "
                          "mean over no terms is NaN)")
+    _check_vectors("transls", transls)  # by transls' own index, not smg's [t, i] of the copy below
     x = transls.movedim(1, 0).reshape(T, -1, 3)  # [T, N, 3]: a copy unless dim 0 has size 1
     if not x.is_cuda:
         return _AccelFunction.apply(x, _SOM_ACCEL)
@@ -106,7 +158,7 @@ def som_accel(transls: torch.Tensor) -> torch.Tensor:
     n = x.shape[1]
     idx = torch.empty((n, 0), dtype=torch.int32, device=transls.device)
     w = torch.empty((n, 0), dtype=transls.dtype, device=transls.device)
-    return regularizers(x, None, (idx, w), accel=_SOM_ACCEL, **_OFF).total
+    return _regularizers(x, None, (idx, w), None, False, dict(_OFF, accel=_SOM_ACCEL), "compat.som_accel").total
 
 
 # ---- MoSca (JiahuiLei/MoSca, lib_mosca/mosca.py) ---------------------------------------------------
@@ -116,17 +168,23 @@ _ALL_OFF = {name: False for name in REGULARIZER_TERMS}
 
 
 def _check_nodes(node_xyz, node_quat):
-    if not isinstance(node_xyz, torch.Tensor) or node_xyz.dim() != 3 or node_xyz.shape[-1] != 3:
-        raise ValueError(f"node_xyz: expected a tensor of shape [T, M, 3], got "
-                         f"{list(node_xyz.shape) if isinstance(node_xyz, torch.Tensor) else type(node_xyz).__name__}")
+    """MoSca's node_xyz [T, M, 3] and node_quat [T, M, 4] as smg reads them (_dense), checked before
+    any work: shapes, dtypes, devices, then every point finite and every quaternion finite and
+    nonzero, each refusal naming the caller's argument and index."""
+    node_xyz, node_quat = _dense("node_xyz", node_xyz), _dense("node_quat", node_quat)
+    if node_xyz.dim() != 3 or node_xyz.shape[-1] != 3:
+        raise ValueError(f"node_xyz: expected a tensor of shape [T, M, 3], got {list(node_xyz.shape)}")
     _check_floats("node_xyz", node_xyz)
-    if not isinstance(node_quat, torch.Tensor) or tuple(node_quat.shape) != tuple(node_xyz.shape[:2]) + (4,):
+    if tuple(node_quat.shape) != tuple(node_xyz.shape[:2]) + (4,):
         raise ValueError(f"node_quat: expected shape {list(node_xyz.shape[:2]) + [4]} ([T, M, 4] of node_xyz), "
-                         f"got {list(node_quat.shape) if isinstance(node_quat, torch.Tensor) else type(node_quat).__name__}")
+                         f"got {list(node_quat.shape)}")
     if node_quat.dtype != node_xyz.dtype:
         raise ValueError(f"node_quat: dtype {node_quat.dtype} differs from node_xyz's {node_xyz.dtype}")
     if node_quat.device != node_xyz.device:
         raise ValueError(f"node_quat: device {node_quat.device} differs from node_xyz's {node_xyz.device}")
+    _check_vectors("node_xyz", node_xyz)
+    _check_vectors("node_quat", node_quat, quaternions=True)
+    return node_xyz, node_quat
 
 
 def _check_reduce(reduce, square):
@@ -136,11 +194,54 @@ def _check_reduce(reduce, square):
         raise ValueError(f"square: must be a bool, got {type(square).__name__}")
 
 
+def _numbers(name, values, integer):
+    """A shift list (integer=True) or a weight list as Python numbers: ints, or floats read in
+    double (exact for every float32 or float64 value: the gap weights are then formed in double,
+    whatever dtype the caller's tensor had). Takes a sequence of Python or numpy numbers or
+    0-dim tensors, or a 1-D tensor of any real dtype; one error naming name[k] for an entry that
+    is not such a number (upstream slices local_coord[:-shift]: a shift must be an integer)."""
+    if isinstance(values, torch.Tensor):
+        values = _dense(name, values)
+        if values.dim() > 1:
+            raise ValueError(f"{name}: expected a sequence or a 1-D tensor, got shape {list(values.shape)}")
+        if values.dtype == torch.bool or values.is_complex():
+            raise ValueError(f"{name}: dtype must be a real number type, got {values.dtype}")
+        items = values.detach().cpu().reshape(-1).tolist()
+    elif isinstance(values, (str, bytes)):
+        raise ValueError(f"{name}: expected a sequence of numbers, got {type(values).__name__}")
+    else:
+        try:
+            items = list(values)
+        except TypeError:
+            raise ValueError(f"{name}: expected a sequence of numbers, got {type(values).__name__}") from None
+    out = []
+    for k, v in enumerate(items):
+        if isinstance(v, torch.Tensor):
+            if v.numel() != 1 or v.dtype == torch.bool or v.is_complex():
+                raise ValueError(f"{name}[{k}]: expected a real number, got a {v.dtype} tensor of shape {list(v.shape)}")
+            v = _dense(f"{name}[{k}]", v).item()
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise ValueError(f"{name}[{k}]: expected a real number, got {v!r}")
+        if integer:
+            if not isinstance(v, numbers.Integral):
+                raise ValueError(f"{name}[{k}]: expected an integer (MoSca slices local_coord[:-shift]), got {v!r}")
+            v = int(v)
+            if v < 0:
+                raise ValueError(f"{name}[{k}]: is {v}; a negative shift makes MoSca's local_coord[:-shift] compare "
+                                 "the first frames with the last ones, which smg does not reproduce (shifts >= 0)")
+        else:
+            v = float(v)
+            if not math.isfinite(v):
+                raise ValueError(f"{name}[{k}]: is {v} (MoSca's loss would be NaN or infinite)")
+        out.append(v)
+    return out
+
+
 def _frame_owner_graph(owner, other, weight, M):
     """smg's graph of MoSca's local coordinates ℓ = R_owner^T (x_other − x_owner): row `owner`
     (whose rotation expresses the edge, smg's row i), neighbour `other` (smg's j), weight `weight`
-    (1-D, one per edge). Edges to itself and zero weights are left out (each adds exactly 0 to
-    the unsquared and the squared forms; smg refuses self edges); rows padded with −1 to the
+    (1-D, one per edge, >= 0). Edges to itself and zero weights are left out (each adds exactly 0
+    to the unsquared and the squared forms; smg refuses self edges); rows padded with −1 to the
     largest in-degree. Returns (indices [M, D] int64, weights [M, D])."""
     keep = (owner != other) & (weight != 0)
     owner, other, weight = owner[keep], other[keep], weight[keep]
@@ -157,16 +258,30 @@ def _frame_owner_graph(owner, other, weight, M):
     return idx, w
 
 
+def _signed_graphs(owner, other, weight, M):
+    """[(sign, indices, weights)] of the edges with positive and with negative weights: smg's graph
+    weights are >= 0, and MoSca multiplies by a negative weight as by any other (the energy is
+    linear in the weights, so the loss is the positive graph's minus the negated one's)."""
+    out = [(1.0,) + _frame_owner_graph(owner, other, weight.clamp(min=0), M)]
+    if bool((weight < 0).any()):
+        out.append((-1.0,) + _frame_owner_graph(owner, other, (-weight).clamp(min=0), M))
+    return out
+
+
 def _shift_gaps(shifts, shift_weights, T, rows, reduce):
-    """MoSca's shift loop as smg's gaps: γ_s/((T − s)·rows) for reduce="mean" (its per-shift mean
-    over (T − s)·rows), γ_s for "sum"; a shift with T − s < 1 adds nothing, as upstream skips it."""
-    gaps, weights = [], []
+    """MoSca's shift loop as smg's gaps, split by the sign of the weights (smg's gap weights are
+    >= 0): {sign: (gaps, weights)} with weights |γ_s|/((T − s)·rows) for reduce="mean" (its
+    per-shift mean over (T − s)·rows), |γ_s| for "sum"; a shift with T − s < 1 adds nothing, as
+    upstream skips it, and so does shift 0 (upstream's local_coord[:-0] is empty) and a weight 0.
+    The caller has refused rows == 0 under "mean" where a shift is active (upstream's NaN)."""
+    out = {}
     for s, g in zip(shifts, shift_weights):
-        if T - s < 1 or rows == 0:
+        if s == 0 or T - s < 1 or rows == 0 or g == 0:
             continue
-        gaps.append(int(s))
-        weights.append(float(g) / ((T - s) * rows) if reduce == "mean" else float(g))
-    return gaps, weights
+        gaps, weights = out.setdefault(1.0 if g > 0 else -1.0, ([], []))
+        gaps.append(s)
+        weights.append(abs(g) / ((T - s) * rows) if reduce == "mean" else abs(g))
+    return out
 
 
 def _fused(x, q, idx, w, terms, need_x, need_q):
@@ -183,7 +298,9 @@ class _RigidPartsFunction(torch.autograd.Function):
     Forward: one energy-only pass with both parts (C-ARAP with α = 1 and c ≡ 1 is plain ARAP:
     its λl = 0 for the coordinates, ARAP's λc = 0 for the lengths, the fused step returns both
     energies). Backward: the parts are linear in λ, so the gradient of g_c·coord + g_l·len is one
-    pass with λc = g_c, λl = g_l (two passes where a grad_output is negative: λ >= 0)."""
+    pass with λc = g_c, λl = g_l where both are finite and >= 0 (smg's λ >= 0); otherwise one pass
+    per part with λ = 1, each scaled by its g in torch (so an infinite or NaN g gives torch's
+    inf·0 = NaN, as upstream's own backward would)."""
 
     @staticmethod
     def forward(ctx, x, q, idx, w, gaps, gap_weights, penalty, stop_gradient):
@@ -197,17 +314,17 @@ class _RigidPartsFunction(torch.autograd.Function):
         return x.new_tensor(e["carap"]), x.new_tensor(e["arap"])
 
     @staticmethod
-    @torch.autograd.function.once_differentiable
+    @_first_order("compat.mosca_arap")
     def backward(ctx, g_coord, g_len):
         x, q, idx, w = ctx.saved_tensors
         need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
         gc, gl = float(g_coord), float(g_len)
-        if gc >= 0 and gl >= 0:
+        if gc >= 0 and gl >= 0 and math.isfinite(gc) and math.isfinite(gl):
             _, gx, gq = _fused(x.detach(), q.detach(), idx, w, dict(arap=dict(ctx.rigid, lambda_c=gc, lambda_l=gl)),
                                need_x, need_q)
         else:
             gx = gq = None
-            for lam, (lc, ll) in ((gc, (1.0, 0.0)), (gl, (0.0, 1.0))):
+            for lam, (lc, ll) in ((g_coord, (1.0, 0.0)), (g_len, (0.0, 1.0))):
                 _, px, pq = _fused(x.detach(), q.detach(), idx, w, dict(arap=dict(ctx.rigid, lambda_c=lc, lambda_l=ll)),
                                    need_x, need_q)
                 gx = None if px is None else (px * lam if gx is None else gx + px * lam)
@@ -215,13 +332,30 @@ class _RigidPartsFunction(torch.autograd.Function):
         return (gx, gq) + (None,) * 6
 
 
-def _rigid_parts(x, q, idx, w, gaps, gap_weights, penalty, stop_gradient):
-    """(coordinate part, length part) of smg's ARAP (E9, E24) on the graph, each differentiable
-    (a loss is weighted by its own λ upstream)."""
-    if not gaps or idx.shape[1] == 0:
+def _rigid_parts(x, q, graphs, gaps, penalty, stop_gradient):
+    """(coordinate part, length part) of smg's ARAP (E9, E24) on the signed graphs
+    (_signed_graphs) and signed gaps (_shift_gaps), each differentiable (a loss is weighted by
+    its own λ upstream): Σ sign_graph · sign_gaps · parts, one _RigidPartsFunction per nonempty
+    pair (one in the usual case, where every weight is >= 0)."""
+    coord = length = None
+    for sg, idx, w in graphs:
+        for sh, (gs, gw) in gaps.items():
+            if idx.shape[1] == 0:
+                continue
+            c, l = _RigidPartsFunction.apply(x, q, idx, w, tuple(gs), tuple(gw), penalty, stop_gradient)
+            sign = sg * sh
+            coord = c * sign if coord is None else coord + c * sign
+            length = l * sign if length is None else length + l * sign
+    if coord is None:
         zero = x.sum() * 0 + q.sum() * 0  # keeps the autograd graph, as upstream's 0-sums do
         return zero, zero
-    return _RigidPartsFunction.apply(x, q, idx, w, tuple(gaps), tuple(gap_weights), penalty, stop_gradient)
+    return coord, length
+
+
+def _active(shifts, shift_weights, T):
+    """Whether some shift adds a term upstream (0 < s < T; its weight may be 0: the mean is taken
+    before it multiplies)."""
+    return any(0 < s < T for s in shifts)
 
 
 def mosca_arap(node_xyz: torch.Tensor, node_quat: torch.Tensor, topo_ind: torch.Tensor,
@@ -236,72 +370,95 @@ def mosca_arap(node_xyz: torch.Tensor, node_quat: torch.Tensor, topo_ind: torch.
     frame), weighted by mask / (Σ_k mask + 1e-6) (computed in float32, as upstream does);
     loss_coord = Σ_s γ_s ρ_s[Σ_k w ‖ℓ^t − ℓ^{t+s}‖], loss_len the same with |‖ℓ^t‖ − ‖ℓ^{t+s}‖|,
     ρ_s the mean over (T − s)·M rows (reduce="mean") or the sum; square=True squares each norm.
+    shifts: integers >= 0 (0 and shifts >= T add nothing, as upstream skips them), shift_weights
+    real numbers of any sign, as sequences of Python or numpy numbers or 0-dim tensors, or 1-D
+    tensors of any dtype (read in double).
 
     levels: MoSca's multi-level edges, each (edges [E, 2], weight [E], mu, detach_nn,
     detach_self) = (`multilevel_arap_edge_list[l]`, `multilevel_arap_topo_w[l]`,
     `mlevel_w_list[l]`, `mlevel_detach_nn_flag`, `mlevel_detach_self_flag`): column 0 the node
-    expressed, column 1 the node whose frame expresses it; weights used as given; the mean over
-    (T − s)·E; mu times each loss added; detach_nn holds column 1's position, detach_self
-    column 0's (upstream refuses both).
+    expressed, column 1 the node whose frame expresses it; weights used as given (any sign:
+    upstream multiplies by them); the mean over (T − s)·E; mu times each loss added; detach_nn
+    holds column 1's position, detach_self column 0's (upstream refuses both).
+
+    Where upstream's mean is over nothing (M = 0 nodes, or a level with E = 0 edges, under
+    reduce="mean" with a shift 0 < s < T) its loss is NaN and compute_arap asserts on it: this
+    refuses that call naming the argument.
 
     How: smg's ARAP (E9) with the unsquared `norm` penalty (E24), or `squared`, on the graph
     whose rows are the frame owners (MoSca's row i is smg's neighbour of row j, so smg's
     d = R_j^T (x_i − x_j) is ℓ itself); the per-shift mean is in the gap weights; a held position
     is smg's stop_gradient ("row" for detach_nn, "neighbor" for detach_self). Per graph, one
     energy-only fused pass gives both losses, and backward one fused pass with λc, λl the two
-    losses' incoming gradients (the energy is linear in them). Gradients
-    reach node_xyz and the raw node_quat; torch's sub-gradient 0 where a difference is 0.
-    Returns two 0-dim tensors of node_xyz's dtype."""
-    _check_nodes(node_xyz, node_quat)
+    losses' incoming gradients (the energy is linear in them); negative weights are a second
+    graph (or gap list) subtracted. Gradients reach node_xyz and the raw node_quat; torch's
+    sub-gradient 0 where a difference is 0. Returns two 0-dim tensors of node_xyz's dtype."""
+    # Everything is checked before any work.
+    node_xyz, node_quat = _check_nodes(node_xyz, node_quat)
     _check_reduce(reduce, square)
     T, M = node_xyz.shape[:2]
-    if not isinstance(topo_ind, torch.Tensor) or topo_ind.dim() != 2 or topo_ind.shape[0] != M \
-            or topo_ind.dtype not in (torch.int32, torch.int64):
+    topo_ind, topo_mask = _dense("topo_ind", topo_ind), _dense("topo_mask", topo_mask)
+    if topo_ind.dim() != 2 or topo_ind.shape[0] != M or topo_ind.dtype not in (torch.int32, torch.int64):
         raise ValueError(f"topo_ind: expected an int32 or int64 tensor of shape [M, K] with M = {M}, got "
-                         f"{list(topo_ind.shape) if isinstance(topo_ind, torch.Tensor) else type(topo_ind).__name__}")
-    if not isinstance(topo_mask, torch.Tensor) or topo_mask.shape != topo_ind.shape or topo_mask.dtype != torch.bool:
+                         f"{topo_ind.dtype} {list(topo_ind.shape)}")
+    if topo_mask.shape != topo_ind.shape or topo_mask.dtype != torch.bool:
         raise ValueError(f"topo_mask: expected a bool tensor of topo_ind's shape {list(topo_ind.shape)}, got "
-                         f"{(topo_mask.dtype, list(topo_mask.shape)) if isinstance(topo_mask, torch.Tensor) else type(topo_mask).__name__}")
+                         f"{topo_mask.dtype} {list(topo_mask.shape)}")
     for name, t in (("topo_ind", topo_ind), ("topo_mask", topo_mask)):
         if t.device != node_xyz.device:
             raise ValueError(f"{name}: device {t.device} differs from node_xyz's {node_xyz.device}")
     if topo_ind.numel() and (int(topo_ind.min()) < 0 or int(topo_ind.max()) >= M):
         raise ValueError(f"topo_ind: entries must lie in [0, {M}), got [{int(topo_ind.min())}, {int(topo_ind.max())}]")
-    shifts, shift_weights = list(shifts), list(shift_weights)
+    shifts = _numbers("shifts", shifts, integer=True)
+    shift_weights = _numbers("shift_weights", shift_weights, integer=False)
     if len(shifts) != len(shift_weights):
         raise ValueError(f"shift_weights: {len(shift_weights)} weights for {len(shifts)} shifts")
-    if any(int(s) != s or s < 1 for s in shifts):
-        raise ValueError(f"shifts: must be integers >= 1, got {shifts}")
+    active = reduce == "mean" and _active(shifts, shift_weights, T)
+    if active and M == 0:
+        raise ValueError(f"node_xyz: has no nodes (shape {list(node_xyz.shape)}): MoSca's mean over (T - s)·M rows "
+                         "is then NaN and its compute_arap asserts on it")
+    checked = []
+    for k, level in enumerate(levels):
+        if not isinstance(level, (tuple, list)) or len(level) != 5:
+            raise ValueError(f"levels[{k}]: expected (edges, weight, mu, detach_nn, detach_self)")
+        edges, weight, mu, detach_nn, detach_self = level
+        edges, weight = _dense(f"levels[{k}].edges", edges), _dense(f"levels[{k}].weight", weight)
+        if edges.dim() != 2 or edges.shape[1] != 2 or edges.dtype not in (torch.int32, torch.int64):
+            raise ValueError(f"levels[{k}].edges: expected an int32 or int64 tensor of shape [E, 2], got "
+                             f"{edges.dtype} {list(edges.shape)}")
+        if weight.shape != edges.shape[:1] or not weight.is_floating_point():
+            raise ValueError(f"levels[{k}].weight: expected a float tensor of shape [E] = [{edges.shape[0]}], got "
+                             f"{weight.dtype} {list(weight.shape)}")
+        if edges.numel() and (int(edges.min()) < 0 or int(edges.max()) >= M):
+            bad = edges.reshape(-1)[((edges < 0) | (edges >= M)).reshape(-1)][0]
+            raise ValueError(f"levels[{k}].edges: entry {int(bad)} is out of range [0, M = {M})")
+        _check_finite(f"levels[{k}].weight", weight)
+        if isinstance(mu, bool) or not isinstance(mu, (numbers.Real, torch.Tensor)):
+            raise ValueError(f"levels[{k}].mu: expected a real number, got {mu!r}")
+        if detach_nn and detach_self:
+            raise ValueError(f"levels[{k}]: detach_nn and detach_self are exclusive (as upstream asserts)")
+        if active and edges.shape[0] == 0:
+            raise ValueError(f"levels[{k}].edges: has no edges: MoSca's mean over (T - s)·E rows is then NaN and "
+                             "its compute_arap asserts on it")
+        checked.append((edges, weight, float(mu), "row" if detach_nn else "neighbor" if detach_self else "none"))
     penalty = "squared" if square else "norm"
+    dev = node_xyz.device
     # Main graph: row i's weights as upstream forms them (float32), on smg's edge j -> i.
     m = topo_mask.float()
     w_rows = (m / (m.sum(dim=-1, keepdim=True) + 1e-6)).to(node_xyz.dtype)
     K = topo_ind.shape[1]
-    rows = torch.arange(M, device=node_xyz.device).unsqueeze(1).expand(M, K)
-    idx, w = _frame_owner_graph(topo_ind.reshape(-1).long(), rows.reshape(-1), w_rows.reshape(-1), M)
-    gaps, gw = _shift_gaps(shifts, shift_weights, T, M, reduce)
-    loss_coord, loss_len = _rigid_parts(node_xyz, node_quat, idx, w, gaps, gw, penalty, "none")
-    for k, level in enumerate(levels):
-        if len(level) != 5:
-            raise ValueError(f"levels[{k}]: expected (edges, weight, mu, detach_nn, detach_self), got {len(level)} items")
-        edges, weight, mu, detach_nn, detach_self = level
-        if not isinstance(edges, torch.Tensor) or edges.dim() != 2 or edges.shape[1] != 2 \
-                or edges.dtype not in (torch.int32, torch.int64):
-            raise ValueError(f"levels[{k}]: edges must be an int32 or int64 tensor of shape [E, 2]")
-        if not isinstance(weight, torch.Tensor) or weight.shape != edges.shape[:1]:
-            raise ValueError(f"levels[{k}]: weight must be a tensor of shape [E] = [{edges.shape[0]}]")
-        if edges.numel() and (int(edges.min()) < 0 or int(edges.max()) >= M):
-            raise ValueError(f"levels[{k}]: edges must lie in [0, {M})")
-        if detach_nn and detach_self:
-            raise ValueError(f"levels[{k}]: detach_nn and detach_self are exclusive (as upstream asserts)")
-        stop = "row" if detach_nn else "neighbor" if detach_self else "none"
+    rows = torch.arange(M, device=dev).unsqueeze(1).expand(M, K)
+    graphs = _signed_graphs(topo_ind.reshape(-1).long(), rows.reshape(-1), w_rows.reshape(-1), M)
+    gaps = _shift_gaps(shifts, shift_weights, T, M, reduce)
+    loss_coord, loss_len = _rigid_parts(node_xyz, node_quat, graphs, gaps, penalty, "none")
+    for edges, weight, mu, stop in checked:
         E = edges.shape[0]
-        li, lw = _frame_owner_graph(edges[:, 1].long().to(node_xyz.device), edges[:, 0].long().to(node_xyz.device),
-                                    weight.to(device=node_xyz.device, dtype=node_xyz.dtype), M)
-        lg, lgw = _shift_gaps(shifts, shift_weights, T, E, reduce)
-        c, l = _rigid_parts(node_xyz, node_quat, li, lw, lg, lgw, penalty, stop)
-        loss_coord = loss_coord + c * float(mu)
-        loss_len = loss_len + l * float(mu)
+        graphs = _signed_graphs(edges[:, 1].long().to(dev), edges[:, 0].long().to(dev),
+                                weight.to(device=dev, dtype=node_xyz.dtype), M)
+        c, l = _rigid_parts(node_xyz, node_quat, graphs, _shift_gaps(shifts, shift_weights, T, E, reduce),
+                            penalty, stop)
+        loss_coord = loss_coord + c * mu
+        loss_len = loss_len + l * mu
     return loss_coord, loss_len
 
 
@@ -316,7 +473,7 @@ def mosca_vel_acc(node_xyz: torch.Tensor, node_quat: torch.Tensor, *, reduce: st
     `squared`) penalty (E22) and smg's rotation-angle term (E23) in both forms with the same
     penalty, one fused call each (each loss differentiable on its own). Needs T >= 3 (upstream's
     mean of no acceleration term is NaN). Gradients reach node_xyz and the raw node_quat."""
-    _check_nodes(node_xyz, node_quat)
+    node_xyz, node_quat = _check_nodes(node_xyz, node_quat)
     _check_reduce(reduce, square)
     T, M = node_xyz.shape[:2]
     if T < 3 or M == 0:
@@ -332,11 +489,13 @@ def mosca_vel_acc(node_xyz: torch.Tensor, node_quat: torch.Tensor, *, reduce: st
                      normalize=normalize, weight=1.0)
         angle = dict(REGULARIZER_DEFAULTS["angle"], form=form, penalty=penalty, confidence_weighted=False,
                      normalize=normalize, weight=1.0)
-        out.append(regularizers(node_xyz, None, empty, **dict(_ALL_OFF, accel=accel)).total)
+        out.append(_regularizers(node_xyz, None, empty, None, False, dict(_ALL_OFF, accel=accel),
+                                 "compat.mosca_vel_acc").total)
         # The angle term reads no positions: a detached view gives the shapes, so the binding
         # neither computes nor returns a position gradient of zeros [T, M, 3] (as upstream, whose
         # q losses have no xyz gradient at all).
-        out.append(regularizers(node_xyz.detach(), node_quat, empty, **dict(_ALL_OFF, angle=angle)).total)
+        out.append(_regularizers(node_xyz.detach(), node_quat, empty, None, False, dict(_ALL_OFF, angle=angle),
+                                 "compat.mosca_vel_acc").total)
     return out[0], out[1], out[2], out[3]
 
 
@@ -397,8 +556,7 @@ def _quat_from_matrix(R: torch.Tensor) -> torch.Tensor:
 
 
 def _scgs_index(name: str, t, n_edges: Optional[int], hi: int, hi_name: str, device) -> torch.Tensor:
-    if not isinstance(t, torch.Tensor):
-        raise ValueError(f"{name}: expected a torch.Tensor, got {type(t).__name__}")
+    t = _dense(name, t)
     if t.dim() != 1:
         raise ValueError(f"{name}: expected shape [Ne], got {list(t.shape)}")
     if t.dtype not in (torch.int32, torch.int64):
@@ -440,7 +598,7 @@ def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, 
     K: int >= 1, the slots per row. weight: None or [Nv, K] float32/float64, finite (upstream: a
     NaN or inf weight, even in a slot without an edge, makes S NaN and its SVD fails on CPU;
     cal_connectivity_from_points' adaptive weights are NaN in the rows with a neighbour beyond
-    the radius), >= 0 on the edges; a constant here (no gradient to it, where upstream would
+    the radius), of any sign (upstream multiplies by it); a constant here (no gradient to it, where upstream would
     differentiate a weight that requires grad).
     Returns a 0-dim tensor of nodes_sequence's dtype and device.
 
@@ -452,9 +610,7 @@ def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, 
     the graph side by side ([2, (Nt − 1)·Nv, 3]). smg's graph: row i lists the j of its edges in
     slot order with the weights w_in, padded with −1 / 0; self edges (ii = jj) are dropped (their
     edge is 0 in both frames: they add nothing to S or to the energy)."""
-    x = nodes_sequence
-    if not isinstance(x, torch.Tensor):
-        raise ValueError(f"nodes_sequence: expected a torch.Tensor, got {type(x).__name__}")
+    x = _dense("nodes_sequence", nodes_sequence)
     if x.dim() != 3 or x.shape[-1] != 3:
         raise ValueError(f"nodes_sequence: expected shape [Nt, Nv, 3], got {list(x.shape)}")
     _check_floats("nodes_sequence", x)
@@ -468,10 +624,17 @@ def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, 
         raise ValueError(f"nodes_sequence: Nv = {Nv} nodes > {_SCGS_SAMPLE_NUM} (SC-GS's sample_num): "
                          "SC-GS then sums over a random sample of rows drawn with replacement "
                          "(np.random.choice), which scgs_arap does not reproduce")
-    if not bool(torch.isfinite(x.detach()).all()):
-        raise ValueError("nodes_sequence: has a NaN or infinite coordinate")
-    if isinstance(K, bool) or not isinstance(K, int) or K < 1:
+    _check_vectors("nodes_sequence", x)
+    if isinstance(K, bool) or not isinstance(K, numbers.Integral) or K < 1:
         raise ValueError(f"K: expected an int >= 1 (the neighbour slots per node), got {K!r}")
+    K = int(K)
+    # SC-GS's edge matrices [Nv, K, 3] (one per frame, as upstream makes them) and the [Nv, K]
+    # slot tables, estimated before anything is allocated (and before ii·K could overflow int64).
+    need = (Nt + 2) * Nv * K * 3 * x.element_size() + 2 * Nv * K * 8
+    if need > memory_limit():
+        raise ValueError(f"K: {K} slots per node would need {need / 2 ** 30:.3g} GiB for SC-GS's [Nv, K, 3] edge "
+                         f"matrices (Nv = {Nv}, Nt = {Nt}), above smg_torch's memory limit of "
+                         f"{memory_limit() / 2 ** 30:.3g} GiB (smg_torch.set_memory_limit)")
     dev, dt = x.device, x.dtype
     ii = _scgs_index("ii", ii, None, Nv, "Nv", dev)
     jj = _scgs_index("jj", jj, ii.shape[0], Nv, "Nv", dev)
@@ -485,23 +648,22 @@ def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, 
             w = torch.zeros((Nv, K), dtype=dt, device=dev)
             w[ii, nn] = 1
         else:
-            if not isinstance(weight, torch.Tensor):
-                raise ValueError(f"weight: expected a torch.Tensor or None, got {type(weight).__name__}")
+            weight = _dense("weight", weight)
             if tuple(weight.shape) != (Nv, K):
                 raise ValueError(f"weight: expected shape [Nv, K] = [{Nv}, {K}], got {list(weight.shape)}")
             if weight.dtype not in (torch.float32, torch.float64):
                 raise ValueError(f"weight: dtype must be float32 or float64, got {weight.dtype}")
             w = weight.detach().to(device=dev, dtype=dt)
-            if not bool(torch.isfinite(w).all()):
-                raise ValueError("weight: has a NaN or infinite entry (in SC-GS it reaches the "
-                                 "covariance S, whose SVD then fails on CPU; cal_connectivity_from_points' "
+            bad = ~torch.isfinite(w)
+            if bool(bad.any()):
+                flat = int(bad.reshape(-1).nonzero()[0])
+                raise ValueError(f"weight{_index_of(flat, (Nv, K))} is {float(w.reshape(-1)[flat])} (in SC-GS it "
+                                 "reaches the covariance S, whose SVD then fails on CPU; cal_connectivity_from_points' "
                                  "adaptive weights are NaN in the rows with a neighbour beyond the radius)")
         # smg's neighbour table: row i's edges in slot order, self edges dropped, -1 / 0 after.
         slot = torch.full((Nv, K), -1, dtype=torch.int64, device=dev)
         slot[ii, nn] = jj
         keep = (slot >= 0) & (slot != torch.arange(Nv, device=dev)[:, None])
-        if bool((w[keep] < 0).any()):
-            raise ValueError("weight: negative on an edge (smg's ARAP takes weights >= 0)")
         order = torch.sort((~keep).to(torch.int32), dim=1, stable=True).indices
         g_idx = slot.masked_fill(~keep, -1).gather(1, order)
         g_w = w.masked_fill(~keep, 0).gather(1, order)
@@ -520,8 +682,15 @@ def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, 
         g_idx = torch.where(g_idx >= 0, g_idx + off, g_idx).reshape(P * Nv, K)
         g_w = g_w.expand(P, Nv, K).reshape(P * Nv, K)
     positions = torch.stack([x[0].expand(P, Nv, 3).reshape(P * Nv, 3), x[1:].reshape(P * Nv, 3)])
-    return arap(positions, quats, (g_idx, g_w), lambda_c=1.0, lambda_l=0.0, gaps=(1,),
-                gap_weights=(1.0,), normalize=False)
+    # smg_torch.arap's Function, naming this call in its second-order refusal. smg's graph weights
+    # are >= 0 and SC-GS multiplies by a negative weight like any other: the energy is linear in
+    # the weights, so such edges are a second graph, subtracted.
+    def part(weights):
+        return _CarapFunction.apply(positions, quats, g_idx, weights, None, True, 1.0, 1.0, 0.0, [1], [1.0], False,
+                                    False, "compat.scgs_arap")
+    if bool((g_w < 0).any()):
+        return part(g_w.clamp(min=0)) - part((-g_w).clamp(min=0))
+    return part(g_w)
 
 
 # Dynamic 3D Gaussians' floor inside every square root (helpers.py weighted_l2_loss_v1/_v2 and
@@ -530,44 +699,50 @@ _D3DGS_EPS = 1e-20
 # Rows per chunk of the isometry loss: a [rows, K, 3] gather at a time (about 4 MiB in float32 at
 # K = 20), not the whole [N, K, 3].
 _D3DGS_ISO_ROWS = 16384
+# How far from 1 the norm of fg_rot and prev_rot may be: smg normalises them, D3DGS's rot loss
+# compares the raw products fg ⊗ prev* (so it scales with their norms); F.normalize's output is
+# within 1e-7 of 1 in float32, and a float32 one cast to float64 stays so.
+_D3DGS_UNIT_TOL = 1e-5
 
 
 class _D3dgsPartsFunction(torch.autograd.Function):
     """(rigid, rot) of Dynamic 3D Gaussians from smg's fused step on the two-frame window
     x = [prev_pts, fg_pts], q = [prev_rot, fg_rot]: rigid is plain ARAP's coordinate part (E9)
-    under sqrt_weighted (E24), rot the relative-rotation term (E25), both with the mean over
-    N·K. Forward: where a gradient is wanted, one pass per loss with its gradient (each loss
-    has its own weight upstream, and the two passes cost less than an energy pass and a
-    gradient pass of both: 281 against 385 ms at N = 100 000, K = 20, 2 threads); else one
-    energy-only pass with both. Backward: g_r·∇rigid + g_q·∇rot of the frame-1 rows (fg's; the
-    previous state gets none)."""
+    under sqrt_weighted (E24), rot the relative-rotation term (E25), each summed over the
+    graph's edges with weight `scale` = 1/(N·K) (D3DGS's mean over N·K slots) plus `floor`, the
+    sqrt(1e-20)·scale of each self edge the graph left out (its residual is 0 in both losses, so
+    it adds exactly that and no gradient). Forward: where a gradient is wanted, one pass per loss
+    with its gradient (each loss has its own weight upstream, and the two passes cost less than
+    an energy pass and a gradient pass of both: 281 against 385 ms at N = 100 000, K = 20, 2
+    threads); else one energy-only pass with both. Backward: g_r·∇rigid + g_q·∇rot of the frame-1
+    rows (fg's; the previous state gets none)."""
 
     @staticmethod
-    def forward(ctx, fg_pts, fg_rot, prev_pts, prev_rot, idx, w):
+    def forward(ctx, fg_pts, fg_rot, prev_pts, prev_rot, idx, w, scale, floor):
         x = torch.stack((prev_pts.detach(), fg_pts.detach()))
         q = torch.stack((prev_rot.detach(), fg_rot.detach()))
         need_x, need_q = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
         if not (need_x or need_q):
-            e, _, _ = _fused(x, q, idx, w, _d3dgs_terms(1.0, 1.0), False, False)
-            return fg_pts.new_tensor(e["arap"]), fg_pts.new_tensor(e["relrot"])
-        er, gxr, gqr = _fused(x, q, idx, w, _d3dgs_terms(1.0, 0.0), need_x, need_q)
-        eq, gxq, gqq = _fused(x, q, idx, w, _d3dgs_terms(0.0, 1.0), need_x, need_q)
+            e, _, _ = _fused(x, q, idx, w, _d3dgs_terms(scale, scale), False, False)
+            return fg_pts.new_tensor(e["arap"] + floor), fg_pts.new_tensor(e["relrot"] + floor)
+        er, gxr, gqr = _fused(x, q, idx, w, _d3dgs_terms(scale, 0.0), need_x, need_q)
+        eq, gxq, gqq = _fused(x, q, idx, w, _d3dgs_terms(0.0, scale), need_x, need_q)
         ctx.grads = tuple(None if g is None else g[1] for g in (gxr, gqr, gxq, gqq))
-        return fg_pts.new_tensor(er["arap"]), fg_pts.new_tensor(eq["relrot"])
+        return fg_pts.new_tensor(er["arap"] + floor), fg_pts.new_tensor(eq["relrot"] + floor)
 
     @staticmethod
-    @torch.autograd.function.once_differentiable
+    @_first_order("compat.d3dgs_losses")
     def backward(ctx, g_rigid, g_rot):
         gxr, gqr, gxq, gqq = ctx.grads
         gx = None if gxr is None else gxr * g_rigid + gxq * g_rot
         gq = None if gqr is None else gqr * g_rigid + gqq * g_rot
-        return gx, gq, None, None, None, None
+        return gx, gq, None, None, None, None, None, None
 
 
 def _d3dgs_terms(w_rigid, w_rot):
     """The fused step's terms for D3DGS's rigid and rot losses, with these weights (0 turns one
-    off)."""
-    sq = dict(penalty="sqrt_weighted", penalty_eps=_D3DGS_EPS, normalize=True)
+    off), summed (normalize=False: the weight holds the mean's 1/(N·K))."""
+    sq = dict(penalty="sqrt_weighted", penalty_eps=_D3DGS_EPS, normalize=False)
     terms = {}
     if w_rigid != 0:
         terms["arap"] = dict(REGULARIZER_DEFAULTS["arap"], lambda_c=1.0, lambda_l=0.0, gaps=[1], gap_weights=[1.0],
@@ -609,7 +784,7 @@ class _D3dgsIsoFunction(torch.autograd.Function):
         return total / (N * K)
 
     @staticmethod
-    @torch.autograd.function.once_differentiable
+    @_first_order("compat.d3dgs_losses")
     def backward(ctx, g):
         return ctx.grad * g, None, None, None
 
@@ -622,8 +797,11 @@ def d3dgs_losses(fg_pts: torch.Tensor, fg_rot: torch.Tensor, prev_pts: torch.Ten
     and normalised rotations (w x y z) being optimised; prev_pts, prev_rot the same at the end
     of the previous timestep (variables["prev_pts"][is_fg] and variables["prev_rot"][is_fg]: the
     state D3DGS's prev_offset and prev_inv_rot_fg are made from); neighbor_indices [N, K] (int64
-    or int32, every slot a node: Open3D's KNN), neighbor_weight [N, K] ≥ 0, neighbor_dist [N, K]
-    (variables["neighbor_*"], from the first timestep).
+    or int32, every slot a node: Open3D's KNN; a slot naming its own row, a self edge, is taken and
+    adds sqrt(1e-20) to each mean, as upstream), neighbor_weight [N, K] ≥ 0, neighbor_dist [N, K]
+    (variables["neighbor_*"], from the first timestep). fg_rot and prev_rot must be unit
+    quaternions to 1e-5 (D3DGS normalises them; its rot loss on the raw products would scale with
+    their norms, smg's normalises: a call off by more is refused, naming the row).
 
         rigid = mean sqrt(w ‖R(rel_i)ᵀ(x_j − x_i) − (p_j − p_i)‖² + 1e-20),  rel = fg_rot ⊗ prev_rot*
         rot   = mean sqrt(w ‖rel_j − rel_i‖² + 1e-20)
@@ -637,11 +815,11 @@ def d3dgs_losses(fg_pts: torch.Tensor, fg_rot: torch.Tensor, prev_pts: torch.Ten
     that of the rotation: its radial part, which D3DGS's raw 4-vector "rot" has and
     F.normalize's backward then removes, is 0 here, so the gradient of the optimised
     unnorm_rotations is D3DGS's (docs/math/terms/relrot.md). CPU and CUDA tensors."""
-    for name, t in (("fg_pts", fg_pts), ("fg_rot", fg_rot), ("prev_pts", prev_pts), ("prev_rot", prev_rot),
-                    ("neighbor_indices", neighbor_indices), ("neighbor_weight", neighbor_weight),
-                    ("neighbor_dist", neighbor_dist)):
-        if not isinstance(t, torch.Tensor):
-            raise ValueError(f"{name}: expected a torch.Tensor, got {type(t).__name__}")
+    fg_pts, fg_rot, prev_pts, prev_rot = (_dense(n, t) for n, t in (("fg_pts", fg_pts), ("fg_rot", fg_rot),
+                                                                     ("prev_pts", prev_pts), ("prev_rot", prev_rot)))
+    neighbor_indices, neighbor_weight, neighbor_dist = (
+        _dense(n, t) for n, t in (("neighbor_indices", neighbor_indices), ("neighbor_weight", neighbor_weight),
+                                  ("neighbor_dist", neighbor_dist)))
     if fg_pts.dim() != 2 or fg_pts.shape[1] != 3 or fg_pts.shape[0] == 0:
         raise ValueError(f"fg_pts: expected shape [N, 3] with N >= 1, got {list(fg_pts.shape)}")
     _check_floats("fg_pts", fg_pts)
@@ -667,10 +845,45 @@ def d3dgs_losses(fg_pts: torch.Tensor, fg_rot: torch.Tensor, prev_pts: torch.Ten
                     ("neighbor_dist", neighbor_dist)):
         if t.device != fg_pts.device:
             raise ValueError(f"{name}: device {t.device} differs from fg_pts' {fg_pts.device}")
-    if bool((neighbor_indices < 0).any()) or bool((neighbor_indices >= N).any()):
-        raise ValueError(f"neighbor_indices: every entry must be a node in [0, {N}) (Open3D's KNN fills every slot)")
+    # Contents, each refusal by the caller's name and index, before any work.
+    bad = (neighbor_indices < 0) | (neighbor_indices >= N)
+    if bool(bad.any()):
+        flat = int(bad.reshape(-1).nonzero()[0])
+        raise ValueError(f"neighbor_indices{_index_of(flat, (N, neighbor_indices.shape[1]))} = "
+                         f"{int(neighbor_indices.reshape(-1)[flat])} is not a node in [0, {N}) (Open3D's KNN "
+                         "fills every slot)")
+    _check_vectors("fg_pts", fg_pts)
+    _check_vectors("prev_pts", prev_pts)
+    for name, t in (("fg_rot", fg_rot), ("prev_rot", prev_rot)):
+        _check_vectors(name, t, quaternions=True)
+        off = (t.detach().norm(dim=-1) - 1).abs() > _D3DGS_UNIT_TOL
+        if bool(off.any()):
+            i = int(off.nonzero()[0])
+            raise ValueError(f"{name}[{i}] has norm {float(t[i].detach().norm()):.9g}: d3dgs_losses takes unit "
+                             "quaternions, as D3DGS's get_loss has them (F.normalize of unnorm_rotations); its rot "
+                             "loss compares the raw products fg_rot ⊗ prev_rot*, which scale with their norms")
+    _check_finite("neighbor_weight", neighbor_weight)
+    _check_finite("neighbor_dist", neighbor_dist)
+    neg = neighbor_weight < 0
+    if bool(neg.any()):
+        flat = int(neg.reshape(-1).nonzero()[0])
+        raise ValueError(f"neighbor_weight{_index_of(flat, tuple(neg.shape))} = {float(neighbor_weight.reshape(-1)[flat])} "
+                         "is negative: D3DGS's sqrt(w·‖r‖² + 1e-20) is NaN there")
+    K = neighbor_indices.shape[1]
     idx = neighbor_indices.contiguous()
     w = neighbor_weight.contiguous()
-    rigid, rot = _D3dgsPartsFunction.apply(fg_pts, fg_rot, prev_pts, prev_rot, idx, w)
+    # Self edges (j = i: a duplicate point can come back from Open3D's KNN) are legal upstream,
+    # where each adds sqrt(0 + 1e-20) to both means and no gradient; smg's graph takes no self
+    # edge, so they move to the end of their row as padding (-1) and their floor is added back.
+    self_edge = idx == torch.arange(N, device=idx.device, dtype=idx.dtype)[:, None]
+    n_self = int(self_edge.sum())
+    g_idx, g_w = idx, w
+    if n_self:
+        order = torch.sort(self_edge.to(torch.int8), dim=1, stable=True).indices
+        g_idx = idx.masked_fill(self_edge, -1).gather(1, order)
+        g_w = w.masked_fill(self_edge, 0).gather(1, order)
+    scale = 1.0 / (N * K)
+    rigid, rot = _D3dgsPartsFunction.apply(fg_pts, fg_rot, prev_pts, prev_rot, g_idx, g_w, scale,
+                                           n_self * math.sqrt(_D3DGS_EPS) * scale)
     iso = _D3dgsIsoFunction.apply(fg_pts, idx.long(), w, neighbor_dist.contiguous())
     return rigid, rot, iso
