@@ -166,6 +166,14 @@ bool fused_all_finite(const FusedOut<S>& r) {
   return fin(r.gx) && fin(r.gr) && std::isfinite(static_cast<double>(r.e.total()));
 }
 
+// Whether the fused step runs these options by nodes (energy/element_pass.hpp): the library's
+// own rule, asked of the term list.
+bool runs_by_nodes(const smg::RegularizerOptions& o, const Scene<double>& s) {
+  smg::detail::RegularizerTermSet<double, std::int32_t> terms(s.T, s.N, s.K, s.N * s.K, o, true, true);
+  return terms.apply(
+      [](const auto&... t) { return smg::detail::element_schedule<double, std::int32_t>(t...); });
+}
+
 // Fused against separate on one scene, every subset of the terms on the list, tangent and raw.
 void fused_check_equal(const Scene<double>& s, const std::string& what) {
   CAPTURE(what);
@@ -181,9 +189,14 @@ void fused_check_equal(const Scene<double>& s, const std::string& what) {
       const FusedOut<double> r = fused_separate(s, o, 2, raw);
       CHECK(fused_all_finite(f));
       if (o.terms.confidence) CHECK(f.conf == r.conf);  // bitwise: same functions, same order
-      // One energy alone: the separate operator is the same driver with the same term, bitwise.
+      // One energy alone: the separate operator is the same driver with the same term, bitwise,
+      // where both run the same schedule (the separate call reads the confidences, so a term that
+      // runs by nodes alone runs in frame blocks beside computed confidences: to 1e-12 below).
       const unsigned energies = mask & ~bit("confidence");
-      if (energies != 0 && (energies & (energies - 1)) == 0) check_fused_bitwise(f, r);
+      smg::RegularizerOptions alone = o;
+      alone.terms.confidence = false;
+      if (energies != 0 && (energies & (energies - 1)) == 0 && runs_by_nodes(o, s) == runs_by_nodes(alone, s))
+        check_fused_bitwise(f, r);
       // Energies only (no gradient buffers: no spill, a different frame overlap).
       const FusedOut<double> fe = fused_run(s, o, 2, raw, false);
       Result::each_energy(
@@ -438,6 +451,60 @@ TEST_CASE("fused regularizers keep their extra memory under the inputs' size") {
   CHECK(ws_lrm.bytes() > 0);
   CHECK(ws_lrm.bytes() <= sizeof(double) * s.x.size() + graph_bytes);
   CHECK(ws_carap.bytes() <= sizeof(double) * (s.x.size() + s.q.size()) + graph_bytes);
+}
+
+namespace {
+// Trajectory smoothness and the rotation-angle term without C-ARAP, ARAP, LRM, relrot or
+// computed confidences (options `computed`: the confidences on, which read the graph).
+smg::RegularizerOptions graph_free_options(bool computed) {
+  smg::RegularizerOptions o;
+  o.terms.confidence = computed;
+  o.terms.carap = o.terms.arap = o.terms.lrm = o.terms.relrot = false;
+  o.terms.accel = o.terms.angle = true;
+  o.accel.penalty = smg::Penalty::norm;
+  o.accel.normalization = smg::Normalization::mean;
+  o.angle.form = smg::AccelForm::velocity;
+  return o;
+}
+}  // namespace
+
+TEST_CASE("graph-free terms run by nodes: the frame blocks' results, every core, no scratch") {
+  // energy/element_pass.hpp: accel and angle alone run as per-(frame, node) elements over chunks
+  // of nodes; with the confidences computed beside them (they read the graph, and accel and
+  // angle do not read them here) the same terms run in frame blocks. Short windows (one block
+  // there) and a long one; N over several chunks of 256 nodes.
+  SMG_TEST_RNG(rng, 2406);
+  for (const auto& shape : {std::pair<smg::Index, smg::Index>{2, 700}, {3, 1100}, {5, 300}, {41, 600}}) {
+    const smg::Index T = shape.first, N = shape.second;
+    CAPTURE(T);
+    CAPTURE(N);
+    const Scene<double> sd = smg::test::random_scene(T, N, 5, rng);
+    const Scene<float> sf = sd.cast<float>();
+    for (bool raw : {false, true}) {
+      CAPTURE(raw);
+      const FusedOut<double> nodes = fused_run(sd, graph_free_options(false), 1, raw);
+      const FusedOut<double> blocks = fused_run(sd, graph_free_options(true), 1, raw);
+      CHECK(fused_rel(nodes.e.accel, blocks.e.accel) <= 1e-13);
+      CHECK(fused_rel(nodes.e.angle, blocks.e.angle) <= 1e-13);
+      CHECK(fused_rel_diff(nodes.gx, blocks.gx) <= 1e-13);
+      CHECK(fused_rel_diff(nodes.gr, blocks.gr) <= 1e-13);
+      // Bit-identical for any thread count (the chunks are a function of N only).
+      const FusedOut<float> f1 = fused_run(sf, graph_free_options(false), 1, raw);
+      for (int threads : {2, 3, 4}) {
+        CAPTURE(threads);
+        check_fused_bitwise(fused_run(sd, graph_free_options(false), threads, raw), nodes);
+        check_fused_bitwise(fused_run(sf, graph_free_options(false), threads, raw), f1);
+      }
+    }
+    // No scratch: the workspace stays empty, as regularizers_extra_bytes says.
+    smg::EnergyWorkspace<double> ws;
+    (void)fused_run(sd, graph_free_options(false), 2, false, true, true, &ws);
+    CHECK(ws.bytes() == 0);
+    CHECK(smg::regularizers_extra_bytes<double, std::int32_t>(T, N, 5, graph_free_options(false), true, true,
+                                                              true, true) == 0);
+    CHECK(smg::regularizers_extra_bytes<double, std::int32_t>(T, N, 5, graph_free_options(true), true, true,
+                                                              true, true) > 0);
+  }
 }
 
 TEST_CASE("validate_regularizers names the bad argument in one line") {

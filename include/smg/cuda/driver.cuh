@@ -63,24 +63,14 @@ namespace detail {
 
 // ---- The element terms of the CPU list: the members of RegularizerTermSet with an Element ----
 
+// What an Element reads (ElementReadsRotations, ElementReadsGraph) is stated once, in
+// energy/block.hpp, beside the term concept: the CPU element pass (energy/element_pass.hpp)
+// reads the same traits.
+using ::smg::detail::ElementReadsGraph;
+using ::smg::detail::ElementReadsRotations;
+
 // The steps of the element terms, in list order; at() runs those that are on, term k's energy
 // into e[k]. A recursive pack rather than std::tuple: device code calls it.
-// An Element that reads the rotations says so (`static constexpr bool kReadsRotations = true`,
-// AngleElement): its step then also takes q [T][N][4] and the rotation gradient rows,
-// at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, energy).
-template <class E, class = void>
-struct ElementReadsRotations : std::false_type {};
-template <class E>
-struct ElementReadsRotations<E, std::void_t<decltype(E::kReadsRotations)>>
-    : std::integral_constant<bool, E::kReadsRotations> {};
-// An Element along the edges (`static constexpr bool kReadsGraph = true`, RelrotElement) reads
-// the graph and its in-edges (ElementGraph: the gradient of its node from the terms of the edges
-// into it, no atomics) and the rotations: at(t, n, q, graph, grad_tangent, grad_raw, energy).
-template <class E, class = void>
-struct ElementReadsGraph : std::false_type {};
-template <class E>
-struct ElementReadsGraph<E, std::void_t<decltype(E::kReadsGraph)>>
-    : std::integral_constant<bool, E::kReadsGraph> {};
 
 template <class... Es>
 struct ElementPack {

@@ -339,6 +339,24 @@ template <class E> using reads_confidence = decltype(std::declval<const E&>().re
 template <class Term>
 constexpr bool has_element_v = detected_v<term_members::element_type, Term>;
 
+// What an Element reads, for the drivers that run it (cuda/driver.cuh, energy/element_pass.hpp).
+// An Element that reads the rotations says so (`static constexpr bool kReadsRotations = true`,
+// AngleElement): its step then also takes q [T][N][4] and the rotation gradient rows,
+// at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, energy).
+template <class E, class = void>
+struct ElementReadsRotations : std::false_type {};
+template <class E>
+struct ElementReadsRotations<E, std::void_t<decltype(E::kReadsRotations)>>
+    : std::integral_constant<bool, E::kReadsRotations> {};
+// An Element along the edges (`static constexpr bool kReadsGraph = true`, RelrotElement) reads
+// the graph and its in-edges (ElementGraph: the gradient of its node from the terms of the edges
+// into it, no atomics) and the rotations: at(t, n, q, graph, grad_tangent, grad_raw, energy).
+template <class E, class = void>
+struct ElementReadsGraph : std::false_type {};
+template <class E>
+struct ElementReadsGraph<E, std::void_t<decltype(E::kReadsGraph)>>
+    : std::integral_constant<bool, E::kReadsGraph> {};
+
 // The term concept for the compiler: one static_assert per member, each naming it, so that a term
 // that misses one stops at a line that says which. Returns whether Term models the concept, so
 // that the drivers compile nothing more for a term that does not (no template errors deep inside

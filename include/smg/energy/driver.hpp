@@ -32,6 +32,7 @@
 #include "smg/core/validate.hpp"
 #include "smg/core/views.hpp"
 #include "smg/energy/block.hpp"
+#include "smg/energy/element_pass.hpp"
 #include "smg/energy/term_list.hpp"  // RegularizerResult
 #include "smg/energy/terms/confidence.hpp"
 #include "smg/energy/workspace.hpp"
@@ -344,6 +345,18 @@ RegularizerResult<S> drive_views(PositionsView<const S> positions, QuaternionsVi
   if constexpr (!models) {
     return RegularizerResult<S>();
   } else {
+    // Terms that are all per-(frame, node) steps reading no graph run by nodes on every core
+    // (energy/element_pass.hpp); the rest by frame blocks below.
+    if (element_schedule<S, I>(terms...)) {
+      bool pos = false, rot = false;
+      ((terms.on() ? (pos = pos || terms.position_gradient(), rot = rot || terms.rotation_gradient(), 0)
+                   : 0),
+       ...);
+      return drive_elements<RegularizerResult<S>, S, I>(
+          positions, rotations, positions.nodes(), pos ? grad_positions.data() : nullptr,
+          rot ? grad_rotations.tangent().data() : nullptr, rot ? grad_rotations.raw().data() : nullptr,
+          parallel, terms...);
+    }
     const BlockPlan p = fitted_plan<S, I>(positions.frames(), positions.nodes(), graph.k(),
                                           grad_positions.data() != nullptr, !grad_rotations.empty(),
                                           parallel, rotations.data() != nullptr, visibility_given,

@@ -67,6 +67,7 @@ std::size_t regularizers_extra_bytes(Index frames, Index nodes, Index k,
   detail::RegularizerTermSet<S, I> terms(frames, nodes, k, nodes * k, options, grad_positions,
                                          grad_rotations);
   const Index n = terms.apply([&](const auto&... t) {
+    if (detail::element_schedule<S, I>(t...)) return Index(0);  // the element pass keeps no scratch
     const detail::BlockPlan p = detail::fitted_plan<S, I>(frames, nodes, k, grad_positions, grad_rotations,
                                                           parallel, rotations_given, visibility_given, t...);
     return detail::driver_total_scalars<S>(p, t...);

@@ -124,12 +124,36 @@ struct AccelElement {
 
   bool reads_confidence() const { return weighted; }
 
+  // The CPU element pass (energy/element_pass.hpp) evaluates each term once, term_at(), rather
+  // than once per frame it touches, at(): a thread there owns all of node i's rows.
+  static constexpr bool kWholeTerms = true;
+
+  // The term with earliest frame u of node i, once: its energy into `energy` and its gradient,
+  // g·(1, −2, 1) or g·(−1, 1), added to node i's rows u … u + order of grad_x when not null.
+  SMG_HOST_DEVICE void term_at(Index u, Index i, PositionsView<const S> x, const S* conf, S* grad_x,
+                               S& energy) const {
+    const Index N = x.nodes();
+    const S w = weighted && conf != nullptr ? S(conf[u * N + i]) : S(1);
+    S a[3], ga[3];
+    difference(x, u, i, a);
+    energy += accel_penalty<S, Literal<S>>(penalty, S(k), w, S(eps), a[0], a[1], a[2], ga[0], ga[1],
+                                           ga[2]);
+    if (grad_x == nullptr) return;
+    for (Index p = 0; p <= order; ++p) {
+      const S m = order == 2 ? (p == 1 ? S(-2) : S(1)) : (p == 0 ? S(-1) : S(1));
+      S* row = grad_x + ((u + p) * N + i) * 3;
+      for (int d = 0; d < 3; ++d) row[d] += m * ga[d];
+    }
+  }
+
   SMG_HOST_DEVICE void at(Index t, Index i, PositionsView<const S> x, const S* conf, S* grad_x,
                           S& energy) const {
     const Index T = x.frames(), N = x.nodes();
     S g[3] = {S(0), S(0), S(0)};
     for (Index u = t - order; u <= t; ++u) {
       if (u < 0 || u + order >= T) continue;
+      // Without a gradient only the term frame t owns counts (the others are their frames').
+      if (grad_x == nullptr && u != t) continue;
       const S w = weighted && conf != nullptr ? S(conf[u * N + i]) : S(1);
       S a[3], ga[3];
       difference(x, u, i, a);
