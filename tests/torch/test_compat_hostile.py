@@ -452,3 +452,37 @@ def test_refused_calls_leave_nothing_behind():
         for a, b in zip(v + g, before[name][0] + before[name][1]):
             assert torch.equal(a, b), name
     assert math.isfinite(float(_total(mosca_vel_acc(*_mosca_args()[0][:2]))))
+
+
+# ---- CUDA (skipped without a device and a CUDA build of smg_torch) ----
+
+cuda = pytest.mark.skipif(not (torch.cuda.is_available() and smg.has_cuda),
+                          reason="no CUDA device or smg_torch built without CUDA")
+
+
+def _to_cuda(args):
+    return [a.cuda() if isinstance(a, torch.Tensor) else a for a in args]
+
+
+@cuda
+@pytest.mark.parametrize("name", list(CALLS))
+def test_cuda_refusals_name_the_callers_index_and_negative_bits_read_as_values(name):
+    """The classes above on CUDA tensors: a NaN is refused by the caller's index (the check reads
+    one flag back to the host), a negative-bit tensor gives the plain tensor's values and
+    gradients, and the values agree with the CPU's."""
+    fn, make, diff, _, names = CALLS[name]
+    args, kw = make()
+    cpu_v, _ = _values_and_grads(name, args, kw)
+    cargs = _to_cuda(args)
+    ckw = {k: tuple(tuple(_to_cuda(list(level))) for level in v) if k == "levels" else v for k, v in kw.items()}
+    ref_v, ref_g = _values_and_grads(name, cargs, ckw)
+    v, g = _values_and_grads(name, cargs, ckw, wrap=lambda i, leaf: _neg_view(leaf))
+    for a, b in zip(v + g, ref_v + ref_g):
+        assert torch.equal(a, b), name
+    for a, b in zip(ref_v, cpu_v):
+        assert abs(float(a) - float(b)) <= 1e-9 * max(abs(float(b)), 1e-300), name
+    bad = cargs[0].clone()
+    bad[(1,) * (bad.dim() - 1) + (0,)] = float("nan")
+    cargs[0] = bad
+    with pytest.raises(ValueError, match=rf"^{names[0]}\[{', '.join(['1'] * (bad.dim() - 1))}\] has a NaN"):
+        fn(*cargs, **ckw)
