@@ -99,7 +99,9 @@ void element_rows(const Term& term, PositionsView<const S> x, QuaternionsView<co
     for (Index t = 0; t < T; ++t)
       for (Index n = n0; n < n1; ++n) {
         S v(0);
-        if constexpr (ElementWholeTerms<El>::value)
+        if constexpr (ElementWholeTerms<El>::value && ElementReadsRotations<El>::value)
+          step.term_at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, v);  // each term once
+        else if constexpr (ElementWholeTerms<El>::value)
           step.term_at(t, n, x, conf, grad_x, v);  // each term once, from its earliest frame
         else if constexpr (ElementReadsRotations<El>::value)
           step.at(t, n, x, q, conf, grad_x, grad_tangent, grad_raw, v);

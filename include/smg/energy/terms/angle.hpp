@@ -185,6 +185,34 @@ struct AngleElement {
 
   bool reads_confidence() const { return weighted; }
 
+  // The CPU element pass (energy/element_pass.hpp) evaluates each term once, term_at(), rather
+  // than once per frame it touches, at(): a thread there owns all of node i's rows.
+  static constexpr bool kWholeTerms = true;
+
+  // The term with earliest frame u of node i, once: its energy into `energy` and the right-tangent
+  // gradients of R_i^u … R_i^{u+order} (θ^u = θ(u, u+1): −u_0 on frame u, +u_0 on u+1; θ^{u+1}:
+  // −u_1 on u+1, +u_1 on u+2), each added to its row (grad_tangent or grad_raw; either or both
+  // null: no gradient).
+  SMG_HOST_DEVICE void term_at(Index u, Index i, PositionsView<const S>, QuaternionsView<const S> q,
+                               const S* conf, S*, S* grad_tangent, S* grad_raw, S& energy) const {
+    using L = Literal<S>;
+    const Index N = q.nodes();
+    S a0[3], a1[3] = {S(0), S(0), S(0)};
+    const S th0 = rotation_angle<S, L>(q.ptr(u, i), q.ptr(u + 1, i), a0);
+    const S th1 = order == 2 ? rotation_angle<S, L>(q.ptr(u + 1, i), q.ptr(u + 2, i), a1) : S(0);
+    S g0, g1;
+    energy += angle_term<S>(order, penalty, S(k), Weight{weighted ? conf : nullptr, N, i}(u), S(eps),
+                            th0, th1, g0, g1);
+    if (grad_tangent == nullptr && grad_raw == nullptr) return;
+    for (Index p = 0; p <= order; ++p) {
+      const S m0 = p == 0 ? S(-g0) : (p == 1 ? g0 : S(0));
+      const S m1 = p == 1 ? S(-g1) : (p == 2 ? g1 : S(0));
+      S g[3];
+      for (int d = 0; d < 3; ++d) g[d] = m0 * a0[d] + m1 * a1[d];
+      add_rotation_gradient(q.ptr(u + p, i), (u + p) * N + i, g, grad_tangent, grad_raw);
+    }
+  }
+
   SMG_HOST_DEVICE void at(Index t, Index i, PositionsView<const S>, QuaternionsView<const S> q,
                           const S* conf, S*, S* grad_tangent, S* grad_raw, S& energy) const {
     const Index T = q.frames(), N = q.nodes();
