@@ -352,7 +352,7 @@ def _rigid_parts(x, q, graphs, gaps, penalty, stop_gradient):
     return coord, length
 
 
-def _active(shifts, shift_weights, T):
+def _active(shifts, T):
     """Whether some shift adds a term upstream (0 < s < T; its weight may be 0: the mean is taken
     before it multiplies)."""
     return any(0 < s < T for s in shifts)
@@ -413,7 +413,7 @@ def mosca_arap(node_xyz: torch.Tensor, node_quat: torch.Tensor, topo_ind: torch.
     shift_weights = _numbers("shift_weights", shift_weights, integer=False)
     if len(shifts) != len(shift_weights):
         raise ValueError(f"shift_weights: {len(shift_weights)} weights for {len(shifts)} shifts")
-    active = reduce == "mean" and _active(shifts, shift_weights, T)
+    active = reduce == "mean" and _active(shifts, T)
     if active and M == 0:
         raise ValueError(f"node_xyz: has no nodes (shape {list(node_xyz.shape)}): MoSca's mean over (T - s)·M rows "
                          "is then NaN and its compute_arap asserts on it")

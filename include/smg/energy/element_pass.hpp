@@ -7,10 +7,12 @@
 // Why: the frame blocks of driver.hpp let a term push gradient into other rows, so a block owns
 // frames and a call over a short window (T up to 5–8 frames: Shape of Motion's three, a
 // two-frame window) is one block on one thread, which also gathers every node's frames into
-// records first. An element step instead computes x_n^t's (and R_n^t's) whole gradient row
-// itself, recomputing the few terms that share the row, and the energy of the terms frame t
-// owns; no row is written by two steps, so the nodes split into chunks over every core, with no
-// records, no spill and no scratch (the EnergyWorkspace is not touched).
+// records first. Here a chunk of nodes owns every row of its nodes: a term with a whole-term
+// form (kWholeTerms: AccelElement, AngleElement) is evaluated once and adds its gradient to the
+// rows it reaches; an Element without one would run its GPU step at(), which writes one row and
+// recomputes the terms that share it. No row is written by two chunks, so the nodes split into
+// chunks over every core, with no records, no spill and no scratch (the EnergyWorkspace is not
+// touched).
 //
 // Determinism: the chunks are a function of N only (element_chunk_nodes), each chunk sums its
 // terms' energies in (t, n) order, and the chunks' sums are added in chunk order: bit-identical
