@@ -21,6 +21,11 @@
 //                       and the inputs' size (MB)
 //   locality rows       C-ARAP / LRM with gradient with the nodes in a random order and in the
 //                       Morton order of smg/graph/node_order.hpp (same scene, same graph)
+//   floor_ms, x_floor   the row's floor on this machine, max(flops / peak, bytes / bandwidth) in
+//                       ms, and the wall time per iteration over it (bench/floor.hpp: counts per
+//                       case family, bench/notes/roofline.md; the peak of all cores, measured at
+//                       start or read from bench_floor's JSON, --floor=FILE; --floor=off: none).
+//                       Rows without a count (list/, residual and autodiff rows) have none.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -37,6 +42,7 @@
 
 #include "energy/reference_energies.hpp"
 #include "bench_common.hpp"
+#include "floor.hpp"
 #include "energy/scene.hpp"
 #include "smg/energy.hpp"
 #include "smg/graph/node_order.hpp"
@@ -171,6 +177,33 @@ void set_ns_per_term(benchmark::State& state, double seconds, double terms) {
   state.counters["ns_per_term"] = smg_bench::per(state, seconds, terms, 1e9);
 }
 
+// ---- the floor (bench/floor.hpp): the machine's peak, the shape of the scene as the counts take it
+namespace rl = smg_bench::roofline;
+rl::Machine machine;      // main() measures it or reads it (--floor)
+bool floor_on = false;
+double last_iteration_seconds = 0;  // time_energy's wall seconds per iteration
+template <class S>
+rl::Shape shape() {
+  rl::Shape s;
+  s.T = static_cast<double>(cfg.T);
+  s.N = static_cast<double>(cfg.N);
+  s.E = edges();
+  s.pair_frames = pair_terms() / std::max(1.0, s.E);
+  s.scalar = sizeof(S);
+  s.index = sizeof(std::int32_t);
+  s.vis = sizeof(std::uint8_t);
+  s.rot_grad = 3;  // tangents
+  return s;
+}
+// floor_ms and x_floor of a row whose work is `w` (the last time_energy's time per iteration).
+template <class S>
+void set_floor(benchmark::State& state, const rl::Work& w) {
+  if (!floor_on) return;
+  const double f = machine.floor_seconds(w, sizeof(S));
+  state.counters["floor_ms"] = f * 1e3;
+  state.counters["x_floor"] = f > 0 ? last_iteration_seconds / f : 0.0;
+}
+
 // The body every energy row shares: times `call()` (one evaluation, returning its energy), sets
 // ns_per_term, and returns the energy of the last call.
 template <class Call>
@@ -181,7 +214,9 @@ double time_energy(benchmark::State& state, double terms, Call&& call) {
     e = call();
     benchmark::DoNotOptimize(e);
   }
-  set_ns_per_term(state, clock.seconds(), terms);
+  const double seconds = clock.seconds();
+  last_iteration_seconds = smg_bench::per(state, seconds, 1.0, 1.0);
+  set_ns_per_term(state, seconds, terms);
   return e;
 }
 // Float rows: err_vs_double = error(reference()) (double on the same, float-rounded, inputs) and
@@ -214,6 +249,7 @@ void BM_confidence(benchmark::State& state) {
                              {}, {}, &ws, threads(state));
     return double(c[0]);
   });
+  set_floor<S>(state, rl::confidences(shape<S>()));
   set_errors<S>(
       state, [&](const Reference& r) { return relative_error(c, r.conf); },
       [](const Reference& r, const Reference& o) { return relative_error(r.conf, o.conf); });
@@ -248,6 +284,7 @@ void rigidity_row(benchmark::State& state) {
       return double(smg::arap<S>(s.positions(), s.rotations(), s.graph(), arap_options(), vx, vr, &ws,
                                  threads(state)));
   });
+  set_floor<S>(state, rl::rigidity(shape<S>(), kCarap, kGradient));
   set_errors<S>(
       state,
       [&](const Reference& r) {
@@ -282,6 +319,7 @@ void BM_lrm(benchmark::State& state) {
     return double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(kMode == 2),
                               grad_view(gx, s, kMode > 0), &ws, threads(state)));
   });
+  set_floor<S>(state, rl::lrm(shape<S>(), kMode));
   set_errors<S>(
       state,
       [&](const Reference& r) {
@@ -306,6 +344,7 @@ void BM_accel(benchmark::State& state) {
     return double(smg::accel<S>(s.positions(), {}, smg::AccelOptions{}, grad_view(gx, s, true), &ws,
                                 threads(state)));
   });
+  set_floor<S>(state, rl::accel(shape<S>()));
   set_errors<S>(
       state, [&](const Reference& r) { return relative_error(gx, r.accel_x); },
       [](const Reference& r, const Reference& o) { return relative_error(r.accel_x, o.accel_x); });
@@ -363,6 +402,7 @@ void BM_carap_plus_lrm(benchmark::State& state) {
                                 tangent_view(gr, s, true), &ws, threads(state))) +
            double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(), g, &ws, threads(state)));
   });
+  set_floor<S>(state, rl::carap_plus_lrm(shape<S>()));
   auto sum = [](const Reference& r) {
     std::vector<double> v(r.carap_x.size());
     for (std::size_t k = 0; k < v.size(); ++k) v[k] = r.carap_x[k] + r.lrm_x[k];
@@ -413,6 +453,7 @@ void BM_regularizers(benchmark::State& state) {
            double(smg::lrm<S>(s.positions(), cc, s.graph(), o.lrm, vx, &ws_sep, threads(state)));
   };
   const double e = time_energy(state, terms, fused);
+  set_floor<S>(state, rl::step(shape<S>(), kGradient));  // the fused step's time, not the separate calls'
   const std::vector<S> fgx = gx, fgr = gr;
   const double fused_ns = state.counters["ns_per_term"];
   double e_sep = 0;
@@ -517,6 +558,7 @@ void BM_locality(benchmark::State& state) {
       return double(smg::lrm<S>(s.positions(), s.confidence(), s.graph(), lrm_options(), grad_view(gx, s, true),
                                 &ws, threads(state)));
   });
+  set_floor<S>(state, kEnergy == 0 ? rl::rigidity(shape<S>(), true, true) : rl::lrm(shape<S>(), 1));
   // The energy does not depend on the order: its relative difference to the input order's.
   const Reference& r = is_double<S>() ? original_reference() : reference();
   const double ref = kEnergy == 0 ? r.carap : r.lrm;
@@ -748,6 +790,8 @@ int main(int argc, char** argv) {
   cfg.res_frames = p.integer("res_frames", 10, "frames of the residual rows");
   cfg.ad_frames = p.integer("ad_frames", 8, "frames of the AutoDiffScalar rows (0: no autodiff rows)");
   const bool locality = p.integer("locality", 1, "1: the random-vs-Morton node order rows") != 0;
+  const std::string floor = p.text("floor", "measure",
+                                   "measure | off | FILE (bench_floor --json=FILE): the peak behind floor_ms, x_floor");
   p.finish();
   if (cfg.N < 2 || cfg.T < 2 || cfg.K < 1) {
     std::fprintf(stderr, "bench_energy: need n >= 2, t >= 2, k >= 1\n");
@@ -760,6 +804,20 @@ int main(int argc, char** argv) {
     return 2;
   }
 
+  if (floor != "off") {
+    bool ok = true;
+    machine = floor == "measure" ? rl::measure_machine() : rl::load_machine(floor, ok);
+    if (!ok) {
+      std::fprintf(stderr, "bench_energy: --floor=%s: not a bench_floor JSON file\n", floor.c_str());
+      return 2;
+    }
+    floor_on = true;
+    char b[256];
+    std::snprintf(b, sizeof b, "FP32 %.1f GFLOP/s (%s), FP64 %.1f GFLOP/s, %.1f GB/s, %d threads (%s)",
+                  machine.fp32_gflops, machine.best_isa.c_str(), machine.fp64_gflops, machine.bandwidth_gbs,
+                  machine.threads, floor == "measure" ? "measured at start" : floor.c_str());
+    benchmark::AddCustomContext("floor_machine", b);
+  }
   // One row per thread count, named like BENCHMARK_TEMPLATE's "BM_x<float, true>/threads:2".
   auto add = [&](const std::string& name, void (*f)(benchmark::State&)) {
     auto* b = benchmark::RegisterBenchmark(name.c_str(), f);

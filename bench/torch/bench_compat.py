@@ -30,6 +30,11 @@ loss = 4 rigid + 4 rot + 2 iso: smg_torch.compat.d3dgs_losses against the upstre
 CUDA events (best of --repeat after two warm-ups), peak = torch.cuda.max_memory_allocated growth over one
 call (the inputs excluded), and a third peer, torch.compile of the upstream expression (timed after its first
 call, whose seconds are reported as compile_s).
+Floor (CPU, issue 59): beside each time, the case's floor on this machine, max(flops / peak, bytes /
+bandwidth), with the counts of bench/floor.hpp (som_accel, mosca_arap, mosca_vel_acc, d3dgs; through
+bench/torch/floor.py) and the peak of all cores from --floor-json FILE (bench_floor --json=FILE) or from
+the newest build/*/bench/bench_floor run at the start (n/a without either); "x floor" = time / floor.
+The --device cuda table has no floor column.
 """
 import argparse
 import gc
@@ -51,6 +56,9 @@ import bench_torch  # noqa: E402  (RssPeak)
 from smg_torch.compat import d3dgs_losses, mosca_arap, mosca_vel_acc, som_accel  # noqa: E402
 from test_compat import GAMMAS, SHIFTS, mosca_arap_torch, mosca_scene, mosca_vel_acc_torch  # noqa: E402
 from test_compat_d3dgs import d3dgs_torch  # noqa: E402
+import floor  # noqa: E402  (bench/torch/floor.py: the floor beside each time)
+
+WORK = {}  # case name -> (flops, bytes) of its floor (bench/floor.hpp), filled by the case builders
 
 
 def som_accel_torch(m):
@@ -139,6 +147,13 @@ def mosca_cases(M, g, device="cpu"):
         c, l = mosca_arap_torch(x, r, ti, mask, SHIFTS, GAMMAS, levels=lv)
         return 10 * c + 10 * l
 
+    # the floor's edges: every weighted neighbour k >= 1 of topo_ind (the self entry is zero) and
+    # every coarse edge of non-zero weight; the graph as the call takes it (int64, bool, float32)
+    E = int(mask[:, 1:].sum()) + sum(int((w_ > 0).sum()) for _, w_, _, _, _ in lv)
+    WORK["MoSca ARAP, one coarse level"] = floor.mosca_arap(
+        25, M, E, sum(25 - s for s in SHIFTS), ti.numel() * 8 + mask.numel() + sum(e.numel() * 8 + w_.numel() * 4
+                                                                                   for e, w_, _, _, _ in lv))
+    WORK["MoSca vel/acc"] = floor.mosca_vel_acc(25, M)
     return [("MoSca ARAP, one coarse level", [25, M, 16], [x, r], arap_smg, arap_torch),
             ("MoSca vel/acc", [25, M], [x, r], lambda x, r: sum(mosca_vel_acc(x, r)),
              lambda x, r: sum(mosca_vel_acc_torch(x, r)))]
@@ -169,6 +184,7 @@ def d3dgs_cases(N, device="cpu"):
     def loss(fn):
         return lambda x, r: sum(c * l for c, l in zip((4.0, 4.0, 2.0), fn(x, r, prev_pts, prev_rot, idx, w, d0)))
 
+    WORK["D3DGS rigid + rot + iso"] = floor.d3dgs(N, 20)
     return [("D3DGS rigid + rot + iso", [N, 20], [x, r], loss(d3dgs_losses), loss(d3dgs_torch))]
 
 
@@ -180,6 +196,8 @@ def main():
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--cases", default="", help="run only the cases whose name contains this text")
+    ap.add_argument("--floor-json", default=None,
+                    help="bench_floor --json=FILE's output: the peak behind the floor columns (default: run bench_floor now)")
     a = ap.parse_args()
     if a.device == "cuda":
         import smg_torch
@@ -194,6 +212,10 @@ def main():
     for name, shape in [("SoM tracks [G, 3, B, 3]", (G, 3, 8, 3)), ("SoM init tracks [G, T, 3]", (G, 30, 3))]:
         x = (torch.randn(shape, generator=g).cumsum(1) * 0.1).float().requires_grad_()
         cases.append((name, list(shape), [x], som_accel, som_accel_torch))
+        # second differences: [G, 3, B, 3] one per (g, b), its points its own; [G, T, 3] T - 2 per g, shared
+        WORK[name] = (floor.som_accel(G * shape[2], x.numel(), False) if len(shape) == 4 else
+                      floor.som_accel(G * (shape[1] - 2), x.numel(), True))
+    m = floor.machine(a.floor_json)
     cases += mosca_cases(1000 if a.quick else 10000, g)
     cases += d3dgs_cases(10000 if a.quick else 100000)
     cases = [c for c in cases if a.cases in c[0]]
@@ -207,14 +229,19 @@ def main():
                              input_bytes=sum(x.numel() * x.element_size() for x in xs),
                              rel_diff=abs(e_smg - e_ref) / abs(e_ref)))
     print(f"threads {a.threads}, float32, best of {repeat}, forward + backward; peak = resident-set growth of one call")
-    print("| case | shape | peer | ms | peak MiB | input MiB | energy rel. diff smg/torch |")
-    print("|---|---|---|---|---|---|---|")
+    print("| case | shape | peer | ms | peak MiB | input MiB | energy rel. diff smg/torch | floor ms | x floor |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
+        fl, ratio = floor.cells(m, WORK.get(r["case"]), r["seconds"])
+        r["floor_ms"] = m.floor_seconds(WORK[r["case"]]) * 1e3 if r["case"] in WORK else None
         print(f"| {r['case']} | {r['shape']} | {r['peer']} | {r['seconds'] * 1e3:.2f} | "
-              f"{r['peak_bytes'] / 2**20:.1f} | {r['input_bytes'] / 2**20:.1f} | {r['rel_diff']:.1e} |")
+              f"{r['peak_bytes'] / 2**20:.1f} | {r['input_bytes'] / 2**20:.1f} | {r['rel_diff']:.1e} | "
+              f"{fl.replace(' ms', '')} | {ratio} |")
+    print(m.describe())
     if a.json:
         with open(a.json, "w") as f:
-            json.dump(dict(threads=a.threads, repeat=repeat, torch=torch.__version__, rows=rows), f, indent=1)
+            json.dump(dict(threads=a.threads, repeat=repeat, torch=torch.__version__, floor=m.describe(), rows=rows), f,
+                      indent=1)
 
 
 def main_cuda(a):

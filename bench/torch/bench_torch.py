@@ -27,6 +27,12 @@ skipped at a size where the linear extrapolation from its largest measured size 
 --skip-seconds per call or the memory limit (scaling_table says which and why).
 Prints a markdown table; --json writes the same rows in Google Benchmark's JSON layout so that
 bench/report.py puts them into docs/performance.md.
+Floor (issue 59): beside each time, the case's floor on this machine, max(flops / peak, bytes /
+bandwidth) with the counts of bench/floor.hpp (bench/torch/floor.py; the energy rows: the fused
+step's count, the case being the same computation whichever peer runs it; the overhead rows:
+C-ARAP's and LRM's own), and time / floor ("x floor"); the peak of all cores is read from
+--floor-json FILE (bench_floor --json=FILE) or measured by the newest build/*/bench/bench_floor at
+the start (n/a without either). DQB and render have no count yet ("n/a").
 """
 import argparse
 import datetime
@@ -51,6 +57,9 @@ sys.path.insert(0, os.path.join(ROOT, "tests", "reference"))
 
 import smg_torch as smg  # noqa: E402
 import torch_reference as ref  # noqa: E402
+
+sys.path.insert(0, HERE)
+import floor  # noqa: E402  (bench/torch/floor.py: the floor beside each time)
 
 
 def best_of(fn, repeat):
@@ -221,13 +230,31 @@ def overhead_rows(x, q, idx, w, repeat):
     return rows
 
 
-def print_overhead(rows, repeat):
+def energy_shape(idx, T, gaps=(1, 2, 4)):
+    """bench/floor.hpp's Shape of the energies' scene: smg_torch's int64 indices, float32, no
+    visibility, quaternion gradients."""
+    return floor.Shape(T, idx.shape[0], int((idx >= 0).sum()), gaps=gaps, scalar=4, index=8, vis=0, rot_grad=4)
+
+
+def overhead_work(name, shape):
+    """The floor's work of an overhead row: C-ARAP with gradients or LRM with the exact gradient."""
+    return floor.rigidity(shape, True, True) if name.startswith("C-ARAP") else floor.lrm(shape, 1)
+
+
+def print_overhead(rows, repeat, m=None, shape=None):
     print(f"Binding overhead: smg_torch forward + backward against the bare C++ call (std::chrono in C++), "
           f"best of {repeat} interleaved, torch {torch.__version__}, {os.cpu_count()} CPUs\n")
-    print("| operation | smg_torch fwd+bwd | bare C++ call | overhead |")
-    print("|---|---:|---:|---:|")
+    extra = m is not None and shape is not None
+    print("| operation | smg_torch fwd+bwd | bare C++ call | overhead |"
+          + (" floor | x floor (smg_torch) | x floor (C++) |" if extra else ""))
+    print("|---|---:|---:|---:|" + ("---:|---:|---:|" if extra else ""))
     for name, a, b in rows:
-        print(f"| {name} | {a * 1e3:.2f} ms | {b * 1e3:.2f} ms | {100 * (a / b - 1):+.1f} % |")
+        line = f"| {name} | {a * 1e3:.2f} ms | {b * 1e3:.2f} ms | {100 * (a / b - 1):+.1f} % |"
+        if extra:
+            work = overhead_work(name, shape)
+            f, ra = floor.cells(m, work, a)
+            line += f" {f} | {ra} | {floor.cells(m, work, b)[1]} |"
+        print(line)
 
 
 def rel(a, b):
@@ -366,7 +393,8 @@ def scaling_table(sizes, K, peers, limit_s, limit_bytes, scene=None, skippable=(
     for N, T in sizes:
         x, q, idx, w = (scene or scaling_scene)(N, T, K)
         terms = carap_terms(idx, T)
-        row = {"N": N, "T": T, "K": K, "terms": terms, "inputs_bytes": tensor_bytes(x, q, idx, w)}
+        row = {"N": N, "T": T, "K": K, "terms": terms, "inputs_bytes": tensor_bytes(x, q, idx, w),
+               "work": floor.step(energy_shape(idx, T), True)}
         for name, measure in peers:
             if name in per_term and name in skippable:
                 (s0, b0, at) = per_term[name]
@@ -398,14 +426,14 @@ def _cells(r, terms):
     return [f"{r['seconds'] * 1e3:.1f} ms", f"{r['seconds'] * 1e9 / terms:.2f}", f"{r['peak_bytes'] / 2**20:.0f}"]
 
 
-def print_scaling(rows, title, memory):
+def print_scaling(rows, title, memory, m=None):
     """The scaling table as markdown, then every peer's note (why a cell has no number)."""
     print(f"{title}\n\nns/term: time / (edge, frame, gap) terms, terms = sum over gaps d of (T - d) x "
           f"valid edges (carap_term_count). Peak: {memory}.\n")
     print("| N x T | terms | inputs [MiB] | smg | smg ns/term | smg peak [MiB] | eager | eager ns/term "
           "| eager peak [MiB] | compile (1st call) | compile | compile ns/term | compile peak [MiB] "
-          "| eager / smg | compile / smg |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| eager / smg | compile / smg |" + (" floor | smg x floor |" if m else ""))
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|" + ("---:|---:|" if m else ""))
     notes = []
     for row in rows:
         terms, smg_r = row["terms"], row["smg"]
@@ -418,6 +446,8 @@ def print_scaling(rows, title, memory):
             r = row[name]
             ok = "seconds" in r and "seconds" in smg_r
             cells.append(f"{r['seconds'] / smg_r['seconds']:.1f}x" if ok else "")
+        if m:
+            cells += floor.cells(m, row["work"], smg_r.get("seconds"))
         print("| " + " | ".join(cells) + " |")
         notes += [(name, row[name]["note"], f"{row['N']} x {row['T']}") for name in PEERS if "note" in row[name]]
     # one line per peer and reason (torch.compile's absence is the same at every size)
@@ -429,7 +459,7 @@ def print_scaling(rows, title, memory):
     print()
 
 
-def scaling_json(rows, threads):
+def scaling_json(rows, threads, m=None):
     """Rows of the scaling table in bench/report.py's layout: real_time = smg's ms; pytorch_* = the
     eager peer (speedup = eager / smg, as torch.json's rows); compile_*; *_note where a peer has
     no number (NaN in its numeric fields)."""
@@ -455,6 +485,9 @@ def scaling_json(rows, threads):
                 b[(prefix or "smg_") + "note"] = r["note"]
         b["speedup"] = b["pytorch_ms"] / b["real_time"]
         b["compile_speedup"] = b["compile_ms"] / b["real_time"]
+        if m and m.floor_seconds(row["work"]) > 0:
+            b["floor_ms"] = m.floor_seconds(row["work"]) * 1e3
+            b["x_floor"] = b["real_time"] / b["floor_ms"]
         out.append(b)
     return out
 
@@ -472,6 +505,7 @@ def write_json(path, bench, repeat, extra=None):
 def cpu_scaling(args):
     """--scaling on the CPU at 2 threads: smg, eager and compile at SCALING_SIZES (SCALING_QUICK
     with --quick); memory limit min(24 GiB, 90 % of the machine's RAM)."""
+    m = floor.machine(args.floor_json)
     torch.set_num_threads(2)
     rss = RssPeak()
     load0 = " ".join(f"{v:.2f}" for v in os.getloadavg())
@@ -509,9 +543,10 @@ def cpu_scaling(args):
     print_scaling(rows, f"Scaling, CPU, {torch.get_num_threads()} threads, best of {args.repeat} "
                         f"(smg after 1 warm-up, eager without, compile after its compile and 1 more call), "
                         f"torch {torch.__version__}, {os.cpu_count()} CPUs, load average {load0} before, "
-                        f"{load1} after, {time.perf_counter() - t0:.0f} s", memory)
+                        f"{load1} after, {time.perf_counter() - t0:.0f} s", memory, m)
+    print(m.describe() + "; the floor is the fused step's (bench/floor.hpp step), the same at every peer\n")
     if args.json:
-        write_json(args.json, scaling_json(rows, 2), args.repeat,
+        write_json(args.json, scaling_json(rows, 2, m), args.repeat,
                    {"smg_params": f"--scaling --repeat {args.repeat}, 2 threads",
                     "loadavg_start": load0, "loadavg_after": load1, **({"note": args.note} if args.note else {}), "peak_memory": memory,
                     "skip_limits": f"{args.skip_seconds:.0f} s per call, {limit_bytes / 2**30:.1f} GiB"})
@@ -530,6 +565,8 @@ def main():
                     help="--json: a caveat about this run's machine, stored in the context (report.py prints it)")
     ap.add_argument("--skip-seconds", type=float, default=120.0,
                     help="--scaling: skip a PyTorch peer whose predicted time per call exceeds this")
+    ap.add_argument("--floor-json", default=None,
+                    help="bench_floor --json=FILE's output: the peak behind the floor columns (default: run bench_floor now)")
     args = ap.parse_args()
     if args.scaling:
         cpu_scaling(args)
@@ -541,10 +578,14 @@ def main():
     old_threads = torch.get_num_threads()
     load0 = " ".join(f"{v:.2f}" for v in os.getloadavg())
     rows = []  # (name, smg seconds, torch seconds or None, compile peer dict or None)
+    works = {}  # name -> (flops, bytes) of the floor; rows without a count have none
 
+    m = floor.machine(args.floor_json)
     x, q, idx, w = energy_scene(N, T, K)
+    shape = energy_shape(idx, T)
+    step_work = floor.step(shape, True)
     if args.overhead_only:
-        print_overhead(overhead_rows(x, q, idx, w, max(args.repeat, 5)), max(args.repeat, 5))
+        print_overhead(overhead_rows(x, q, idx, w, max(args.repeat, 5)), max(args.repeat, 5), m, shape)
         torch.set_num_threads(old_threads)
         return 0
     for threads in (1, 2):
@@ -555,9 +596,11 @@ def main():
         t_cmp = compiled_peer(energy_ref, lambda fn: fwd_bwd(fn, x, q, idx, w), args.repeat, best_of)
         rows.append((f"energies fwd+bwd (conf + C-ARAP + LRM + ARAP), N={N} T={T} K={K} float32, {threads} thread(s)",
                      t_smg, t_ref, t_cmp))
+        works[rows[-1][0]] = step_work
         fwd_bwd(energy_fused, x, q, idx, w)  # warm-up
         t_fused = best_of(lambda: fwd_bwd(energy_fused, x, q, idx, w), args.repeat)
         rows.append((f"the same, fused (smg_torch.regularizers), {threads} thread(s)", t_fused, t_ref, t_cmp))
+        works[rows[-1][0]] = step_work
     overhead = overhead_rows(x, q, idx, w, max(args.repeat, 5))
     e1, gx1, gq1 = energies_smg(x, q, idx, w)
     e2, gx2, gq2 = energies_torch(x, q, idx, w)
@@ -588,8 +631,9 @@ def main():
     print(f"smg_torch vs pure-PyTorch autograd (eager) and torch.compile of the same PyTorch code, best of "
           f"{args.repeat}, torch {torch.__version__}, {os.cpu_count()} CPUs, load average {load0} before, "
           f"{load1} after\n")
-    print("| operation | smg_torch | PyTorch autograd | speed-up | torch.compile (compile time) | speed-up |")
-    print("|---|---:|---:|---:|---:|---:|")
+    print("| operation | smg_torch | PyTorch autograd | speed-up | torch.compile (compile time) | speed-up "
+          "| floor | smg x floor | autograd x floor | compile x floor |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name, a, b, c in rows:
         cells = [name, f"{a * 1e3:.1f} ms"]
         cells += ([f"{b * 1e3:.1f} ms", f"{b / a:.1f}x"] if b else
@@ -600,9 +644,15 @@ def main():
             cells += [f"{c['seconds'] * 1e3:.1f} ms ({c['compile_s']:.1f} s)", f"{c['seconds'] / a:.1f}x"]
         else:
             cells += [c["note"], ""]
+        work = works.get(name)
+        cells += list(floor.cells(m, work, a))
+        cells.append(floor.cells(m, work, b)[1] if b else "")
+        cells.append(floor.cells(m, work, c["seconds"])[1] if c and "seconds" in c else "")
         print("| " + " | ".join(cells) + " |")
+    print(f"\n{m.describe()}; the energy rows' floor is the fused step's count (bench/floor.hpp step), "
+          f"the same for every peer; DQB and render: no count (n/a)")
     print(f"\n{agree}\n")
-    print_overhead(overhead, max(args.repeat, 5))
+    print_overhead(overhead, max(args.repeat, 5), m, shape)
     if args.json:
         bench = []
         for name, a, b, c in rows:
@@ -615,6 +665,9 @@ def main():
                              compile_speedup=c["seconds"] / a)
             elif c is not None:
                 entry["compile_note"] = c["note"]  # no number where torch has no torch.compile
+            if name in works and m.floor_seconds(works[name]) > 0:
+                entry["floor_ms"] = m.floor_seconds(works[name]) * 1e3
+                entry["x_floor"] = entry["real_time"] / entry["floor_ms"]
             bench.append(entry)
         for name, a, b in overhead:
             bench.append({"name": "overhead: " + name, "run_type": "iteration", "iterations": max(args.repeat, 5),

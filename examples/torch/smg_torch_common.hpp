@@ -108,6 +108,10 @@ struct CudaOps {
   void (*regularizers)(const EnergyInputs&, const smg::RegularizerOptions&, bool validate,
                        const at::Tensor& energies, const at::Tensor& conf, const at::Tensor& gx,
                        const at::Tensor& gq) = nullptr;
+  // Exact point KNN (G15): points [N, 3] (finite, checked by the caller), into indices int64
+  // [N, k] and squared distances [N, k] of points' dtype, on points' device.
+  void (*point_knn)(const Reference& ref, const at::Tensor& points, int k, double radius,
+                    bool include_self, const at::Tensor& indices, const at::Tensor& distances2) = nullptr;
   void (*dqb_forward)(const SkinInputs&, const smg::SkinOptions&, const at::Tensor& drivers,
                       const at::Tensor& weights, const at::Tensor& out_x,
                       const at::Tensor& out_q) = nullptr;
@@ -120,6 +124,14 @@ struct CudaOps {
 inline CudaOps& cuda_ops() {
   static CudaOps ops;
   return ops;
+}
+
+// CUDA implementation `f` of cuda_ops() (set in a CUDA build whenever a CUDA reference passed
+// reference()); NotImplementedError in a build without CUDA.
+template <class F>
+F& cuda(F& f) {
+  if (!f) not_implemented(kNoCudaMessage);
+  return f;
 }
 
 // Module registration, one per source file.

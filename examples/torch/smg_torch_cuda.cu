@@ -22,6 +22,7 @@
 #include "smg/cuda/confidence.cuh"
 #include "smg/cuda/dqb.cuh"
 #include "smg/cuda/lrm.cuh"
+#include "smg/cuda/point_knn.cuh"
 #include "smg/cuda/regularizers.cuh"
 #include "smg/cuda/skin_weights.cuh"
 #include "smg/cuda/validate.cuh"
@@ -215,6 +216,21 @@ void regularizers_cuda(const EnergyInputs& in, const smg::RegularizerOptions& o,
   });
 }
 
+// knn_points on a CUDA tensor: smg::cuda::point_knn on the current stream (no synchronisation).
+void point_knn_cuda(const Reference& ref, const at::Tensor& points, int k, double radius, bool include_self,
+                    const at::Tensor& indices, const at::Tensor& distances2) {
+  const c10::cuda::CUDAGuard guard(ref.device);
+  const cudaStream_t stream = stream_of(ref);
+  const int64_t N = points.size(0);
+  dispatch(ref.st, true, [&](auto s, auto) {
+    using S = decltype(s);
+    ok(smg::cuda::point_knn<S, std::int64_t>(smg::TableView<const S, 3>(cptr<S>(points), N), k, radius,
+                                             include_self, {mptr<std::int64_t>(indices), N, k},
+                                             {mptr<S>(distances2), N, k}, stream));
+    return 0;
+  });
+}
+
 // smg's scratch from PyTorch's CUDA caching allocator (stream-aware: a block freed on a stream
 // is reused on it without synchronisation).
 void* torch_allocate(std::size_t bytes, cudaStream_t stream, void*) {
@@ -237,6 +253,7 @@ void register_cuda(py::module_& m) {
   ops.carap = &carap_cuda;
   ops.lrm = &lrm_cuda;
   ops.regularizers = &regularizers_cuda;
+  ops.point_knn = &point_knn_cuda;
   ops.dqb_forward = &dqb_forward_cuda;
   ops.dqb_backward = &dqb_backward_cuda;
 }

@@ -57,14 +57,6 @@ at::Tensor zeros_if(bool need, const EnergyInputs& in, int64_t last) {
 
 py::object opt(const at::Tensor& t) { return t.defined() ? py::cast(t) : py::none(); }
 
-// CUDA implementation `f` of cuda_ops() (set in a CUDA build whenever a CUDA reference passed
-// reference()).
-template <class F>
-F& cuda(F& f) {
-  if (!f) not_implemented(kNoCudaMessage);
-  return f;
-}
-
 // This thread's workspace of S, kept between calls (one per thread and dtype, as a trainer keeps
 // one: smg/energy/workspace.hpp), for every CPU operator of the binding: without it each call
 // allocates and zero-fills the driver's scratch anew (at Shape of Motion's T = 3, N = 320 000 about
@@ -138,16 +130,6 @@ py::tuple carap_impl(const CarapCall& call, const at::Tensor& positions, const a
     return double(smg::carap<S>(xv, qv, cv, gv, call.carap, gxv, gqv, thread_workspace<S>(), parallel_options()));
   });
   return py::make_tuple(at::scalar_tensor(e, in.ref.options()), opt(gx), opt(gq));
-}
-
-// smg::accel on x [T, N, 3] into gx (when defined), with this thread's workspace of S.
-template <class S>
-double accel_call(const at::Tensor& x, const smg::AccelOptions& o, const at::Tensor& gx, int64_t T, int64_t N) {
-  const smg::PositionsView<const S> xv(cptr<S>(x), T, N);
-  const smg::PositionsView<S> gxv = gx.defined() ? smg::PositionsView<S>(mptr<S>(gx), T, N) : smg::PositionsView<S>();
-  ok(smg::validate_accel<S>(xv, {}, o, gxv), kEnergyNames);
-  py::gil_scoped_release release;
-  return double(smg::accel<S>(xv, {}, o, gxv, thread_workspace<S>(), parallel_options()));
 }
 
 py::tuple lrm_impl(const at::Tensor& positions, const at::Tensor& indices, const at::Tensor& weights,
@@ -234,25 +216,30 @@ py::tuple regularizers_impl(const at::Tensor& positions, const OptTensor& quats,
   return py::make_tuple(energies.to(in.ref.options().dtype()), opt(c), opt(gx), opt(gq));
 }
 
-// _accel(positions, options, grad_positions) -> (energy 0-dim, grad_positions [T, N, 3] or None):
-// smg::accel, the one-term smoothness operator (E21)-(E22), on CPU tensors, with `options` the
-// accel term's dict (smg_torch.REGULARIZER_DEFAULTS["accel"] and its changes; messages "accel.<option>:
-// ..."). Not public API: smg_torch.compat's entry to smg's accel (CUDA tensors go through
-// regularizers). It keeps one EnergyWorkspace per thread and dtype between calls, as a trainer
-// passes one (smg/energy/workspace.hpp): without it every call allocates and zero-fills the
-// driver's scratch anew, which at Shape of Motion's T = 3, N = 320 000 is about 7 times the input
-// (76 MiB for 11 MiB of float32) and took 75 % of the call.
-py::tuple accel_impl(const at::Tensor& positions, const py::dict& options, bool grad_x) {
+// _accel_windows(x, options, grad_x) -> (energy 0-dim, grad [G, T, B, 3] or None): smg::accel_windows
+// on a CPU tensor x [G, T, B, 3] (trajectory-major windows: Shape of Motion's transls reshaped,
+// a view), the gradient in x's own layout, so smg_torch.compat.som_accel makes no [T, N, 3] copy
+// of its input and autograd none of the gradient. `options`: the accel term's dict (smg_torch.REGULARIZER_DEFAULTS["accel"] and its
+// changes; messages "accel.<option>: ..."). Not public API.
+py::tuple accel_windows_impl(const at::Tensor& positions, const py::dict& options, bool grad_x) {
   require_cpu(positions, "positions");
   smg::AccelOptions o;
   read_term_options(options, "accel", o);
   if (const smg::Status st = smg::validate_options(o); !st)
     value_error("accel." + python_message(st.message(), {}));
   const Reference ref = reference(positions, "positions");
-  const at::Tensor x = float_input(positions, "positions", ref, 3, 3, "[T, N, 3]");
-  const int64_t T = x.size(0), N = x.size(1);
-  const at::Tensor gx = grad_x ? at::zeros({T, N, 3}, ref.options()) : at::Tensor();
-  const double e = ref.st == at::kDouble ? accel_call<double>(x, o, gx, T, N) : accel_call<float>(x, o, gx, T, N);
+  const at::Tensor x = float_input(positions, "positions", ref, 4, 3, "[G, T, B, 3]");
+  const int64_t G = x.size(0), T = x.size(1), B = x.size(2);
+  const at::Tensor gx = grad_x ? at::zeros({G, T, B, 3}, ref.options()) : at::Tensor();
+  double e = 0;
+  dispatch(ref.st, false, [&](auto s, auto) {
+    using S = decltype(s);
+    ok(smg::validate_accel_windows<S>(cptr<S>(x), G, T, B, o), kEnergyNames);
+    py::gil_scoped_release release;
+    e = double(smg::accel_windows<S>(cptr<S>(x), G, T, B, o, gx.defined() ? mptr<S>(gx) : nullptr,
+                                     parallel_options()));
+    return 0;
+  });
   return py::make_tuple(at::scalar_tensor(e, ref.options()), opt(gx));
 }
 
@@ -360,7 +347,7 @@ void register_energy(py::module_& m) {
   m.def("_regularizer_energies", &energy_names);
   m.def("_library_seconds", &library_seconds, "op"_a, "positions"_a, "quats"_a, "indices"_a, "weights"_a,
         "confidence"_a, "repeat"_a);
-  m.def("_accel", &accel_impl, "positions"_a, "options"_a, "grad_positions"_a);
+  m.def("_accel_windows", &accel_windows_impl, "positions"_a, "options"_a, "grad_positions"_a);
   m.def("lrm", &lrm_impl, "positions"_a, "indices"_a, "weights"_a, "confidence"_a, "alpha"_a,
         "huber_delta"_a, "detach_omega"_a, "normalize"_a, "grad_positions"_a, "validate"_a);
   m.def("set_memory_limit", [](double bytes) {

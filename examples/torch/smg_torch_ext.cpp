@@ -79,7 +79,7 @@ int64_t parallel_threads(const py::int_& chunks_arg, const py::int_& wanted_arg,
 PYBIND11_MODULE(_C, m) {
   using namespace pybind11::literals;
   m.doc() = "smg_torch._C: smg's operators over CPU tensors, and with has_cuda over CUDA tensors for "
-            "node_confidences, carap, arap, lrm, regularizers and dqb (use the smg_torch package)";
+            "node_confidences, carap, arap, lrm, regularizers, dqb and knn_points (use the smg_torch package)";
   // smg's parallel loops run on torch's intra-op pool; each call asks for at::get_num_threads().
   smg::set_executor({&smg_torch::torch_run, nullptr});
   m.attr("version") = SMG_VERSION_STRING;

@@ -3,6 +3,7 @@
 // (G1)-(G3), the exact trajectory KNN, the semantic gate, isolated policy and topology weights.
 // No gradient (the graph is a constant of the energies). Indices come back as int64 (what
 // PyTorch indexes with; converted from the library's int32 output, N×K values).
+#include <limits>
 #include <optional>
 #include <string>
 
@@ -106,6 +107,53 @@ py::tuple build_graph(const at::Tensor& positions, const OptTensor& visibility,
   return py::make_tuple(idx64, w, feats.defined() ? py::cast(feats) : py::none(), d);
 }
 
+// knn_points -> (squared distances [N, k] of points' dtype, indices int64 [N, k]) (G15):
+// exact rows by (d², j), d² <= radius² (radius None = +inf), self included or not, padded +inf
+// / -1. CPU: the tree search on torch's thread count, straight into torch's int64 (no copy);
+// CUDA: the all-pairs kernel on the current stream. No gradient here (smg_torch.knn_points adds
+// d²'s).
+py::tuple knn_points(const at::Tensor& points, const py::int_& k_arg, const py::object& radius_arg,
+                     bool include_self) {
+  const Reference r = reference(points, "points");
+  const at::Tensor p = float_input(points, "points", r, 2, 3, "[N, 3]");
+  const int64_t N = p.size(0);
+  const int64_t k = int_arg(k_arg, "K", 1, 1 << 20);
+  double radius = std::numeric_limits<double>::infinity();
+  if (!radius_arg.is_none()) {
+    radius = py::cast<double>(radius_arg);
+    if (!(radius >= 0)) value_error("radius: must be >= 0 (or None for no bound), got " + std::to_string(radius));
+  }
+  const std::string what = "K: K = " + std::to_string(k) + " neighbours of N = " + std::to_string(N) + " points";
+  check_memory(double(N) * double(k) * (8 + (r.st == at::kFloat ? 4 : 8)) + double(N) * 40, what);
+  at::Tensor idx, d2;
+  allocating(what, [&] {
+    idx = at::empty({N, k}, r.options().dtype(at::kLong));
+    d2 = at::empty({N, k}, r.options());
+  });
+  if (r.cuda()) {
+    cuda(cuda_ops().point_knn)(r, p, int(k), radius, include_self, idx, d2);
+    return py::make_tuple(d2, idx);
+  }
+  dispatch(r.st, true, [&](auto s, auto) {
+    using S = decltype(s);
+    smg::PointKnnOptions o;
+    o.k = int(k);
+    o.radius = radius;
+    o.include_self = include_self;
+    o.parallel = parallel_options();
+    const smg::TableView<const S, 3> pv(cptr<S>(p), N);
+    const smg::TableView<std::int64_t, Eigen::Dynamic> iv(mptr<std::int64_t>(idx), N, k);
+    const smg::TableView<S, Eigen::Dynamic> dv(mptr<S>(d2), N, k);
+    ok(smg::validate_point_knn<S, std::int64_t>(pv, o, iv, dv));
+    allocating(what, [&] {  // the tree
+      py::gil_scoped_release release;
+      smg::point_knn<S, std::int64_t>(pv, o, iv, dv);
+    });
+    return 0;
+  });
+  return py::make_tuple(d2, idx);
+}
+
 }  // namespace
 
 void register_graph(py::module_& m) {
@@ -113,6 +161,7 @@ void register_graph(py::module_& m) {
   m.def("build_graph", &build_graph, "positions"_a, "visibility"_a, "feature_samples"_a,
         "features"_a, "k"_a, "tau"_a, "aggregation"_a, "m"_a, "rho"_a, "min_covisible"_a,
         "isolated"_a, "weighting"_a, "gate"_a);
+  m.def("knn_points", &knn_points, "points"_a, "K"_a, "radius"_a, "include_self"_a);
 }
 
 }  // namespace smg_torch

@@ -11,5 +11,6 @@
 #include "smg/graph/neighbors.hpp"
 #include "smg/graph/node_order.hpp"
 #include "smg/graph/node_selection.hpp"
+#include "smg/graph/point_knn.hpp"
 #include "smg/graph/semantic_graph.hpp"
 #include "smg/graph/trajectory_distance.hpp"

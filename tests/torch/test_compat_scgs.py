@@ -333,8 +333,13 @@ def test_scgs_arap_refuses_more_than_512_nodes():
     g = torch.Generator().manual_seed(15)
     x = torch.rand(2, 513, 3, generator=g, dtype=torch.float64)
     ii, jj, nn, _ = connectivity(x[0])
-    with pytest.raises(ValueError, match=r"nodes_sequence: Nv = 513 nodes > 512"):
+    with pytest.raises(ValueError, match=r"nodes_sequence: Nv = 513 nodes > 512 .*sample_num=None sums every node"):
         scgs_arap(x, ii, jj, nn)
+    with pytest.raises(ValueError, match=r"nodes_sequence: Nv = 513 nodes > 100"):
+        scgs_arap(x, ii, jj, nn, sample_num=100)
+    for bad in (0, -3, 2.5, True):
+        with pytest.raises(ValueError, match=r"sample_num: expected an int >= 1 or None"):
+            scgs_arap(x, ii, jj, nn, sample_num=bad)
     # 512 is still one deterministic sum.
     x = x[:, :512]
     ii, jj, nn, _ = connectivity(x[0])
@@ -406,3 +411,23 @@ def test_scgs_arap_cuda(dtype, tol_e, tol_g, Nt):
     ref = float(cal_arap_error_torch(seq.double(), ii, jj, nn))
     assert abs(float(ea) - float(eb)) <= tol_e * ref
     assert _rel(a.grad.cpu(), gb) <= tol_g
+
+
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+def test_scgs_arap_every_node_past_sample_num(dtype):
+    """sample_num=None: every row at Nv = 2000 (4x SC-GS's sample), against the reading summing
+    every row (its Nv <= sample_num branch), float64 to 1e-9 / 1e-7, float32 to the float64 reading."""
+    seq, ii, jj, nn, w = _scene(M=2000, Nt=3, seed=21)
+    a = seq.to(dtype).detach().clone().requires_grad_()
+    b = seq.detach().clone().requires_grad_()
+    ea = scgs_arap(a, ii, jj, nn, sample_num=None)
+    eb = cal_arap_error_torch(b, ii, jj, nn)
+    ea.backward()
+    eb.backward()
+    _report(f"{dtype}, M = 2000, Nt = 3, sample_num=None", ea, a.grad, eb, b.grad)
+    tol_e, tol_g = (1e-9, 1e-7) if dtype == torch.float64 else (1e-4, 1e-3)
+    assert _erel(ea, eb) <= tol_e and _rel(a.grad, b.grad) <= tol_g
+    # At Nv <= sample_num both readings are upstream's full sum: the same value either way.
+    small = seq[:, :400].detach()
+    i4, j4, n4, _ = connectivity(small[0].double())
+    assert torch.equal(scgs_arap(small, i4, j4, n4), scgs_arap(small, i4, j4, n4, sample_num=None))

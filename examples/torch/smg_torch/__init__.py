@@ -1,5 +1,5 @@
 """smg_torch — smg's Semantic Motion Graph regularisers as PyTorch operators (CPU tensors; with a CUDA
-build, also CUDA tensors for node_confidences, carap, arap, lrm, regularizers and dqb: docs/cuda.md).
+build, also CUDA tensors for node_confidences, carap, arap, lrm, regularizers, dqb and knn_points: docs/cuda.md).
 
     import smg_torch as smg
     c = smg.node_confidences(positions, g)                        # [T, N], no grad
@@ -43,13 +43,13 @@ import torch
 
 from . import _C  # noqa: E402  (after torch: the module links against libtorch)
 
-__all__ = ["Graph", "has_cuda", "build_graph", "node_confidences", "carap", "arap", "lrm", "regularizers",
+__all__ = ["Graph", "has_cuda", "build_graph", "knn_points", "node_confidences", "carap", "arap", "lrm", "regularizers",
            "Regularizers", "dqb", "render", "version", "set_memory_limit", "memory_limit"]
 
 version = _C.version
 
 #: True when the extension was built with its CUDA operators (smg_torch_cuda.cu): then
-#: node_confidences, carap, arap, lrm, regularizers and dqb also take CUDA tensors (all on one device) and run on the
+#: node_confidences, carap, arap, lrm, regularizers, dqb and knn_points also take CUDA tensors (all on one device) and run on the
 #: device's current stream with the same equations and gradients.
 has_cuda = bool(getattr(_C, "has_cuda", False))
 
@@ -162,6 +162,52 @@ def _first_order(op: str):
                 return backward(ctx, *grads)
         return run
     return wrap
+
+
+class _KnnPointsFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, points, K, radius, include_self):
+        d2, idx = _C.knn_points(points.detach(), K, radius, include_self)
+        ctx.save_for_backward(points.detach(), idx)
+        ctx.mark_non_differentiable(idx)
+        return d2, idx
+
+    @staticmethod
+    @_first_order("knn_points")
+    def backward(ctx, g, _):
+        # d²_ij = ‖p_i − p_j‖²: ∂/∂p_i = 2 (p_i − p_j), ∂/∂p_j = −2 (p_i − p_j); padding has none.
+        points, idx = ctx.saved_tensors
+        valid = idx >= 0
+        j = idx.clamp(min=0)
+        gi = torch.where(valid[..., None], 2 * g[..., None] * (points[:, None, :] - points[j]),
+                         points.new_zeros(()))
+        grad = gi.sum(1)
+        grad.index_add_(0, j.reshape(-1), -gi.reshape(-1, 3))
+        return grad, None, None, None
+
+
+def knn_points(points: torch.Tensor, K: int, *, radius: Optional[float] = None,
+               include_self: bool = True) -> Tuple[torch.Tensor, torch.Tensor]:
+    """Exact K nearest neighbours of every point (docs/math/graph.md (G15)): points [N, 3]
+    float32/float64 -> (squared_distances [N, K] of points' dtype, indices int64 [N, K]). Row i
+    is sorted by (d², j) — ties by index, so the rows never depend on the search or the thread
+    count — keeps only d² <= radius² (frnn's test; None: no bound) and j != i unless
+    include_self. Entries past the last neighbour: index -1, squared distance +inf. The squared
+    distances are differentiable w.r.t. points (2 (p_i − p_j) and its negative; none through the
+    padding or the choice of neighbours). CPU: a bounding-box tree on torch's threads; CUDA: an
+    all-pairs kernel (O(N²), the same rows bit for bit). Each codebase's own table (Open3D,
+    cKDTree, frnn) comes from smg_torch.compat (open3d_knn, ckdtree_knn, frnn_knn).
+    Devices: CPU and CUDA tensors."""
+    if not isinstance(points, torch.Tensor):
+        raise TypeError(f"points: expected a torch.Tensor, got {type(points).__name__}")
+    if points.dim() == 2 and points.shape[-1] == 3 and points.is_floating_point() and points.numel() \
+            and not bool(torch.isfinite(points).all()):
+        bad = (~torch.isfinite(points)).nonzero()[0].tolist()
+        raise ValueError(f"points[{bad[0]}, {bad[1]}] is {points[bad[0], bad[1]].item()}: "
+                         "every coordinate must be finite")
+    if radius is not None:
+        radius = float(radius)
+    return _KnnPointsFunction.apply(points, K, radius, bool(include_self))
 
 
 class _CarapFunction(torch.autograd.Function):

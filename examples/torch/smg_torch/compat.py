@@ -9,7 +9,11 @@ Covered: Shape of Motion's `compute_accel_loss` (flow3d/loss_utils.py), on 3-vec
 `cal_arap_error` (utils/deform_utils.py: per-node Procrustes rotations, then the weighted sum of
 squared stretches) as `scgs_arap`, through smg's plain ARAP (E9); Dynamic 3D Gaussians' rigid,
 rot and iso losses (train.py get_loss) as `d3dgs_losses`, through smg's plain ARAP under the
-sqrt_weighted penalty (E24) and the relative-rotation term (E25).
+sqrt_weighted penalty (E24) and the relative-rotation term (E25). The neighbour tables these
+codebases build with tools of their own, through smg's exact point KNN (smg_torch.knn_points):
+`open3d_knn` (Dynamic 3D Gaussians' and DynOMo's `o3d_knn`, Open3D's KDTreeFlann), `ckdtree_knn`
+(scipy's cKDTree.query, DreamScene4D's `precompute_nn`) and `frnn_knn` (frnn.frnn_grid_points,
+Dynamic Gaussian Marbles' `_cache_isometry_knn`).
 """
 from __future__ import annotations
 
@@ -20,9 +24,10 @@ from typing import Optional, Sequence, Tuple
 import torch
 
 from . import (_REGULARIZER_ENERGIES, REGULARIZER_DEFAULTS, REGULARIZER_TERMS, _C, _CarapFunction, _first_order,
-               _regularizers, _scale, _term_options, has_cuda, memory_limit)
+               _regularizers, _scale, _term_options, has_cuda, knn_points, memory_limit)
 
-__all__ = ["som_accel", "mosca_arap", "mosca_vel_acc", "scgs_arap", "d3dgs_losses"]
+__all__ = ["som_accel", "mosca_arap", "mosca_vel_acc", "scgs_arap", "d3dgs_losses", "open3d_knn", "ckdtree_knn",
+           "frnn_knn"]
 
 # smg's smoothness (E21) with the unsquared norm (E22) and Normalization::mean, i.e. the mean of
 # ‖a‖ over the (T − 2)·N terms: the accel term's options.
@@ -95,12 +100,13 @@ def _check_floats(name, t):
 
 
 class _AccelFunction(torch.autograd.Function):
-    """smg::accel (the one-term operator) on CPU tensors x [T, N, 3]: the energy, and its gradient
-    computed in the same pass when x requires grad (scaled by grad_output in backward)."""
+    """smg::accel_windows on CPU tensors x [G, T, B, 3] (trajectory-major windows): the energy,
+    and its gradient in x's layout computed in the same pass when x requires grad (scaled by
+    grad_output in backward)."""
 
     @staticmethod
     def forward(ctx, x, options):
-        e, g = _C._accel(x.detach(), options, bool(ctx.needs_input_grad[0]))
+        e, g = _C._accel_windows(x.detach(), options, bool(ctx.needs_input_grad[0]))
         ctx.grad = g
         return e
 
@@ -125,17 +131,14 @@ def som_accel(transls: torch.Tensor) -> torch.Tensor:
     gives. Shape of Motion's rotation bases ([K, T, 6]) are not covered: smg's smoothness is on
     3-vectors, and splitting a 6-vector in two is exact only for the squared form.
 
-    On CPU tensors it calls smg::accel, the one-term operator; on CUDA tensors the fused step
-    with smoothness alone (smg::cuda::regularizers, the same element).
-
-    Memory, honestly: smg reads trajectories as [T][N][3], frame-major, and transls is
-    trajectory-major, so one copy of transls in that layout is made (transls.movedim(1, 0) then
-    a reshape to [T, N, 3], N = the product of the other dims; no copy when dim 0 has size 1),
-    plus the gradient [T, N, 3] that smg writes in the same pass (returned to autograd as a view
-    in transls' shape). No [..., T − 2, 3] intermediates: the differences, norms and their
-    gradients are formed per element inside smg's loop. On CPU, smg's scratch is kept between
-    calls (one workspace per thread and dtype, as a trainer keeps one; it only grows): at T = 3
-    it is about 7 times the input (76 MiB for G·B = 320 000 float32 trajectories)."""
+    On CPU tensors it calls smg::accel_windows, the smoothness term on trajectory-major windows:
+    transls is read in place as [K, T, B, 3] (B = the product of the dims after time; a view,
+    no copy, for a contiguous transls) and the gradient is written in the same pass in that
+    layout, so autograd gets it in transls' shape with no copy either. No [..., T − 2, 3]
+    intermediates: the differences, norms and their gradients are formed per element inside
+    smg's loop, and no scratch. On CUDA tensors: the fused step with smoothness alone
+    (smg::cuda::regularizers, the same element) on one copy of transls in smg's frame-major
+    layout [T, N, 3] (transls.movedim(1, 0), N = the product of the other dims)."""
     transls = _dense("transls", transls)
     if transls.dim() < 3:
         raise ValueError(f"transls: expected shape [K, T, 3] or [K, T, ..., 3], got {list(transls.shape)}")
@@ -151,9 +154,9 @@ def som_accel(transls: torch.Tensor) -> torch.Tensor:
         raise ValueError(f"transls: has an empty dim, shape {list(transls.shape)} (Shape of Motion's "
                          "mean over no terms is NaN)")
     _check_vectors("transls", transls)  # by transls' own index, not smg's [t, i] of the copy below
+    if not transls.is_cuda:  # [K, T, B, 3] in place: smg::accel_windows reads and writes this layout
+        return _AccelFunction.apply(transls.reshape(transls.shape[0], T, -1, 3), _SOM_ACCEL)
     x = transls.movedim(1, 0).reshape(T, -1, 3)  # [T, N, 3]: a copy unless dim 0 has size 1
-    if not x.is_cuda:
-        return _AccelFunction.apply(x, _SOM_ACCEL)
     # CUDA: smg::cuda::regularizers runs the same element (AccelElement); an empty [N, 0] graph.
     n = x.shape[1]
     idx = torch.empty((n, 0), dtype=torch.int32, device=transls.device)
@@ -573,7 +576,8 @@ def _scgs_index(name: str, t, n_edges: Optional[int], hi: int, hi_name: str, dev
 
 
 def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, nn: torch.Tensor,
-              K: int = 10, weight: Optional[torch.Tensor] = None) -> torch.Tensor:
+              K: int = 10, weight: Optional[torch.Tensor] = None, *,
+              sample_num: Optional[int] = _SCGS_SAMPLE_NUM) -> torch.Tensor:
     """SC-GS's `cal_arap_error(nodes_sequence, ii, jj, nn, K, weight)` (yihua7/SC-GS,
     utils/deform_utils.py l.177-205), the ARAP loss of its control nodes
     (ControlNodeWarp.arap_loss in utils/time_utils.py calls it with the ii, jj, nn of
@@ -591,9 +595,12 @@ def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, 
     is upstream's: 1 on every (ii, nn) slot, 0 elsewhere (l.184-186).
 
     nodes_sequence: [Nt, Nv, 3], float32 or float64, CPU (or CUDA with a CUDA build), finite;
-    Nt >= 2 (upstream returns the Python int 0 for Nt = 1) and 1 <= Nv <= 512 (above its
-    sample_num = 512 upstream samples 512 rows with replacement, np.random.choice, l.189-190: not
-    reproduced, refused). ii, jj, nn: [Ne] int32/int64 (any device), ii, jj in [0, Nv), nn in
+    Nt >= 2 (upstream returns the Python int 0 for Nt = 1) and Nv >= 1. sample_num: upstream's
+    (512): with Nv <= sample_num every row is summed, as upstream does; above it upstream sums
+    sample_num rows drawn with replacement (np.random.choice, l.189-190), which is not reproduced
+    (refused, naming sample_num=None). sample_num=None: every row at any Nv, the loss the draw
+    estimates (its expectation is sample_num / Nv times this sum) without its variance, and what
+    SC-GS's `no_arap_loss  # For large scenes arap is too slow` switched off. ii, jj, nn: [Ne] int32/int64 (any device), ii, jj in [0, Nv), nn in
     [0, K), each slot (ii, nn) at most once (upstream's scatter would keep one of the duplicates).
     K: int >= 1, the slots per row. weight: None or [Nv, K] float32/float64, finite (upstream: a
     NaN or inf weight, even in a slot without an edge, makes S NaN and its SVD fails on CPU;
@@ -620,10 +627,14 @@ def scgs_arap(nodes_sequence: torch.Tensor, ii: torch.Tensor, jj: torch.Tensor, 
                          "returns the Python int 0 for a single frame)")
     if Nv < 1:
         raise ValueError(f"nodes_sequence: has no nodes, shape {list(x.shape)}")
-    if Nv > _SCGS_SAMPLE_NUM:
-        raise ValueError(f"nodes_sequence: Nv = {Nv} nodes > {_SCGS_SAMPLE_NUM} (SC-GS's sample_num): "
-                         "SC-GS then sums over a random sample of rows drawn with replacement "
-                         "(np.random.choice), which scgs_arap does not reproduce")
+    if sample_num is not None:
+        if isinstance(sample_num, bool) or not isinstance(sample_num, numbers.Integral) or sample_num < 1:
+            raise ValueError(f"sample_num: expected an int >= 1 or None (every node), got {sample_num!r}")
+        if Nv > sample_num:
+            raise ValueError(f"nodes_sequence: Nv = {Nv} nodes > {int(sample_num)} (SC-GS's sample_num): "
+                             "SC-GS then sums over a random sample of rows drawn with replacement "
+                             "(np.random.choice), which scgs_arap does not reproduce; sample_num=None sums "
+                             "every node")
     _check_vectors("nodes_sequence", x)
     if isinstance(K, bool) or not isinstance(K, numbers.Integral) or K < 1:
         raise ValueError(f"K: expected an int >= 1 (the neighbour slots per node), got {K!r}")
@@ -887,3 +898,92 @@ def d3dgs_losses(fg_pts: torch.Tensor, fg_rot: torch.Tensor, prev_pts: torch.Ten
                                            n_self * math.sqrt(_D3DGS_EPS) * scale)
     iso = _D3dgsIsoFunction.apply(fg_pts, idx.long(), w, neighbor_dist.contiguous())
     return rigid, rot, iso
+
+
+# ---- neighbour tables as each codebase's tool returns them (smg_torch.knn_points underneath) ----
+
+def _knn_input(name, points, dtype=None):
+    """points as a [N, 3] tensor (numpy arrays and lists taken as the upstream helpers take them)."""
+    if not isinstance(points, torch.Tensor):
+        try:
+            points = torch.as_tensor(points)
+        except (TypeError, ValueError, RuntimeError) as e:
+            raise TypeError(f"{name}: expected a [N, 3] array or tensor, got {type(points).__name__}") from e
+    if points.dim() != 2 or points.shape[1] != 3:
+        raise ValueError(f"{name}: expected shape [N, 3], got {list(points.shape)}")
+    if dtype is not None:
+        points = points.detach().to(dtype)
+    elif not points.is_floating_point():
+        points = points.to(torch.get_default_dtype())
+    return points
+
+
+def open3d_knn(pts, num_knn: int):
+    """Dynamic 3D Gaussians' `o3d_knn(pts, num_knn)` (helpers.py, kept by DynOMo): for every point,
+    Open3D's `KDTreeFlann.search_knn_vector_3d(p, num_knn + 1)` over the points as float64 with the
+    first column (the point itself) dropped. -> (sq_dists float64 [N, num_knn], indices int32
+    [N, num_knn]) as numpy arrays, the dtypes `np.array` gives Open3D's DoubleVector and
+    IntVector, on which the upstream code then calls torch.tensor(...).
+
+    Differences, both where upstream has no defined answer: fewer than num_knn + 1 points pad with
+    -1 / inf (upstream's rows would be ragged); among points at exactly equal distance the lower
+    index comes first (Open3D's order among exact ties is its tree's), so of exact duplicates the
+    lower index is the dropped column 0 of both rows."""
+    p = _knn_input("pts", pts, torch.float64)
+    d2, idx = knn_points(p.cpu(), int(num_knn) + 1)
+    return d2[:, 1:].numpy(), idx[:, 1:].to(torch.int32).numpy()
+
+
+def ckdtree_knn(data, k: int, distance_upper_bound: float = math.inf):
+    """scipy's `cKDTree(data).query(data, k=k, distance_upper_bound=...)`, the table DreamScene4D's
+    `precompute_nn` builds (gs_renderer_4d.py, k = 16): data as float64, Euclidean distances
+    (not squared), the point itself in column 0. -> (distances float64, indices int64) numpy
+    arrays [N, k] ([N] for k = 1, as cKDTree); missing neighbours (distance >= the bound, which
+    cKDTree excludes) are inf and index N, as cKDTree pads.
+
+    Difference: among points at exactly equal distance the lower index comes first; cKDTree's
+    order among exact ties is its tree's (for exact duplicates its column 0 may be the other
+    copy), so a row may list tied neighbours in another order or, at the k-th place, another
+    neighbour at the same distance."""
+    p = _knn_input("data", data, torch.float64).cpu()
+    bound = float(distance_upper_bound)
+    if not bound > 0:
+        raise ValueError(f"distance_upper_bound: must be > 0, got {bound}")
+    d2, idx = knn_points(p, int(k), radius=None if math.isinf(bound) else bound)
+    d = d2.sqrt()
+    cut = (idx < 0) | ~(d < bound)  # cKDTree keeps d < bound only
+    d[cut] = math.inf
+    idx[cut] = p.shape[0]
+    d, idx = d.numpy(), idx.numpy()
+    return (d[:, 0], idx[:, 0]) if int(k) == 1 else (d, idx)
+
+
+def frnn_knn(points: torch.Tensor, K: int, r: float, segments: Optional[torch.Tensor] = None):
+    """frnn's `frnn_grid_points(points[None], points[None], K=K, r=r)` (points1 = points2, the
+    table Dynamic Gaussian Marbles' `_cache_isometry_knn` builds, K = 32, r = 0.1 there, 24 / 0.3
+    in its configs): squared distances d² <= r² in the points' dtype, self included, sorted.
+    -> (dists [1, N, K], idxs int64 [1, N, K]) with frnn's padding: -1 in both.
+
+    segments [N] (optional, integer labels): neighbours only within a point's segment — what
+    Marbles gets by appending segment * 2r as a fourth coordinate (two segments are then at least
+    2r apart; within one the fourth difference is 0, so d² is the 3D one).
+    Difference: among points at exactly equal distance the lower index comes first (frnn's order
+    among exact ties is its grid's)."""
+    p = _knn_input("points", points)
+    K, r = int(K), float(r)
+    if not r >= 0:
+        raise ValueError(f"r: must be >= 0, got {r}")
+    if segments is None:
+        d2, idx = knn_points(p.detach(), K, radius=r)
+    else:
+        if not isinstance(segments, torch.Tensor) or segments.shape != (p.shape[0],):
+            raise ValueError(f"segments: expected a tensor of shape [{p.shape[0]}] (one label per point)")
+        d2 = torch.full((p.shape[0], K), math.inf, dtype=p.dtype, device=p.device)
+        idx = torch.full((p.shape[0], K), -1, dtype=torch.long, device=p.device)
+        for label in torch.unique(segments):
+            members = (segments == label).nonzero().flatten()
+            sd2, sidx = knn_points(p.detach()[members], K, radius=r)
+            d2[members] = sd2
+            idx[members] = torch.where(sidx >= 0, members[sidx.clamp(min=0)], sidx)
+    d2 = torch.where(idx >= 0, d2, d2.new_full((), -1.0))
+    return d2[None], idx[None]
