@@ -25,6 +25,10 @@ workspace, kept between calls, is not counted once warm).
 Dynamic 3D Gaussians (train.py get_loss, t >= 1): N = 100 000 foreground Gaussians, K = 20,
 loss = 4 rigid + 4 rot + 2 iso: smg_torch.compat.d3dgs_losses against the upstream expressions
 (tests/torch/test_compat_d3dgs.py's d3dgs_torch, eager).
+DreamScene4D (gs_renderer_4d.py render_flow): N = 50 000 Gaussians, K = 16 (precompute_nn's
+table: smg_torch.knn_points with self, weights exp(−10 d)), loss = scale + rigidity, backward to
+all six inputs: smg_torch.compat.ds4d_losses against tests/torch/test_compat_ds4d.py's ds4d_torch
+(eager; its weights float32 here, where upstream's numpy weights are float64). No floor count.
 --quick: G = 4 000, M = 1 000, N = 10 000, 3 repeats (a smoke run). Prints a markdown table; --json writes the rows.
 --device cuda (smg_torch built with its CUDA operators, docs/torch.md): the same cases on the GPU, time by
 CUDA events (best of --repeat after two warm-ups), peak = torch.cuda.max_memory_allocated growth over one
@@ -53,10 +57,12 @@ sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "tests", "torch"))
 
 import bench_torch  # noqa: E402  (RssPeak)
-from smg_torch.compat import d3dgs_losses, mosca_arap, mosca_vel_acc, som_accel  # noqa: E402
+from smg_torch.compat import d3dgs_losses, ds4d_losses, mosca_arap, mosca_vel_acc, som_accel  # noqa: E402
 from test_compat import GAMMAS, SHIFTS, mosca_arap_torch, mosca_scene, mosca_vel_acc_torch  # noqa: E402
 from test_compat_d3dgs import d3dgs_torch  # noqa: E402
-import floor  # noqa: E402  (bench/torch/floor.py: the floor beside each time)
+from test_compat_ds4d import ds4d_torch  # noqa: E402
+import floor  # noqa: E402
+from smg_torch import knn_points  # noqa: E402  (bench/torch/floor.py: the floor beside each time)
 
 WORK = {}  # case name -> (flops, bytes) of its floor (bench/floor.hpp), filled by the case builders
 
@@ -188,6 +194,26 @@ def d3dgs_cases(N, device="cpu"):
     return [("D3DGS rigid + rot + iso", [N, 20], [x, r], loss(d3dgs_losses), loss(d3dgs_torch))]
 
 
+def ds4d_cases(N, device="cpu"):
+    """DreamScene4D's render_flow losses at N Gaussians, K = 16 (see the module docstring)."""
+    g = torch.Generator().manual_seed(2)
+    pos_prev = torch.rand(N, 3, generator=g)
+    pos_curr = pos_prev + 0.01 * torch.randn(N, 3, generator=g)
+    rot_prev = torch.randn(N, 4, generator=g) * 0.2 + torch.tensor([1.0, 0, 0, 0])
+    rot_curr = rot_prev + 0.05 * torch.randn(N, 4, generator=g)
+    sc_base = torch.randn(N, 3, generator=g) - 4
+    sc_prev = sc_base + 0.1 * torch.randn(N, 3, generator=g)
+    d2, idx = knn_points(pos_prev, 16)
+    w = torch.exp(-10 * d2.sqrt())
+    xs = [t.to(device).requires_grad_() for t in (pos_curr, pos_prev, rot_curr, rot_prev, sc_prev, sc_base)]
+    idx, w = idx.to(device), w.to(device)
+
+    def loss(fn):
+        return lambda *v: sum(fn(*v, idx, w))
+
+    return [("DreamScene4D scale + rigidity", [N, 16], xs, loss(ds4d_losses), loss(ds4d_torch))]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeat", type=int, default=10)
@@ -218,6 +244,7 @@ def main():
     m = floor.machine(a.floor_json)
     cases += mosca_cases(1000 if a.quick else 10000, g)
     cases += d3dgs_cases(10000 if a.quick else 100000)
+    cases += ds4d_cases(5000 if a.quick else 50000)
     cases = [c for c in cases if a.cases in c[0]]
     rows = []
     for name, shape, xs, f_smg, f_ref in cases:
@@ -255,6 +282,7 @@ def main_cuda(a):
         cases.append((name, list(shape), [x], som_accel, som_accel_torch))
     cases += mosca_cases(1000 if a.quick else 10000, g, "cuda")
     cases += d3dgs_cases(10000 if a.quick else 100000, "cuda")
+    cases += ds4d_cases(5000 if a.quick else 50000, "cuda")
     cases = [c for c in cases if a.cases in c[0]]
     rows = []
     for name, shape, xs, f_smg, f_ref in cases:

@@ -80,10 +80,26 @@ def test_bench_compat_quick_runs(tmp_path):
     r = _run([os.path.join(BENCH, "bench_compat.py"), "--quick", "--json", str(out)], tmp_path)
     assert r.returncode == 0, r.stderr
     rows = json.loads(out.read_text())["rows"]
-    assert [row["peer"] for row in rows] == ["smg", "torch"] * 5
+    assert [row["peer"] for row in rows] == ["smg", "torch"] * 6  # SoM x2, MoSca x2, D3DGS, DreamScene4D
     for row in rows:
         assert row["seconds"] > 0 and row["rel_diff"] < 1e-5
     assert "| case | shape | peer |" in r.stdout
+
+
+def test_bench_knn_quick_runs(tmp_path):
+    """bench/torch/bench_knn.py --quick: every peer present here runs, and the exact ones (the
+    tree tools, on float64 points) return smg's rows."""
+    out = tmp_path / "knn.json"
+    r = _run([os.path.join(BENCH, "bench_knn.py"), "--quick", "--json", str(out)], tmp_path)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(out.read_text())["rows"]
+    assert rows[0]["method"].startswith("smg_torch.knn_points float32") and rows[0]["ms"] > 0
+    for row in rows:
+        if row["method"].startswith(("scipy cKDTree", "Open3D")) and row["ms"] is not None:
+            assert row["same"] is True
+        if row["method"].startswith("torch cdist"):
+            assert row["same"] > 0.99  # cdist's rounding may swap near-ties
+    assert "| method | ms |" in r.stdout
 
 
 def test_bench_cuda_options(tmp_path):

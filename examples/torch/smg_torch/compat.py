@@ -9,7 +9,8 @@ Covered: Shape of Motion's `compute_accel_loss` (flow3d/loss_utils.py), on 3-vec
 `cal_arap_error` (utils/deform_utils.py: per-node Procrustes rotations, then the weighted sum of
 squared stretches) as `scgs_arap`, through smg's plain ARAP (E9); Dynamic 3D Gaussians' rigid,
 rot and iso losses (train.py get_loss) as `d3dgs_losses`, through smg's plain ARAP under the
-sqrt_weighted penalty (E24) and the relative-rotation term (E25). The neighbour tables these
+sqrt_weighted penalty (E24) and the relative-rotation term (E25); DreamScene4D's scale and local
+rigidity losses (gs_renderer_4d.py render_flow) as `ds4d_losses`, through the same ARAP. The neighbour tables these
 codebases build with tools of their own, through smg's exact point KNN (smg_torch.knn_points):
 `open3d_knn` (Dynamic 3D Gaussians' and DynOMo's `o3d_knn`, Open3D's KDTreeFlann), `ckdtree_knn`
 (scipy's cKDTree.query, DreamScene4D's `precompute_nn`) and `frnn_knn` (frnn.frnn_grid_points,
@@ -26,8 +27,8 @@ import torch
 from . import (_REGULARIZER_ENERGIES, REGULARIZER_DEFAULTS, REGULARIZER_TERMS, _C, _CarapFunction, _first_order,
                _regularizers, _scale, _term_options, has_cuda, knn_points, memory_limit)
 
-__all__ = ["som_accel", "mosca_arap", "mosca_vel_acc", "scgs_arap", "d3dgs_losses", "open3d_knn", "ckdtree_knn",
-           "frnn_knn"]
+__all__ = ["som_accel", "mosca_arap", "mosca_vel_acc", "scgs_arap", "d3dgs_losses", "ds4d_losses", "open3d_knn",
+           "ckdtree_knn", "frnn_knn"]
 
 # smg's smoothness (E21) with the unsquared norm (E22) and Normalization::mean, i.e. the mean of
 # ‖a‖ over the (T − 2)·N terms: the accel term's options.
@@ -898,6 +899,136 @@ def d3dgs_losses(fg_pts: torch.Tensor, fg_rot: torch.Tensor, prev_pts: torch.Ten
                                            n_self * math.sqrt(_D3DGS_EPS) * scale)
     iso = _D3dgsIsoFunction.apply(fg_pts, idx.long(), w, neighbor_dist.contiguous())
     return rigid, rot, iso
+
+
+# ---- DreamScene4D (dreamscene4d/dreamscene4d, gs_renderer_4d.py) ------------------------------------
+
+class _TwoFrameArapFunction(torch.autograd.Function):
+    """smg's plain ARAP coordinate part (E9) under sqrt_weighted (E24) on the two-frame window
+    x = [x0, x1], q = [q0, q1] (raw quaternions, normalised by smg), every edge weighted inside the
+    root and the sum scaled by `scale`, plus `floor` (the self edges' sqrt(1e-20)·scale the graph
+    left out); nothing held constant: the gradient reaches all four inputs, from the one pass
+    that computes the value (where a gradient is wanted). op: the caller, for _first_order."""
+
+    @staticmethod
+    def forward(ctx, x0, x1, q0, q1, idx, w, scale, floor, op):
+        need_x = ctx.needs_input_grad[0] or ctx.needs_input_grad[1]
+        need_q = ctx.needs_input_grad[2] or ctx.needs_input_grad[3]
+        e, gx, gq = _fused(torch.stack((x0.detach(), x1.detach())), torch.stack((q0.detach(), q1.detach())), idx, w,
+                           _d3dgs_terms(scale, 0.0), need_x, need_q)
+        ctx.grads = (None, None) if gx is None else (gx[0], gx[1])
+        ctx.grads += (None, None) if gq is None else (gq[0], gq[1])
+        ctx.op = op
+        return x1.new_tensor(e["arap"] + floor)
+
+    @staticmethod
+    @_first_order("compat.ds4d_losses")
+    def backward(ctx, g):
+        return tuple(None if t is None or not need else t * g
+                     for t, need in zip(ctx.grads, ctx.needs_input_grad[:4])) + (None,) * 5
+
+
+def ds4d_losses(pos_curr: torch.Tensor, pos_prev: torch.Tensor, rot_deform_curr: torch.Tensor,
+                rot_deform_prev: torch.Tensor, scales_deform_prev: torch.Tensor, scales_base: torch.Tensor,
+                nn_indices: torch.Tensor, nn_weights: torch.Tensor, *,
+                order: str = "upstream") -> Tuple[torch.Tensor, torch.Tensor]:
+    """DreamScene4D's `local_scale_loss` and `local_rigidity_loss` (gs_renderer_4d.py,
+    Renderer.render_flow) → (scale, rigidity), each a mean over the N·K slots of the
+    precompute_nn table:
+
+        scale     = mean sqrt(w_ij ‖s_j − s_i‖² + 1e-20),   s = scales_deform_prev − scales_base
+        rigidity  = mean sqrt(w_ij ‖(p_j − p_i) − R(rel_i)ᵀ (c_j − c_i)‖² + 1e-20),
+                    rel = q̂_prev ⊗ q̂_curr*   (order="upstream")
+
+    pos_curr, pos_prev [N, 3]: gaussian_3d_pos_curr / _prev (get_2d_gaussian_pos' means);
+    rot_deform_curr, rot_deform_prev [N, 4] (w x y z): the deformation network's raw rotations
+    at the two times (rotations_deform_T / prev_rotations_deform_T), normalised here as
+    rotation_activation (F.normalize) does; scales_deform_prev, scales_base [N, 3]: the raw
+    (log) scales, prev_scales_deform_T and gaussians._scaling; nn_indices [N, K] (int32/int64,
+    every slot a point; cKDTree's table, the point itself in column 0: a self edge adds
+    sqrt(1e-20) to the mean and nothing else, as upstream), nn_weights [N, K] >= 0 (upstream's
+    exp(−10 d), float64 from numpy: taken in pos_curr's dtype here, where upstream's products are
+    promoted to float64). Nothing is held constant, as upstream detaches nothing: gradients reach
+    all six tensors (the rotations' through the normalisation, as F.normalize's backward gives).
+
+    order="upstream" reproduces the code as read: rel = rotations_final ⊗ curr_rotations_final⁻¹
+    composes the previous rotation with the inverse of the current one, the reverse of the
+    Dynamic 3D Gaussians code it follows (rel = q_curr ⊗ q_prev*), so that a rigid motion whose
+    Gaussians co-rotate with it is not at zero loss (by ‖(R_Δ² − I) e‖). order="d3dgs" is
+    D3DGS's composition (zero, up to the 1e-20 floors, on such a motion).
+
+    How: both losses are smg's plain ARAP coordinate part (E9) under the sqrt_weighted penalty
+    (E24) on a two-frame window, one fused pass each with its gradient: rigidity on
+    x = [pos_prev, pos_curr] with q = [q_curr, q_prev] (upstream's order: ‖R_curr R_prevᵀ e_c −
+    e_p‖ is its norm) or [q_prev, q_curr] (D3DGS's), scale on x = [0, s] with identity rotations.
+    CPU and CUDA tensors."""
+    names = ("pos_curr", "pos_prev", "rot_deform_curr", "rot_deform_prev", "scales_deform_prev", "scales_base",
+             "nn_indices", "nn_weights")
+    pos_curr, pos_prev, rot_curr, rot_prev, sc_prev, sc_base, idx, w = (
+        _dense(n, t) for n, t in zip(names, (pos_curr, pos_prev, rot_deform_curr, rot_deform_prev,
+                                             scales_deform_prev, scales_base, nn_indices, nn_weights)))
+    if order not in ("upstream", "d3dgs"):
+        raise ValueError(f"order: must be 'upstream' (DreamScene4D's code) or 'd3dgs' (Dynamic 3D Gaussians' "
+                         f"composition), got {order!r}")
+    if pos_curr.dim() != 2 or pos_curr.shape[1] != 3 or pos_curr.shape[0] == 0:
+        raise ValueError(f"pos_curr: expected shape [N, 3] with N >= 1, got {list(pos_curr.shape)}")
+    _check_floats("pos_curr", pos_curr)
+    N = pos_curr.shape[0]
+    for name, t, shape in (("pos_prev", pos_prev, [N, 3]), ("rot_deform_curr", rot_curr, [N, 4]),
+                           ("rot_deform_prev", rot_prev, [N, 4]), ("scales_deform_prev", sc_prev, [N, 3]),
+                           ("scales_base", sc_base, [N, 3])):
+        if list(t.shape) != shape:
+            raise ValueError(f"{name}: expected shape {shape} (N of pos_curr), got {list(t.shape)}")
+        if t.dtype != pos_curr.dtype:
+            raise ValueError(f"{name}: dtype {t.dtype} differs from pos_curr's {pos_curr.dtype}")
+    if idx.dim() != 2 or idx.shape[0] != N or idx.shape[1] == 0:
+        raise ValueError(f"nn_indices: expected shape [N, K] with N = {N}, K >= 1, got {list(idx.shape)}")
+    if idx.dtype not in (torch.int64, torch.int32):
+        raise ValueError(f"nn_indices: dtype must be int64 or int32, got {idx.dtype}")
+    if list(w.shape) != list(idx.shape):
+        raise ValueError(f"nn_weights: expected shape {list(idx.shape)} (nn_indices'), got {list(w.shape)}")
+    if w.dtype not in (torch.float32, torch.float64):
+        raise ValueError(f"nn_weights: dtype must be float32 or float64, got {w.dtype}")
+    for name, t in zip(names[1:], (pos_prev, rot_curr, rot_prev, sc_prev, sc_base, idx, w)):
+        if t.device != pos_curr.device:
+            raise ValueError(f"{name}: device {t.device} differs from pos_curr's {pos_curr.device}")
+    bad = (idx < 0) | (idx >= N)
+    if bool(bad.any()):
+        flat = int(bad.reshape(-1).nonzero()[0])
+        raise ValueError(f"nn_indices{_index_of(flat, tuple(idx.shape))} = {int(idx.reshape(-1)[flat])} is not a "
+                         f"point in [0, {N}) (cKDTree's table fills every slot)")
+    for name, t in (("pos_curr", pos_curr), ("pos_prev", pos_prev), ("scales_deform_prev", sc_prev),
+                    ("scales_base", sc_base)):
+        _check_vectors(name, t)
+    _check_vectors("rot_deform_curr", rot_curr, quaternions=True)
+    _check_vectors("rot_deform_prev", rot_prev, quaternions=True)
+    _check_finite("nn_weights", w)
+    neg = w < 0
+    if bool(neg.any()):
+        flat = int(neg.reshape(-1).nonzero()[0])
+        raise ValueError(f"nn_weights{_index_of(flat, tuple(w.shape))} = {float(w.reshape(-1)[flat])} is negative: "
+                         "DreamScene4D's sqrt(w·‖r‖² + 1e-20) is NaN there")
+    K = idx.shape[1]
+    w = w.to(pos_curr.dtype).contiguous()
+    idx = idx.contiguous()
+    # Self edges (cKDTree's column 0) to the end of their row as padding, their floor added back.
+    self_edge = idx == torch.arange(N, device=idx.device, dtype=idx.dtype)[:, None]
+    n_self = int(self_edge.sum())
+    g_idx, g_w = idx, w
+    if n_self:
+        perm = torch.sort(self_edge.to(torch.int8), dim=1, stable=True).indices
+        g_idx = idx.masked_fill(self_edge, -1).gather(1, perm)
+        g_w = w.masked_fill(self_edge, 0).gather(1, perm)
+    scale = 1.0 / (N * K)
+    floor = n_self * math.sqrt(_D3DGS_EPS) * scale
+    q0, q1 = (rot_curr, rot_prev) if order == "upstream" else (rot_prev, rot_curr)
+    rigidity = _TwoFrameArapFunction.apply(pos_prev, pos_curr, q0, q1, g_idx, g_w, scale, floor, "compat.ds4d_losses")
+    s = sc_prev - sc_base
+    ident = torch.zeros((N, 4), dtype=pos_curr.dtype, device=pos_curr.device)
+    ident[:, 0] = 1
+    scale_loss = _TwoFrameArapFunction.apply(torch.zeros_like(s), s, ident, ident, g_idx, g_w, scale, floor,
+                                             "compat.ds4d_losses")
+    return scale_loss, rigidity
 
 
 # ---- neighbour tables as each codebase's tool returns them (smg_torch.knn_points underneath) ----
