@@ -717,6 +717,30 @@ _D3DGS_ISO_ROWS = 16384
 _D3DGS_UNIT_TOL = 1e-5
 
 
+def _refuse_negative(name, w, upstream):
+    """A ValueError naming the first negative entry of w (the caller's index): `upstream`'s
+    sqrt(w·‖r‖² + 1e-20) is NaN there."""
+    neg = w < 0
+    if bool(neg.any()):
+        flat = int(neg.reshape(-1).nonzero()[0])
+        raise ValueError(f"{name}{_index_of(flat, tuple(w.shape))} = {float(w.reshape(-1)[flat])} is negative: "
+                         f"{upstream}'s sqrt(w·‖r‖² + 1e-20) is NaN there")
+
+
+def _self_edges_as_padding(idx, w):
+    """(idx, w, n_self) with every self edge (j = i) moved to the end of its row as padding
+    (−1 / 0), the other entries in their order: smg's graph takes no self edge, while D3DGS's
+    and DreamScene4D's tables may hold them (each adds sqrt(0 + 1e-20) to the mean and no
+    gradient; the caller adds n_self such floors back)."""
+    N = idx.shape[0]
+    self_edge = idx == torch.arange(N, device=idx.device, dtype=idx.dtype)[:, None]
+    n_self = int(self_edge.sum())
+    if not n_self:
+        return idx, w, 0
+    perm = torch.sort(self_edge.to(torch.int8), dim=1, stable=True).indices
+    return idx.masked_fill(self_edge, -1).gather(1, perm), w.masked_fill(self_edge, 0).gather(1, perm), n_self
+
+
 class _D3dgsPartsFunction(torch.autograd.Function):
     """(rigid, rot) of Dynamic 3D Gaussians from smg's fused step on the two-frame window
     x = [prev_pts, fg_pts], q = [prev_rot, fg_rot]: rigid is plain ARAP's coordinate part (E9)
@@ -876,24 +900,13 @@ def d3dgs_losses(fg_pts: torch.Tensor, fg_rot: torch.Tensor, prev_pts: torch.Ten
                              "loss compares the raw products fg_rot ⊗ prev_rot*, which scale with their norms")
     _check_finite("neighbor_weight", neighbor_weight)
     _check_finite("neighbor_dist", neighbor_dist)
-    neg = neighbor_weight < 0
-    if bool(neg.any()):
-        flat = int(neg.reshape(-1).nonzero()[0])
-        raise ValueError(f"neighbor_weight{_index_of(flat, tuple(neg.shape))} = {float(neighbor_weight.reshape(-1)[flat])} "
-                         "is negative: D3DGS's sqrt(w·‖r‖² + 1e-20) is NaN there")
+    _refuse_negative("neighbor_weight", neighbor_weight, "D3DGS")
     K = neighbor_indices.shape[1]
     idx = neighbor_indices.contiguous()
     w = neighbor_weight.contiguous()
     # Self edges (j = i: a duplicate point can come back from Open3D's KNN) are legal upstream,
-    # where each adds sqrt(0 + 1e-20) to both means and no gradient; smg's graph takes no self
-    # edge, so they move to the end of their row as padding (-1) and their floor is added back.
-    self_edge = idx == torch.arange(N, device=idx.device, dtype=idx.dtype)[:, None]
-    n_self = int(self_edge.sum())
-    g_idx, g_w = idx, w
-    if n_self:
-        order = torch.sort(self_edge.to(torch.int8), dim=1, stable=True).indices
-        g_idx = idx.masked_fill(self_edge, -1).gather(1, order)
-        g_w = w.masked_fill(self_edge, 0).gather(1, order)
+    # where each adds sqrt(0 + 1e-20) to both means: padding here, their floor added back.
+    g_idx, g_w, n_self = _self_edges_as_padding(idx, w)
     scale = 1.0 / (N * K)
     rigid, rot = _D3dgsPartsFunction.apply(fg_pts, fg_rot, prev_pts, prev_rot, g_idx, g_w, scale,
                                            n_self * math.sqrt(_D3DGS_EPS) * scale)
@@ -1003,22 +1016,10 @@ def ds4d_losses(pos_curr: torch.Tensor, pos_prev: torch.Tensor, rot_deform_curr:
     _check_vectors("rot_deform_curr", rot_curr, quaternions=True)
     _check_vectors("rot_deform_prev", rot_prev, quaternions=True)
     _check_finite("nn_weights", w)
-    neg = w < 0
-    if bool(neg.any()):
-        flat = int(neg.reshape(-1).nonzero()[0])
-        raise ValueError(f"nn_weights{_index_of(flat, tuple(w.shape))} = {float(w.reshape(-1)[flat])} is negative: "
-                         "DreamScene4D's sqrt(w·‖r‖² + 1e-20) is NaN there")
+    _refuse_negative("nn_weights", w, "DreamScene4D")
     K = idx.shape[1]
-    w = w.to(pos_curr.dtype).contiguous()
-    idx = idx.contiguous()
-    # Self edges (cKDTree's column 0) to the end of their row as padding, their floor added back.
-    self_edge = idx == torch.arange(N, device=idx.device, dtype=idx.dtype)[:, None]
-    n_self = int(self_edge.sum())
-    g_idx, g_w = idx, w
-    if n_self:
-        perm = torch.sort(self_edge.to(torch.int8), dim=1, stable=True).indices
-        g_idx = idx.masked_fill(self_edge, -1).gather(1, perm)
-        g_w = w.masked_fill(self_edge, 0).gather(1, perm)
+    # Self edges (cKDTree's column 0) as padding, their floor added back.
+    g_idx, g_w, n_self = _self_edges_as_padding(idx.contiguous(), w.to(pos_curr.dtype).contiguous())
     scale = 1.0 / (N * K)
     floor = n_self * math.sqrt(_D3DGS_EPS) * scale
     q0, q1 = (rot_curr, rot_prev) if order == "upstream" else (rot_prev, rot_curr)
