@@ -29,7 +29,15 @@ DreamScene4D (gs_renderer_4d.py render_flow): N = 50 000 Gaussians, K = 16 (prec
 table: smg_torch.knn_points with self, weights exp(−10 d)), loss = scale + rigidity, backward to
 all six inputs: smg_torch.compat.ds4d_losses against tests/torch/test_compat_ds4d.py's ds4d_torch
 (eager; its weights float32 here, where upstream's numpy weights are float64). No floor count.
---quick: G = 4 000, M = 1 000, N = 10 000, 3 repeats (a smoke run). Prints a markdown table; --json writes the rows.
+Dynamic Gaussian Marbles (src/models/gaussians.py): N = 100 000, the adjacent isometry on frnn's table (K = 24,
+r = 0.3, self included; compat.frnn_knn) over a mask of 70 % of the Gaussians, loss = errs.mean(), and the
+instance isometry on 2 × 4096 drawn pairs: marbles_isometry and marbles_global_rigid against
+tests/torch/test_compat_marbles.py's readings. DynOMo (src/utils/losses.py physics_based_losses): N = 100 000,
+K = 20 (o3d_knn's table, weights exp(−2000 d²)), loss = rigid + rot + iso, backward to the means and raw
+rotations: dynomo_losses against tests/torch/test_compat_dynomo.py's reading. SC-GS (utils/deform_utils.py
+cal_arap_error): 4 096 nodes, K = 10, two times: scgs_arap(sample_num=None) against the reading that sums
+every node (tests/torch/test_compat_scgs.py). No floor count for these four.
+--quick: G = 4 000, M = 1 000, N = 10 000 (512 SC-GS nodes), 3 repeats (a smoke run). Prints a markdown table; --json writes the rows.
 --device cuda (smg_torch built with its CUDA operators, docs/torch.md): the same cases on the GPU, time by
 CUDA events (best of --repeat after two warm-ups), peak = torch.cuda.max_memory_allocated growth over one
 call (the inputs excluded), and a third peer, torch.compile of the upstream expression (timed after its first
@@ -57,12 +65,17 @@ sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "tests", "torch"))
 
 import bench_torch  # noqa: E402  (RssPeak)
-from smg_torch.compat import d3dgs_losses, ds4d_losses, mosca_arap, mosca_vel_acc, som_accel  # noqa: E402
+from smg_torch.compat import (d3dgs_losses, ds4d_losses, dynomo_losses, marbles_global_rigid,  # noqa: E402
+                               marbles_isometry, mosca_arap, mosca_vel_acc, scgs_arap, som_accel)
 from test_compat import GAMMAS, SHIFTS, mosca_arap_torch, mosca_scene, mosca_vel_acc_torch  # noqa: E402
 from test_compat_d3dgs import d3dgs_torch  # noqa: E402
 from test_compat_ds4d import ds4d_torch  # noqa: E402
+from test_compat_dynomo import dynomo_torch  # noqa: E402
+from test_compat_marbles import global_rigid_torch, isometry_torch  # noqa: E402
+from test_compat_scgs import cal_arap_error_torch, connectivity  # noqa: E402
 import floor  # noqa: E402
 from smg_torch import knn_points  # noqa: E402  (bench/torch/floor.py: the floor beside each time)
+from smg_torch.compat import frnn_knn  # noqa: E402
 
 WORK = {}  # case name -> (flops, bytes) of its floor (bench/floor.hpp), filled by the case builders
 
@@ -214,6 +227,67 @@ def ds4d_cases(N, device="cpu"):
     return [("DreamScene4D scale + rigidity", [N, 16], xs, loss(ds4d_losses), loss(ds4d_torch))]
 
 
+def marbles_cases(N, device="cpu"):
+    """Dynamic Gaussian Marbles at N Gaussians: the adjacent isometry on frnn's table (K = 24,
+    r = 0.3, self included) over a mask of 70 %, errs.mean(), and the instance isometry on 4096
+    pairs of each of two halves (module docstring)."""
+    g = torch.Generator().manual_seed(3)
+    src = torch.rand(N, 3, generator=g)
+    xyz = src + 0.01 * torch.randn(N, 3, generator=g)
+    mask = torch.rand(N, generator=g) < 0.7
+    _, idx = frnn_knn(src[mask], 24, 0.3)
+    valid = idx[0] != -1
+    p = torch.arange(int(mask.sum())).repeat_interleave(24)[valid.flatten()].int()
+    k = idx[0][valid].int()
+    src, mask, p, k = (t.to(device) for t in (src, mask, p, k))
+    x = xyz.to(device).requires_grad_()
+    t = (xyz + 0.02 * torch.randn(N, 3, generator=g)).to(device).requires_grad_()
+    half = N // 2
+    i1 = torch.cat([torch.randperm(half, generator=g)[:4096], half + torch.randperm(N - half, generator=g)[:4096]])
+    i2 = torch.cat([torch.randperm(half, generator=g)[:4096], half + torch.randperm(N - half, generator=g)[:4096]])
+    i1, i2 = i1.to(device), i2.to(device)
+    return [("Marbles adjacent isometry", [N, 24], [x], lambda v: marbles_isometry(v, src, p, k, mask).mean(),
+             lambda v: isometry_torch(v, src, p.long(), k.long(), mask, False).mean()),
+            ("Marbles instance isometry", [N, 8192], [t], lambda v: marbles_global_rigid(src, v, i1, i2),
+             lambda v: global_rigid_torch(src, v, i1, i2))]
+
+
+def dynomo_cases(N, device="cpu"):
+    """DynOMo's physics-based losses at N Gaussians, K = 20 (o3d_knn's table, weights
+    exp(−2000 d²)), loss = rigid + rot + iso, backward to the means and raw rotations."""
+    g = torch.Generator().manual_seed(4)
+    prev = torch.rand(N, 3, generator=g)
+    curr = prev + 0.005 * torch.randn(N, 3, generator=g)
+    prev_rot = torch.randn(N, 4, generator=g) * 0.3 + torch.tensor([1.5, 0, 0, 0])
+    curr_rot = prev_rot + 0.05 * torch.randn(N, 4, generator=g)
+    d2, idx = knn_points(prev, 21)
+    s = torch.arange(N).repeat_interleave(20)
+    n = idx[:, 1:].flatten()
+    w = torch.exp(-2000 * d2[:, 1:].flatten())
+    first = prev + 0.01 * torch.randn(N, 3, generator=g)
+    off0 = first[s] - first[n]
+    prev, prev_rot, s, n, w, off0 = (t.to(device) for t in (prev, prev_rot, s, n, w, off0))
+    xs = [curr.to(device).requires_grad_(), curr_rot.to(device).requires_grad_()]
+
+    def loss(fn):
+        return lambda x, q: sum(fn(x, q, prev, prev_rot, s, n, w, off0))
+
+    return [("DynOMo rigid + rot + iso", [N, 20], xs, loss(dynomo_losses), loss(dynomo_torch))]
+
+
+def scgs_cases(M, device="cpu"):
+    """SC-GS's ARAP at M control nodes, K = 10, two times (ControlNodeWarp.arap_loss): every node
+    (sample_num=None) against cal_arap_error's reading summing every node (tests/torch/test_compat_scgs.py)."""
+    g = torch.Generator().manual_seed(5)
+    x0 = torch.rand(M, 3, generator=g, dtype=torch.float64)
+    x1 = x0 + 0.01 * torch.randn(M, 3, generator=g, dtype=torch.float64)
+    ii, jj, nn, _ = connectivity(x0, radius=0.1)
+    ii, jj, nn = (t.to(device) for t in (ii, jj, nn))
+    x = torch.stack([x0, x1]).float().to(device).requires_grad_()
+    return [("SC-GS ARAP, every node", [M, 10], [x], lambda v: scgs_arap(v, ii, jj, nn, 10, sample_num=None),
+             lambda v: cal_arap_error_torch(v, ii, jj, nn, 10))]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeat", type=int, default=10)
@@ -245,6 +319,9 @@ def main():
     cases += mosca_cases(1000 if a.quick else 10000, g)
     cases += d3dgs_cases(10000 if a.quick else 100000)
     cases += ds4d_cases(5000 if a.quick else 50000)
+    cases += marbles_cases(10000 if a.quick else 100000)
+    cases += dynomo_cases(10000 if a.quick else 100000)
+    cases += scgs_cases(512 if a.quick else 4096)
     cases = [c for c in cases if a.cases in c[0]]
     rows = []
     for name, shape, xs, f_smg, f_ref in cases:
@@ -283,6 +360,9 @@ def main_cuda(a):
     cases += mosca_cases(1000 if a.quick else 10000, g, "cuda")
     cases += d3dgs_cases(10000 if a.quick else 100000, "cuda")
     cases += ds4d_cases(5000 if a.quick else 50000, "cuda")
+    cases += marbles_cases(10000 if a.quick else 100000, "cuda")
+    cases += dynomo_cases(10000 if a.quick else 100000, "cuda")
+    cases += scgs_cases(512 if a.quick else 4096, "cuda")
     cases = [c for c in cases if a.cases in c[0]]
     rows = []
     for name, shape, xs, f_smg, f_ref in cases:

@@ -15,9 +15,13 @@ import torch
 import torch.nn.functional as F
 
 import smg_torch as smg
-from smg_torch.compat import d3dgs_losses, mosca_arap, mosca_vel_acc, scgs_arap, som_accel
+from smg_torch.compat import (d3dgs_losses, ds4d_losses, dynomo_losses, marbles_global_rigid, marbles_isometry,
+                               mosca_arap, mosca_vel_acc, scgs_arap, som_accel)
 from test_compat import GAMMAS, SHIFTS, mosca_arap_torch, mosca_scene
 from test_compat_d3dgs import d3dgs_torch, scene as d3dgs_scene, tangent
+from test_compat_ds4d import scene as ds4d_scene
+from test_compat_dynomo import scene as dynomo_scene
+from test_compat_marbles import scene as marbles_scene
 from test_compat_scgs import _scene as scgs_scene, cal_arap_error_torch
 from test_render import small_scene
 from test_skin import skin_scene
@@ -46,6 +50,25 @@ def _scgs_args():
     return [seq, ii, jj, nn], {}
 
 
+def _ds4d_args():
+    return ds4d_scene(N=60, seed=15), {}
+
+
+def _marbles_args():
+    xyz, src, p, k, mask = marbles_scene(N=80, seed=16)
+    return [xyz, src, p, k, mask], {}
+
+
+def _marbles_rigid_args():
+    xyz, src, _, _, _ = marbles_scene(N=80, seed=17)
+    i = torch.arange(80)
+    return [src, xyz, i, i.flip(0)], {}
+
+
+def _dynomo_args():
+    return dynomo_scene(N=60, K=5, seed=18), {}
+
+
 def _som_args():
     g = torch.Generator().manual_seed(14)
     return [torch.randn(5, 6, 2, 3, generator=g)], {}
@@ -62,11 +85,22 @@ CALLS = {
     "d3dgs_losses": (d3dgs_losses, _d3dgs_args, (0, 1), (1, 3),
                      ("fg_pts", "fg_rot", "prev_pts", "prev_rot", "neighbor_indices", "neighbor_weight",
                       "neighbor_dist")),
+    "ds4d_losses": (ds4d_losses, _ds4d_args, (0, 1, 2, 3, 4, 5), (2, 3),
+                    ("pos_curr", "pos_prev", "rot_deform_curr", "rot_deform_prev", "scales_deform_prev",
+                     "scales_base", "nn_indices", "nn_weights")),
+    "marbles_isometry": (marbles_isometry, _marbles_args, (0,), (),
+                         ("xyz", "src_xyz", "point_idxs", "knn_idxs", "mask")),
+    "marbles_global_rigid": (marbles_global_rigid, _marbles_rigid_args, (1,), (),
+                             ("xyz", "transformed_xyz", "idx1", "idx2")),
+    "dynomo_losses": (dynomo_losses, _dynomo_args, (0, 1), (1, 3),
+                      ("curr_means", "curr_rot", "prev_means", "prev_rot", "self_indices", "neighbor_indices",
+                       "neighbor_weight", "offset_0")),
 }
 
 
 def _total(out):
-    return out if isinstance(out, torch.Tensor) else sum(out)
+    """A scalar of a call's result: the sum of its losses, or of its per-edge errors (marbles_isometry)."""
+    return out.sum() if isinstance(out, torch.Tensor) else sum(out)
 
 
 def _values_and_grads(name, args, kw, wrap=None):
@@ -142,7 +176,7 @@ def test_non_finite_entries_are_refused_by_the_callers_index(name, value):
         bad[where + (bad.shape[-1] - 1,)] = value
         args[i] = bad
         idx = ", ".join(str(j) for j in where)
-        if names[i] in ("neighbor_weight", "neighbor_dist"):  # per-entry tables, not vectors
+        if names[i] in ("neighbor_weight", "neighbor_dist", "nn_weights"):  # per-entry tables, not vectors
             idx = ", ".join(str(j) for j in where + (bad.shape[-1] - 1,))
             pattern = rf"^{names[i]}\[{idx}\] is {value}"
         else:
