@@ -26,6 +26,7 @@
 //   struct Block (default-constructible)    the per-block state
 //   Block begin(BlockView&, S* slot) const       per block, before its nodes (may fill c)
 //   void node(const BlockView&, Block&, Index i, RegularizerResult<S>&) const   per (block, node)
+//   void end(const BlockView&, Block&) const *   per block, after its nodes
 //   void finish_frame(Index s, S* grad_row) const *  after the spills, per frame (may be a no-op)
 //   void finish(RegularizerResult<S>&) const *   the block sums' overall scale
 // A term the CUDA element pass runs (cuda/driver.cuh) also has `using Element = ...`, `Element
@@ -154,7 +155,10 @@ struct BlockPlan {
   bool want_x = false, want_r = false;
   Index slots = 1;
 
-  static Index padded(Index frames) { return (frames + 3) / 4 * 4; }
+  // The stride of a block's per-node frame arrays: a multiple of 4 (whole vector lanes over the
+  // frames), except for windows of 1 to 3 frames, which keep their length: a two-frame window
+  // padded to 4 did twice the per-(edge, frame) work, half of it on zero frames.
+  static Index padded(Index frames) { return frames < 4 ? frames : (frames + 3) / 4 * 4; }
   static Index round_up(Index v, Index m) { return (v + m - 1) / m * m; }
   Index M() const { return K * span; }
   // Every scratch array starts on a 64-byte boundary (its size rounded up to 16 scalars, the
@@ -257,6 +261,10 @@ struct TermDefaults {
   void finish_frame(Index, S*) const {}
   template <class E>
   void finish(E&) const {}
+  // After a block's nodes, before its position gradient leaves the block (relrot's per-node sums
+  // become rotation gradients here).
+  template <class V, class B>
+  void end(const V&, B&) const {}
 };
 
 // The defaults of a term with no scratch of its own (each step reads the block's records only,
@@ -324,6 +332,9 @@ template <class T, class S, class I>
 using node = decltype(std::declval<const T&>().node(std::declval<const BlockView<S, I>&>(),
                                                     std::declval<typename T::Block&>(), Index(),
                                                     std::declval<RegularizerResult<S>&>()));
+template <class T, class S, class I>
+using end = decltype(std::declval<const T&>().end(std::declval<const BlockView<S, I>&>(),
+                                                  std::declval<typename T::Block&>()));
 template <class T, class S>
 using finish_frame = decltype(std::declval<const T&>().finish_frame(Index(), std::declval<S*>()));
 template <class T, class S>
@@ -374,7 +385,9 @@ constexpr bool check_block_members() {
     static_assert(beg, "smg term concept: Block begin(BlockView<S, I>&, S* slot) const is missing");
     constexpr bool nod = detected_v<m::node, Term, S, I>;
     static_assert(nod, "smg term concept: void node(const BlockView<S, I>&, Block&, Index, RegularizerResult<S>&) const is missing");
-    return def && beg && nod;
+    constexpr bool fin = detected_v<m::end, Term, S, I>;
+    static_assert(fin, "smg term concept: void end(const BlockView<S, I>&, Block&) const is missing (derive from detail::TermDefaults)");
+    return def && beg && nod && fin;
   }
 }
 template <class Term, class S>

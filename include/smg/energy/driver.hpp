@@ -3,7 +3,7 @@
 // frames cut into blocks (docs/math/energy.md "The fused regulariser pass"). Per block it
 // gathers the block's frames node-major (one contiguous record [x; y; z; c] per node, so a
 // neighbour's frames are one cache-friendly read), lets each term fill what it fills per block
-// (the confidences), then calls every term per node, in the order given.
+// (the confidences), then calls every term per node, in the order given, and each term's end().
 //
 // Determinism: a block owns the gradient rows of its frames; contributions to the up to
 // max(reach) frames past its end go to per-block spill buffers added afterwards in block order.
@@ -11,7 +11,7 @@
 //
 // Memory (all in the EnergyWorkspace): per slot (a block in flight) 4·N·S_b for the records,
 // 3·N·S_b for the block's position gradient and what the terms ask for (slot_scalars), with
-// S_b = the block's stored frames (at most 32 + max reach, rounded up to 4); shared: the spill
+// S_b = the block's stored frames (at most 32 + max reach, rounded up to 4 from 4 on); shared: the spill
 // 2·blocks·G·N·3 (positions, rotations) and the terms' fixed_scalars. The number of slots
 // (≤ threads, ≤ blocks) is lowered until the total is at most `bound` bytes (the caller passes
 // its inputs' size); one slot is left where even that exceeds it.
@@ -250,6 +250,7 @@ E drive_checked(const DriverIO<S, I>& io, const BlockPlan& p, EnergyWorkspace<S>
       std::apply([&](auto&... blk) { ((terms.on() ? (terms.node(v, blk, i, energy), 0) : 0), ...); },
                  blocks);
     }
+    std::apply([&](auto&... blk) { ((terms.on() ? (terms.end(v, blk), 0) : 0), ...); }, blocks);
     // Owned frames into the caller's rows, the overlap into this block's spill.
     if (v.GBx)
       for (Index l = 0; l < v.nr; ++l) {

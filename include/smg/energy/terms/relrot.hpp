@@ -9,7 +9,9 @@
 // No sign canonicalisation: q and −q at one frame flip r, as in D3DGS. The gradient goes to the
 // rotations of both ends (right tangent, or raw quaternions through (Q5)); positions get none.
 // Each term is indexed by its earlier frame, which the block owns; its later frame may be in
-// the block's overlap (reach 1) and reaches the caller through the rotation spill.
+// the block's overlap (reach 1) and reaches the caller through the rotation spill. On the CPU a
+// block forms each node's r once and sums ∂E/∂r over its edges before one tangent conversion per
+// (frame, node) (RelrotTerm); the GPU's element recomputes its neighbours' (RelrotElement).
 #pragma once
 
 #include "smg/core/config.hpp"
@@ -194,11 +196,11 @@ struct RelrotElement {
 namespace detail {
 
 template <class S, class I>
-struct RelrotTerm : ScratchFreeRotationTerm {
+struct RelrotTerm : TermDefaults {
   using L = Literal<S>;
   using Acc = Accumulator<S>;
 
-  bool enabled = false, mean = false;
+  bool enabled = false, mean = false, want_rotations = false;
   Penalty penalty = Penalty::sqrt_weighted;
   double weight_d = 0, scale_d = 0, eps_d = 0;
   Index T = 0;
@@ -223,6 +225,9 @@ struct RelrotTerm : ScratchFreeRotationTerm {
 
   bool on() const { return enabled; }
   Index reach() const { return 1; }
+  bool reads_rotations() const { return true; }
+  bool position_gradient() const { return false; }
+  bool rotation_gradient() const { return want_rotations; }
 
   using Element = RelrotElement<S>;
   // The GPU reads the edge count on the device: with mean, k is the weight and the element
@@ -237,45 +242,89 @@ struct RelrotTerm : ScratchFreeRotationTerm {
   }
   static Acc& energy_of(RegularizerResult<S>& r) { return r.relrot; }
 
-  // The terms of node i's out-edges whose earlier frame the block owns; both ends' rotation
-  // gradients (scattered to the neighbours' rows: the block owns its frames' rows of every node).
+  // Per block, for its pairs (t, t + 1) of owned t: every node's relative rotation r [pairs][N][4]
+  // (formed once, where each edge formed its neighbour's again), and with a gradient G = ∂E/∂r
+  // [pairs][N][4] summed over the node's edges, turned into rotation gradients once per
+  // (pair, node) in end() (where each edge converted its neighbour's: a tangent product and, for
+  // raw quaternions, a conversion per edge).
+  static Index max_pairs(const BlockPlan& p) { return std::max<Index>(0, std::min(p.B, p.T - 1)); }
+  Index slot_scalars(const BlockPlan& p) const {
+    return BlockPlan::chunk(4 * p.N * max_pairs(p)) * (p.want_r ? 2 : 1);
+  }
+  void bind(const BlockPlan&, S*, const NeighborsView<S, I>&) {}
+  struct Block {
+    S* r = nullptr;  // [pairs][N][4]
+    S* g = nullptr;  // [pairs][N][4], null without a rotation gradient
+    Index pairs = 0;
+  };
+  Block begin(BlockView<S, I>& v, S* slot) const {
+    Block b;
+    const Index N = v.plan->N;
+    b.pairs = std::max<Index>(0, std::min(v.nown, T - 1 - v.t0));
+    SlotCursor<S> cur{slot};
+    b.r = cur.take(4 * N * max_pairs(*v.plan));
+    if (v.want_r) {
+      b.g = cur.take(4 * N * max_pairs(*v.plan));
+      std::fill(b.g, b.g + 4 * N * b.pairs, S(0));
+    }
+    for (Index l = 0; l < b.pairs; ++l)
+      for (Index n = 0; n < N; ++n) {
+        S a[4], bq[4];
+        relative_rotation(v.q.ptr(v.t0 + l, n), v.q.ptr(v.t0 + l + 1, n), b.r + 4 * (l * N + n), a, bq);
+      }
+    return b;
+  }
+
+  // The terms of node i's out-edges whose earlier frame the block owns; ∂E/∂r of both ends into
+  // the block's G (the node's own after its row, in a fixed order: deterministic).
   template <class E>
-  void node(const BlockView<S, I>& v, Block&, Index i, E& energy) const {
-    const Index t0 = v.t0, K = v.plan->K;
-    const Index pairs = std::min(v.nown, T - 1 - t0);
-    if (pairs <= 0) return;
+  void node(const BlockView<S, I>& v, Block& blk, Index i, E& energy) const {
+    const Index K = v.plan->K, N = v.plan->N;
+    if (blk.pairs <= 0) return;
     const S k = S(L(scale_d)), ep = S(L(eps_d));
-    const bool want_r = v.want_r;
     Acc e(0);
-    for (Index l = 0; l < pairs; ++l) {
-      const Index t = t0 + l;
-      S ri[4], ai[4], bi[4], Gi[4] = {S(0), S(0), S(0), S(0)};
-      relative_rotation(v.q.ptr(t, i), v.q.ptr(t + 1, i), ri, ai, bi);
+    for (Index l = 0; l < blk.pairs; ++l) {
+      const S* r = blk.r + 4 * l * N;
+      const S* ri = r + 4 * i;
+      S Gi[4] = {S(0), S(0), S(0), S(0)};
       for (Index kk = 0; kk < K; ++kk) {
         const Index j = v.graph.indices(i, kk);
         if (j < 0) break;
         const S w = v.graph.weights(i, kk);
         if (!relrot_edge_on(penalty, w)) continue;
-        S rj[4], aj[4], bj[4], d[4], G[4];
-        relative_rotation(v.q.ptr(t, j), v.q.ptr(t + 1, j), rj, aj, bj);
+        const S* rj = r + 4 * j;
+        S d[4], G[4];
         for (int c = 0; c < 4; ++c) d[c] = rj[c] - ri[c];
         e += Acc(relrot_pair<S, L>(penalty, k, w, ep, d, G));
-        if (!want_r) continue;
-        for (int c = 0; c < 4; ++c) Gi[c] -= G[c];
-        S h[3];
-        relrot_tangent(aj, bj, G, h);
-        v.add_rotation(l + 1, j, h);
-        for (S& c : h) c = -c;
-        v.add_rotation(l, j, h);
+        if (!blk.g) continue;
+        S* gj = blk.g + 4 * (l * N + j);
+        for (int c = 0; c < 4; ++c) {
+          Gi[c] -= G[c];
+          gj[c] += G[c];
+        }
       }
-      if (!want_r) continue;
-      S h[3];
-      relrot_tangent(ai, bi, Gi, h);
-      v.add_rotation(l + 1, i, h);
-      for (S& c : h) c = -c;
-      v.add_rotation(l, i, h);
+      if (blk.g) {
+        S* gi = blk.g + 4 * (l * N + i);
+        for (int c = 0; c < 4; ++c) gi[c] += Gi[c];
+      }
     }
     energy.relrot += e;
+  }
+
+  // After the block's nodes: each (pair, node)'s ∂E/∂r to the right tangents of its two
+  // rotations (E25: +h to the later, −h to the earlier), through the block's rotation sink.
+  void end(const BlockView<S, I>& v, Block& blk) const {
+    if (!blk.g) return;
+    const Index N = v.plan->N;
+    for (Index l = 0; l < blk.pairs; ++l)
+      for (Index n = 0; n < N; ++n) {
+        S r[4], a[4], b[4], h[3];
+        relative_rotation(v.q.ptr(v.t0 + l, n), v.q.ptr(v.t0 + l + 1, n), r, a, b);
+        relrot_tangent(a, b, blk.g + 4 * (l * N + n), h);
+        v.add_rotation(l + 1, n, h);
+        for (S& c : h) c = -c;
+        v.add_rotation(l, n, h);
+      }
   }
 };
 
