@@ -243,6 +243,42 @@ py::tuple accel_windows_impl(const at::Tensor& positions, const py::dict& option
   return py::make_tuple(at::scalar_tensor(e, ref.options()), opt(gx));
 }
 
+// _edge_isometry(positions [T, N, 3], indices [N, K], weights [N, K], rest [N, K], penalty,
+// penalty_eps, length_eps, weight, grad_positions) -> (energy 0-dim, grad [T, N, 3] or None): (E26),
+// smg::edge_isometry on CPU tensors (compat.d3dgs_losses' iso). rest in positions' dtype.
+py::tuple edge_isometry_impl(const at::Tensor& positions, const at::Tensor& indices, const at::Tensor& weights,
+                             const at::Tensor& rest, const std::string& penalty, double penalty_eps,
+                             double length_eps, double weight, bool grad_x) {
+  require_cpu(positions, "positions");
+  const EnergyInputs in = prepare(positions, std::nullopt, indices, weights, std::nullopt);
+  const at::Tensor r = float_input(rest, "rest", in.ref, 2, -1, "[N, K]");
+  smg::EdgeIsometryOptions o;
+  {
+    py::dict d;
+    d["penalty"] = penalty;
+    read_option(d, "penalty", o.penalty);
+  }
+  o.penalty_eps = penalty_eps;
+  o.length_eps = length_eps;
+  o.weight = weight;
+  o.parallel = parallel_options();
+  const at::Tensor gx = zeros_if(grad_x, in, 3);
+  double e = 0;
+  dispatch(in.ref.st, in.g.int64, [&](auto s, auto i) {
+    using S = decltype(s);
+    using I = decltype(i);
+    const auto xv = positions_view<S>(in);
+    const auto gv = graph_view<S, I>(in.g);
+    const smg::TableView<const S, Eigen::Dynamic> rv(cptr<S>(r), r.size(0), r.size(1));
+    const smg::PositionsView<S> gxv = grad_x ? smg::PositionsView<S>(mptr<S>(gx), in.T, in.N) : smg::PositionsView<S>();
+    ok(smg::validate_edge_isometry<S, I>(xv, gv, rv, o, gxv), kEnergyNames);
+    py::gil_scoped_release release;
+    e = double(smg::edge_isometry<S, I>(xv, gv, rv, o, gxv));
+    return 0;
+  });
+  return py::make_tuple(at::scalar_tensor(e, in.ref.options()), opt(gx));
+}
+
 // _library_seconds(op, positions, quats, indices, weights, confidence, repeat): the binding's
 // overhead benchmark (bench/torch/bench_torch.py). Prepares the same inputs as the operators,
 // then times, with std::chrono, best of `repeat`, the bare library call as a C++ caller would
@@ -348,6 +384,8 @@ void register_energy(py::module_& m) {
   m.def("_library_seconds", &library_seconds, "op"_a, "positions"_a, "quats"_a, "indices"_a, "weights"_a,
         "confidence"_a, "repeat"_a);
   m.def("_accel_windows", &accel_windows_impl, "positions"_a, "options"_a, "grad_positions"_a);
+  m.def("_edge_isometry", &edge_isometry_impl, "positions"_a, "indices"_a, "weights"_a, "rest"_a, "penalty"_a,
+        "penalty_eps"_a, "length_eps"_a, "weight"_a, "grad_positions"_a);
   m.def("lrm", &lrm_impl, "positions"_a, "indices"_a, "weights"_a, "confidence"_a, "alpha"_a,
         "huber_delta"_a, "detach_omega"_a, "normalize"_a, "grad_positions"_a, "validate"_a);
   m.def("set_memory_limit", [](double bytes) {

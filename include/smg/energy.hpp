@@ -17,6 +17,7 @@
 #include "smg/energy/confidence.hpp"
 #include "smg/energy/elements/confidence.hpp"
 #include "smg/energy/driver.hpp"
+#include "smg/energy/edge_isometry.hpp"
 #include "smg/energy/lanes.hpp"
 #include "smg/energy/lrm.hpp"
 #include "smg/energy/lrm_residuals.hpp"

@@ -730,18 +730,20 @@ def _refuse_negative(name, w, upstream):
                          f"{upstream}'s sqrt(w·‖r‖² + 1e-20) is NaN there")
 
 
-def _self_edges_as_padding(idx, w):
-    """(idx, w, n_self) with every self edge (j = i) moved to the end of its row as padding
-    (−1 / 0), the other entries in their order: smg's graph takes no self edge, while D3DGS's
-    and DreamScene4D's tables may hold them (each adds sqrt(0 + 1e-20) to the mean and no
-    gradient; the caller adds n_self such floors back)."""
+def _self_edges_as_padding(idx, w, *tables):
+    """(idx, w, n_self, tables) with every self edge (j = i) moved to the end of its row as
+    padding (−1 / 0), the other entries in their order, and each further [N, K] table permuted
+    alike (0 on the padding): smg's graph takes no self edge, while D3DGS's and DreamScene4D's
+    tables may hold them (each adds sqrt(0 + 1e-20) to the rigid and rot means and no gradient;
+    the caller adds n_self such floors back)."""
     N = idx.shape[0]
     self_edge = idx == torch.arange(N, device=idx.device, dtype=idx.dtype)[:, None]
     n_self = int(self_edge.sum())
     if not n_self:
-        return idx, w, 0
+        return idx, w, 0, tables
     perm = torch.sort(self_edge.to(torch.int8), dim=1, stable=True).indices
-    return idx.masked_fill(self_edge, -1).gather(1, perm), w.masked_fill(self_edge, 0).gather(1, perm), n_self
+    return (idx.masked_fill(self_edge, -1).gather(1, perm), w.masked_fill(self_edge, 0).gather(1, perm), n_self,
+            tuple(t.masked_fill(self_edge, 0).gather(1, perm) for t in tables))
 
 
 class _D3dgsPartsFunction(torch.autograd.Function):
@@ -789,6 +791,24 @@ def _d3dgs_terms(w_rigid, w_rot):
     if w_rot != 0:
         terms["relrot"] = dict(REGULARIZER_DEFAULTS["relrot"], weight=w_rot, **sq)
     return terms
+
+
+class _EdgeIsometryFunction(torch.autograd.Function):
+    """D3DGS's isometry loss through smg's (E26) (smg::edge_isometry, CPU): `scale` · Σ over the
+    graph's edges of sqrt(w (sqrt(‖x_j − x_i‖² + 1e-20) − d0)² + 1e-20), plus `floor` (the self
+    edges' constant terms the graph left out); the gradient formed in the same pass."""
+
+    @staticmethod
+    def forward(ctx, fg_pts, idx, w, d0, scale, floor):
+        e, g = _C._edge_isometry(fg_pts.detach()[None], idx, w, d0, "sqrt_weighted", _D3DGS_EPS, _D3DGS_EPS, scale,
+                                 ctx.needs_input_grad[0])
+        ctx.grad = None if g is None else g[0]
+        return e + floor
+
+    @staticmethod
+    @_first_order("compat.d3dgs_losses")
+    def backward(ctx, g):
+        return ctx.grad * g, None, None, None, None, None
 
 
 class _D3dgsIsoFunction(torch.autograd.Function):
@@ -849,7 +869,8 @@ def d3dgs_losses(fg_pts: torch.Tensor, fg_rot: torch.Tensor, prev_pts: torch.Ten
     How: rigid is smg's plain ARAP coordinate part (E9) with the sqrt_weighted penalty (E24) on the
     window [prev, fg] (the same norm: R(rel)ᵀ e = R_prev R_fgᵀ e, and R_prev is orthonormal), rot
     smg's relative-rotation term (E25); both from one fused pass forward and one backward. iso is
-    plain torch by chunks of rows with its gradient written out (smg has no rest-length input).
+    smg's isometry against rest lengths (E26, smg::edge_isometry) on CPU tensors, and plain torch
+    by chunks of rows with its gradient written out on CUDA ones.
     Gradients reach fg_pts and fg_rot (the previous state is a constant). fg_rot's gradient is
     that of the rotation: its radial part, which D3DGS's raw 4-vector "rot" has and
     F.normalize's backward then removes, is 0 here, so the gradient of the optimised
@@ -909,11 +930,22 @@ def d3dgs_losses(fg_pts: torch.Tensor, fg_rot: torch.Tensor, prev_pts: torch.Ten
     w = neighbor_weight.contiguous()
     # Self edges (j = i: a duplicate point can come back from Open3D's KNN) are legal upstream,
     # where each adds sqrt(0 + 1e-20) to both means: padding here, their floor added back.
-    g_idx, g_w, n_self = _self_edges_as_padding(idx, w)
+    d0 = neighbor_dist.contiguous()
+    g_idx, g_w, n_self, (g_d0,) = _self_edges_as_padding(idx, w, d0)
     scale = 1.0 / (N * K)
     rigid, rot = _D3dgsPartsFunction.apply(fg_pts, fg_rot, prev_pts, prev_rot, g_idx, g_w, scale,
                                            n_self * math.sqrt(_D3DGS_EPS) * scale)
-    iso = _D3dgsIsoFunction.apply(fg_pts, idx.long(), w, neighbor_dist.contiguous())
+    if fg_pts.is_cuda:
+        iso = _D3dgsIsoFunction.apply(fg_pts, idx.long(), w, d0)
+    else:
+        # A self edge's iso term is sqrt(w (sqrt(1e-20) − d0)² + 1e-20) with no gradient (its
+        # offset is 0): added here as a constant, the rest by smg's (E26) over the graph.
+        floor = 0.0
+        if n_self:
+            self_edge = idx == torch.arange(N, device=idx.device, dtype=idx.dtype)[:, None]
+            ws, ds = w[self_edge].double(), d0[self_edge].double()
+            floor = float(torch.sqrt(ws * (math.sqrt(_D3DGS_EPS) - ds) ** 2 + _D3DGS_EPS).sum()) * scale
+        iso = _EdgeIsometryFunction.apply(fg_pts, g_idx, g_w, g_d0, scale, floor)
     return rigid, rot, iso
 
 
@@ -1022,7 +1054,7 @@ def ds4d_losses(pos_curr: torch.Tensor, pos_prev: torch.Tensor, rot_deform_curr:
     _refuse_negative("nn_weights", w, "DreamScene4D")
     K = idx.shape[1]
     # Self edges (cKDTree's column 0) as padding, their floor added back.
-    g_idx, g_w, n_self = _self_edges_as_padding(idx.contiguous(), w.to(pos_curr.dtype).contiguous())
+    g_idx, g_w, n_self, _ = _self_edges_as_padding(idx.contiguous(), w.to(pos_curr.dtype).contiguous())
     scale = 1.0 / (N * K)
     floor = n_self * math.sqrt(_D3DGS_EPS) * scale
     q0, q1 = (rot_curr, rot_prev) if order == "upstream" else (rot_prev, rot_curr)
