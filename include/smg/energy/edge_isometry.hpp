@@ -44,22 +44,24 @@ struct EdgeIsometryOptions {
 };
 
 // (E26) on a batch of n edges: e = x_j − x_i as ex, ey, ez [n], weights w [n], rest lengths d0 [n],
-// the factor k, the penalty's ε and the length's floor len_eps. Adds the n energies to `energy`
-// (in order) and, when gx is not null, writes g = ∂E/∂e into gx, gy, gz [n] (x_j's gradient; x_i's
-// is −g); ell [n] is scratch. The lengths through one vectorised square root (sqrt_array); at
+// the factor k, the penalty's ε and the length's floor len_eps. Adds the n energies to `*energy`
+// (in order) when it is not null (a batch of in-edges, whose energies their tails count, passes
+// null) and, when gx is not null, writes g = ∂E/∂e into gx, gy, gz [n] (x_j's gradient; x_i's is
+// −g); ell [n] is scratch. The lengths through one vectorised square root (sqrt_array); at
 // ℓ = 0 (e = 0 with len_eps = 0) the gradient is 0 (the length's derivative pinned there, as (E10)'s).
 template <class S>
 inline void edge_isometry_batch(Penalty p, S k, S eps, S len_eps, Index n, const S* SMG_RESTRICT ex,
                                 const S* SMG_RESTRICT ey, const S* SMG_RESTRICT ez, const S* SMG_RESTRICT w,
                                 const S* SMG_RESTRICT d0, S* SMG_RESTRICT ell, S* SMG_RESTRICT gx,
-                                S* SMG_RESTRICT gy, S* SMG_RESTRICT gz, Accumulator<S>& energy) {
+                                S* SMG_RESTRICT gy, S* SMG_RESTRICT gz, Accumulator<S>* energy) {
   using L = Literal<S>;
   for (Index a = 0; a < n; ++a) ell[a] = ex[a] * ex[a] + ey[a] * ey[a] + ez[a] * ez[a] + len_eps;
   detail::sqrt_array(ell, ell, n);
   for (Index a = 0; a < n; ++a) {
     const S r = ell[a] - d0[a];
     S h;
-    energy += Accumulator<S>(penalty_of_square<S, L>(p, k, w[a], eps, r * r, h));
+    const S e = penalty_of_square<S, L>(p, k, w[a], eps, r * r, h);
+    if (energy) *energy += Accumulator<S>(e);
     if (!gx) continue;
     const S c = ell[a] > S(0) ? S(h * r / ell[a]) : S(0);
     gx[a] = c * ex[a];
@@ -135,7 +137,7 @@ Accumulator<S> edge_isometry(PositionsView<const S> positions, const NeighborsVi
   parallel_for_chunks(
       N,
       [&](Index c, Index n0, Index n1) {
-        Accumulator<S> sum(0), unused(0);
+        Accumulator<S> sum(0);
         S ex[kBatch], ey[kBatch], ez[kBatch], w[kBatch], d0[kBatch], ell[kBatch], gx[kBatch], gy[kBatch],
             gz[kBatch];
         S* const gxp = grad ? gx : nullptr;
@@ -143,46 +145,41 @@ Accumulator<S> edge_isometry(PositionsView<const S> positions, const NeighborsVi
           for (Index n = n0; n < n1; ++n) {
             const S* xn = positions.ptr(t, n);
             S gn[3] = {S(0), S(0), S(0)};
-            // Out-edges n -> j (their energy; −g into x_n), then in-edges m -> n (+g into x_n).
-            auto flush = [&](Index m, bool out) {
-              edge_isometry_batch<S>(p, k_f, eps, len_eps, m, ex, ey, ez, w, d0, ell, gxp, gy, gz,
-                                     out ? sum : unused);
-              if (!grad) return;
-              const S sign = out ? S(-1) : S(1);
-              for (Index a = 0; a < m; ++a) {
-                gn[0] += sign * gx[a];
-                gn[1] += sign * gy[a];
-                gn[2] += sign * gz[a];
-              }
-            };
+            // The batch's edges: out-edges n -> j (their energy counted here; −g into x_n), then
+            // in-edges m -> n (+g into x_n; their energy is counted by m).
             Index m = 0;
-            for (Index k = 0; k < K; ++k) {
-              const Index j = graph.indices(n, k);
-              if (j < 0) break;
-              const S* xj = positions.ptr(t, j);
-              ex[m] = xj[0] - xn[0];
-              ey[m] = xj[1] - xn[1];
-              ez[m] = xj[2] - xn[2];
-              w[m] = graph.weights(n, k);
-              d0[m] = rest(n, k);
-              if (++m == kBatch) flush(m, true), m = 0;
-            }
-            if (m > 0) flush(m, true);
+            auto flush = [&](bool out) {
+              edge_isometry_batch<S>(p, k_f, eps, len_eps, m, ex, ey, ez, w, d0, ell, gxp, gy, gz,
+                                     out ? &sum : nullptr);
+              if (grad) {
+                const S sign = out ? S(-1) : S(1);
+                for (Index a = 0; a < m; ++a) {
+                  gn[0] += sign * gx[a];
+                  gn[1] += sign * gy[a];
+                  gn[2] += sign * gz[a];
+                }
+              }
+              m = 0;
+            };
+            auto push = [&](const S* tail, const S* head, S weight, S rest_length, bool out) {
+              ex[m] = head[0] - tail[0];
+              ey[m] = head[1] - tail[1];
+              ez[m] = head[2] - tail[2];
+              w[m] = weight;
+              d0[m] = rest_length;
+              if (++m == kBatch) flush(out);
+            };
+            for (Index k = 0; k < K && graph.indices(n, k) >= 0; ++k)
+              push(xn, positions.ptr(t, graph.indices(n, k)), graph.weights(n, k), rest(n, k), true);
+            if (m > 0) flush(true);
             if (!grad) continue;
-            m = 0;
             const std::size_t a0 = static_cast<std::size_t>(in_offsets[static_cast<std::size_t>(n)]);
             const std::size_t a1 = static_cast<std::size_t>(in_offsets[static_cast<std::size_t>(n + 1)]);
             for (std::size_t a = a0; a < a1; ++a) {
               const Index slot = static_cast<Index>(in_slots[a]), i = slot / K, s = slot - i * K;
-              const S* xi = positions.ptr(t, i);
-              ex[m] = xn[0] - xi[0];
-              ey[m] = xn[1] - xi[1];
-              ez[m] = xn[2] - xi[2];
-              w[m] = graph.weights(i, s);
-              d0[m] = rest(i, s);
-              if (++m == kBatch) flush(m, false), m = 0;
+              push(positions.ptr(t, i), xn, graph.weights(i, s), rest(i, s), false);
             }
-            if (m > 0) flush(m, false);
+            if (m > 0) flush(false);
             S* dst = grad_positions.ptr(t, n);
             for (int d = 0; d < 3; ++d) dst[d] += gn[d];
           }
