@@ -62,6 +62,17 @@ def _index_of(flat, shape):
     return "[" + ", ".join(str(i) for i in reversed(out)) + "]"
 
 
+def _refuse_out_of_range(name, t, hi, what, hi_name=None, why=""):
+    """Refuses an integer tensor t with an entry outside [0, hi), by the caller's index of the
+    first one: "<name>[i, ...] = v is not <what> in [0, <hi_name> = hi)<why>"."""
+    bad = (t < 0) | (t >= hi)
+    if bool(bad.any()):
+        flat = int(bad.reshape(-1).nonzero()[0])
+        bound = f"{hi_name} = {hi}" if hi_name else f"{hi}"
+        raise ValueError(f"{name}{_index_of(flat, tuple(t.shape))} = {int(t.reshape(-1)[flat])} is not {what} in "
+                         f"[0, {bound}){why}")
+
+
 def _check_vectors(name, t, quaternions=False):
     """Refuses, before any work, the first vector (the last dim: a point or a quaternion) with a
     NaN or infinite coordinate, or, for quaternions, the zero quaternion (it has no rotation),
@@ -436,9 +447,7 @@ def mosca_arap(node_xyz: torch.Tensor, node_quat: torch.Tensor, topo_ind: torch.
         if weight.shape != edges.shape[:1] or not weight.is_floating_point():
             raise ValueError(f"levels[{k}].weight: expected a float tensor of shape [E] = [{edges.shape[0]}], got "
                              f"{weight.dtype} {list(weight.shape)}")
-        if edges.numel() and (int(edges.min()) < 0 or int(edges.max()) >= M):
-            bad = edges.reshape(-1)[((edges < 0) | (edges >= M)).reshape(-1)][0]
-            raise ValueError(f"levels[{k}].edges: entry {int(bad)} is out of range [0, M = {M})")
+        _refuse_out_of_range(f"levels[{k}].edges", edges, M, "a node", "M")
         _check_finite(f"levels[{k}].weight", weight)
         if isinstance(mu, bool) or not isinstance(mu, (numbers.Real, torch.Tensor)):
             raise ValueError(f"levels[{k}].mu: expected a real number, got {mu!r}")
@@ -571,11 +580,7 @@ def _scgs_index(name: str, t, n_edges: Optional[int], hi: int, hi_name: str, dev
     if n_edges is not None and t.shape[0] != n_edges:
         raise ValueError(f"{name}: expected {n_edges} entries (as ii), got {t.shape[0]}")
     t = t.detach().to(device=device, dtype=torch.int64)
-    if t.numel() > 0:
-        lo, top = int(t.min()), int(t.max())
-        if lo < 0 or top >= hi:
-            bad = lo if lo < 0 else top
-            raise ValueError(f"{name}: entry {bad} is out of range [0, {hi_name} = {hi})")
+    _refuse_out_of_range(name, t, hi, "a node" if hi_name == "Nv" else "a neighbour slot", hi_name)
     return t
 
 
@@ -906,12 +911,7 @@ def d3dgs_losses(fg_pts: torch.Tensor, fg_rot: torch.Tensor, prev_pts: torch.Ten
         if t.device != fg_pts.device:
             raise ValueError(f"{name}: device {t.device} differs from fg_pts' {fg_pts.device}")
     # Contents, each refusal by the caller's name and index, before any work.
-    bad = (neighbor_indices < 0) | (neighbor_indices >= N)
-    if bool(bad.any()):
-        flat = int(bad.reshape(-1).nonzero()[0])
-        raise ValueError(f"neighbor_indices{_index_of(flat, (N, neighbor_indices.shape[1]))} = "
-                         f"{int(neighbor_indices.reshape(-1)[flat])} is not a node in [0, {N}) (Open3D's KNN "
-                         "fills every slot)")
+    _refuse_out_of_range("neighbor_indices", neighbor_indices, N, "a node", why=" (Open3D's KNN fills every slot)")
     _check_vectors("fg_pts", fg_pts)
     _check_vectors("prev_pts", prev_pts)
     for name, t in (("fg_rot", fg_rot), ("prev_rot", prev_rot)):
@@ -1040,11 +1040,7 @@ def ds4d_losses(pos_curr: torch.Tensor, pos_prev: torch.Tensor, rot_deform_curr:
     for name, t in zip(names[1:], (pos_prev, rot_curr, rot_prev, sc_prev, sc_base, idx, w)):
         if t.device != pos_curr.device:
             raise ValueError(f"{name}: device {t.device} differs from pos_curr's {pos_curr.device}")
-    bad = (idx < 0) | (idx >= N)
-    if bool(bad.any()):
-        flat = int(bad.reshape(-1).nonzero()[0])
-        raise ValueError(f"nn_indices{_index_of(flat, tuple(idx.shape))} = {int(idx.reshape(-1)[flat])} is not a "
-                         f"point in [0, {N}) (cKDTree's table fills every slot)")
+    _refuse_out_of_range("nn_indices", idx, N, "a point", why=" (cKDTree's table fills every slot)")
     for name, t in (("pos_curr", pos_curr), ("pos_prev", pos_prev), ("scales_deform_prev", sc_prev),
                     ("scales_base", sc_base)):
         _check_vectors(name, t)
@@ -1085,10 +1081,7 @@ def _check_edge_index(name, t, n_edges, hi, hi_name, device):
         raise ValueError(f"{name}: expected shape {want}, got {list(t.shape)}")
     if t.device != device:
         raise ValueError(f"{name}: device {t.device} differs from {hi_name}'s {device}")
-    bad = (t < 0) | (t >= hi)
-    if bool(bad.any()):
-        e = int(bad.nonzero()[0])
-        raise ValueError(f"{name}[{e}] = {int(t[e])} is not a row of {hi_name} (in [0, {hi}))")
+    _refuse_out_of_range(name, t, hi, f"a row of {hi_name}")
     return t.long()
 
 
