@@ -3,7 +3,7 @@
 best of --repeat runs, and peak memory.
 
 usage: PYTHONPATH=<build>/python /usr/bin/python3 bench/torch/bench_compat.py [--repeat 10]
-           [--threads 2] [--json FILE] [--quick] [--device cuda] [--cases TEXT]
+           [--threads 2] [--json FILE] [--quick] [--device cuda] [--cases TEXT] [--isa-ab]
 
 Shape of Motion's track smoothness (flow3d/trainer.py): means [G, 3, B, 3] (the Gaussians'
 positions at t − 1, t, t + 1 for B batch frames), loss = mean ‖2 x_t − x_{t−1} − x_{t+1}‖ over
@@ -37,6 +37,8 @@ K = 20 (o3d_knn's table, weights exp(−2000 d²)), loss = rigid + rot + iso, ba
 rotations: dynomo_losses against tests/torch/test_compat_dynomo.py's reading. SC-GS (utils/deform_utils.py
 cal_arap_error): 4 096 nodes, K = 10, two times: scgs_arap(sample_num=None) against the reading that sums
 every node (tests/torch/test_compat_scgs.py). No floor count for these four.
+--isa-ab: beside smg (the module smg_torch.isa names: _C_avx2 on an AVX2 + FMA CPU), the peer "smg base",
+the same calls on the baseline module _C (SSE2), by turns in each round (docs/torch.md "Instruction sets").
 --quick: G = 4 000, M = 1 000, N = 10 000 (512 SC-GS nodes), 3 repeats (a smoke run). Prints a markdown table; --json writes the rows.
 --device cuda (smg_torch built with its CUDA operators, docs/torch.md): the same cases on the GPU, time by
 CUDA events (best of --repeat after two warm-ups), peak = torch.cuda.max_memory_allocated growth over one
@@ -74,6 +76,7 @@ from test_compat_dynomo import dynomo_torch  # noqa: E402
 from test_compat_marbles import global_rigid_torch, isometry_torch  # noqa: E402
 from test_compat_scgs import cal_arap_error_torch, connectivity  # noqa: E402
 import floor  # noqa: E402
+import smg_torch as smg  # noqa: E402  (smg.isa, printed with the table)
 from smg_torch import knn_points  # noqa: E402  (bench/torch/floor.py: the floor beside each time)
 from smg_torch.compat import frnn_knn  # noqa: E402
 
@@ -88,7 +91,17 @@ def som_accel_torch(m):
 def call(fn, xs):
     for x in xs:
         x.grad = None
-    fn(*xs).backward()
+    with bench_torch.smg_operators(getattr(fn, "smg_ops", None)):
+        fn(*xs).backward()
+
+
+def on_baseline(fn):
+    """fn with smg_torch's baseline module (_C) in place of _C_avx2, forward and backward (the
+    --isa-ab peer "smg base")."""
+    def run(*xs):
+        return fn(*xs)
+    run.smg_ops = smg._operators_from(None)
+    return run
 
 
 def best_times(peers, xs, repeat):
@@ -296,6 +309,9 @@ def main():
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
     ap.add_argument("--cases", default="", help="run only the cases whose name contains this text")
+    ap.add_argument("--isa-ab", action="store_true",
+                    help="a third peer, 'smg base': smg on the baseline module _C (SSE2), by turns with 'smg' "
+                         "(smg_torch.isa's module) in each round")
     ap.add_argument("--floor-json", default=None,
                     help="bench_floor --json=FILE's output: the peak behind the floor columns (default: run bench_floor now)")
     a = ap.parse_args()
@@ -326,13 +342,14 @@ def main():
     rows = []
     for name, shape, xs, f_smg, f_ref in cases:
         e_smg, e_ref = float(f_smg(*xs)), float(f_ref(*xs))
-        peers = (("smg", f_smg), ("torch", f_ref))
+        peers = (("smg", f_smg),) + ((("smg base", on_baseline(f_smg)),) if a.isa_ab else ()) + (("torch", f_ref),)
         best = best_times(peers, xs, repeat)
         for peer, fn in peers:
             rows.append(dict(case=name, shape=shape, peer=peer, seconds=best[peer], peak_bytes=peak(fn, xs),
                              input_bytes=sum(x.numel() * x.element_size() for x in xs),
                              rel_diff=abs(e_smg - e_ref) / abs(e_ref)))
-    print(f"threads {a.threads}, float32, best of {repeat}, forward + backward; peak = resident-set growth of one call")
+    print(f"threads {a.threads}, float32, best of {repeat}, forward + backward, smg_torch.isa {smg.isa}; "
+          "peak = resident-set growth of one call")
     print("| case | shape | peer | ms | peak MiB | input MiB | energy rel. diff smg/torch | floor ms | x floor |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
@@ -344,7 +361,8 @@ def main():
     print(m.describe())
     if a.json:
         with open(a.json, "w") as f:
-            json.dump(dict(threads=a.threads, repeat=repeat, torch=torch.__version__, floor=m.describe(), rows=rows), f,
+            json.dump(dict(threads=a.threads, repeat=repeat, torch=torch.__version__, isa=smg.isa, floor=m.describe(),
+                           rows=rows), f,
                       indent=1)
 
 

@@ -2,7 +2,7 @@
 """smg_torch against pure-PyTorch autograd (CPU): forward + backward, best of --repeat runs.
 
 usage: PYTHONPATH=<build>/python /usr/bin/python3 bench/torch/bench_torch.py [--repeat 5]
-           [--json bench/results/torch.json] [--quick] [--overhead-only]
+           [--json bench/results/torch.json] [--quick] [--overhead-only] [--isa-ab]
        ... bench_torch.py --scaling [--repeat 3] [--json bench/results/torch-scaling.json] [--quick]
 
 Energies: N = 5000 nodes, T = 100 frames, K = 16, gaps 1,2,4, float32: node confidences + C-ARAP
@@ -25,6 +25,9 @@ threads) for smg, eager and compile: best-of---repeat time, ns per (edge, frame,
 (carap_terms) and peak memory (RssPeak: resident-set growth over the calls); a PyTorch peer is
 skipped at a size where the linear extrapolation from its largest measured size exceeds
 --skip-seconds per call or the memory limit (scaling_table says which and why).
+--isa-ab: two more rows per thread count, the fused step on smg_torch.isa's module (_C_avx2 on an AVX2 +
+FMA CPU) and on the baseline module _C (SSE2), one call of each by turns per round (docs/torch.md
+"Instruction sets"); nothing more where smg_torch.isa is "base".
 Prints a markdown table; --json writes the same rows in Google Benchmark's JSON layout so that
 bench/report.py puts them into docs/performance.md.
 Floor (issue 59): beside each time, the case's floor on this machine, max(flops / peak, bytes /
@@ -35,6 +38,7 @@ C-ARAP's and LRM's own), and time / floor ("x floor"); the peak of all cores is 
 the start (n/a without either). DQB and render have no count yet ("n/a").
 """
 import argparse
+import contextlib
 import datetime
 import gc
 import json
@@ -60,6 +64,22 @@ import torch_reference as ref  # noqa: E402
 
 sys.path.insert(0, HERE)
 import floor  # noqa: E402  (bench/torch/floor.py: the floor beside each time)
+
+
+@contextlib.contextmanager
+def smg_operators(ops):
+    """smg_torch's wrappers (and compat's) call `ops` (smg_torch._operators_from(None): the baseline
+    module _C) inside, their own outside; nothing when ops is None (--isa-ab)."""
+    if ops is None:
+        yield
+        return
+    import smg_torch.compat as compat
+    saved = smg._C, compat._C
+    smg._C = compat._C = ops
+    try:
+        yield
+    finally:
+        smg._C, compat._C = saved
 
 
 def best_of(fn, repeat):
@@ -542,7 +562,7 @@ def cpu_scaling(args):
               "earlier one shows 0)")
     print_scaling(rows, f"Scaling, CPU, {torch.get_num_threads()} threads, best of {args.repeat} "
                         f"(smg after 1 warm-up, eager without, compile after its compile and 1 more call), "
-                        f"torch {torch.__version__}, {os.cpu_count()} CPUs, load average {load0} before, "
+                        f"torch {torch.__version__}, smg_torch.isa {smg.isa}, {os.cpu_count()} CPUs, load average {load0} before, "
                         f"{load1} after, {time.perf_counter() - t0:.0f} s", memory, m)
     print(m.describe() + "; the floor is the fused step's (bench/floor.hpp step), the same at every peer\n")
     if args.json:
@@ -561,6 +581,8 @@ def main():
                     help="only the binding-overhead rows (smg_torch against the bare C++ call)")
     ap.add_argument("--scaling", action="store_true",
                     help="only the scaling table (SCALING_SIZES; tiny sizes with --quick), 2 threads")
+    ap.add_argument("--isa-ab", action="store_true",
+                    help="the fused step also on the baseline module _C (SSE2), by turns with smg_torch.isa's module")
     ap.add_argument("--note", default=None,
                     help="--json: a caveat about this run's machine, stored in the context (report.py prints it)")
     ap.add_argument("--skip-seconds", type=float, default=120.0,
@@ -601,6 +623,18 @@ def main():
         t_fused = best_of(lambda: fwd_bwd(energy_fused, x, q, idx, w), args.repeat)
         rows.append((f"the same, fused (smg_torch.regularizers), {threads} thread(s)", t_fused, t_ref, t_cmp))
         works[rows[-1][0]] = step_work
+        if args.isa_ab and smg.isa != "base":
+            # the fused step on both modules by turns (each round one call of each)
+            base_ops, t_a, t_b = smg._operators_from(None), float("inf"), float("inf")
+            for _ in range(args.repeat):
+                t_a = min(t_a, best_of(lambda: fwd_bwd(energy_fused, x, q, idx, w), 1))
+                with smg_operators(base_ops):
+                    t_b = min(t_b, best_of(lambda: fwd_bwd(energy_fused, x, q, idx, w), 1))
+            rows.append((f"the same, fused, {smg.isa} by turns with the next row, {threads} thread(s)", t_a, t_ref,
+                         None))
+            works[rows[-1][0]] = step_work
+            rows.append((f"the same, fused, baseline module _C (SSE2), {threads} thread(s)", t_b, t_ref, None))
+            works[rows[-1][0]] = step_work
     overhead = overhead_rows(x, q, idx, w, max(args.repeat, 5))
     e1, gx1, gq1 = energies_smg(x, q, idx, w)
     e2, gx2, gq2 = energies_torch(x, q, idx, w)
@@ -629,7 +663,7 @@ def main():
     load1 = " ".join(f"{v:.2f}" for v in os.getloadavg())
 
     print(f"smg_torch vs pure-PyTorch autograd (eager) and torch.compile of the same PyTorch code, best of "
-          f"{args.repeat}, torch {torch.__version__}, {os.cpu_count()} CPUs, load average {load0} before, "
+          f"{args.repeat}, torch {torch.__version__}, smg_torch.isa {smg.isa}, {os.cpu_count()} CPUs, load average {load0} before, "
           f"{load1} after\n")
     print("| operation | smg_torch | PyTorch autograd | speed-up | torch.compile (compile time) | speed-up "
           "| floor | smg x floor | autograd x floor | compile x floor |")

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "smg/core/version.hpp"
 #include "subcommand.hpp"
 
 namespace {
@@ -31,7 +32,9 @@ std::vector<cli::FlagSpec> common_flags() {
 void print_usage(std::ostream& os, const std::vector<cli::Subcommand>& subs) {
   os << "usage: smg_cli <subcommand> CASE [OUT] [--flags]\n\nsubcommands:\n";
   for (const auto& s : subs) os << "  " << s.name << "  " << s.summary << "\n";
-  os << "\n'smg_cli <subcommand> --help' lists its flags. Formats: docs/interop.md.\n";
+  os << "\n'smg_cli <subcommand> --help' lists its flags. Formats: docs/interop.md.\n"
+     << "smg " << SMG_VERSION_STRING << ", instruction set " << SMG_ISA_NAME
+     << " (chosen at compile time: docs/quickstart.md \"Build flags\").\n";
 }
 
 int fail(const std::string& where, const std::string& message) {

@@ -73,10 +73,26 @@ int64_t parallel_threads(const py::int_& chunks_arg, const py::int_& wanted_arg,
   return static_cast<int64_t>(seen.size());
 }
 
+// Whether this CPU runs smg_torch._C_avx2 (AVX2 and FMA, and the OS saves the AVX registers:
+// libgcc's cpu model checks XGETBV before it sets the AVX features).
+bool cpu_supports_avx2_fma() {
+#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__))
+  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#else
+  return false;
+#endif
+}
+
 }  // namespace
 }  // namespace smg_torch
 
-PYBIND11_MODULE(_C, m) {
+// The module's name: _C, or _C_avx2 for the AVX2 + FMA build of the energy operators
+// (examples/torch/CMakeLists.txt, setup.py).
+#ifndef SMG_TORCH_MODULE
+#define SMG_TORCH_MODULE _C
+#endif
+
+PYBIND11_MODULE(SMG_TORCH_MODULE, m) {
   using namespace pybind11::literals;
   m.doc() = "smg_torch._C: smg's operators over CPU tensors, and with has_cuda over CUDA tensors for "
             "node_confidences, carap, arap, lrm, regularizers, dqb and knn_points (use the smg_torch package)";
@@ -84,6 +100,10 @@ PYBIND11_MODULE(_C, m) {
   smg::set_executor({&smg_torch::torch_run, nullptr});
   m.attr("version") = SMG_VERSION_STRING;
   m.def("_parallel_threads", &smg_torch::parallel_threads, "chunks"_a, "wanted"_a, "timeout_seconds"_a);
+  // The instruction set this module was compiled for (what its -m flags defined), and whether
+  // this CPU has AVX2 + FMA (smg_torch picks _C_avx2 by it).
+  m.attr("_isa") = SMG_ISA_NAME;
+  m.def("_cpu_supports_avx2_fma", &smg_torch::cpu_supports_avx2_fma);
   smg_torch::register_energy(m);
 #ifdef SMG_TORCH_SKIN
   smg_torch::register_skin(m);

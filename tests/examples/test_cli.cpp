@@ -14,6 +14,7 @@
 #include "cli_args.hpp"
 #include "json_line.hpp"
 #include "npy.hpp"
+#include "smg/core/version.hpp"
 #include "support/run_program.hpp"
 
 namespace fs = std::filesystem;
@@ -98,6 +99,8 @@ TEST_CASE("smg_cli: summary line, errors with exit code 2") {
   r = run_cli("--help");
   CHECK(r.code == 0);
   CHECK(r.out.find("subcommands:") != std::string::npos);
+  // The build's instruction set, as this test's own unit sees the same flags.
+  CHECK(r.out.find(std::string("instruction set ") + SMG_ISA_NAME + " (") != std::string::npos);
   fs::remove_all(dir);
 }
 #endif

@@ -87,6 +87,17 @@ def test_bench_compat_quick_runs(tmp_path):
     assert "| case | shape | peer |" in r.stdout
 
 
+def test_bench_compat_isa_ab_runs_the_baseline_by_turns(tmp_path):
+    out = tmp_path / "compat.json"
+    r = _run([os.path.join(BENCH, "bench_compat.py"), "--quick", "--isa-ab", "--cases", "MoSca vel", "--json",
+              str(out)], tmp_path)
+    assert r.returncode == 0, r.stderr
+    d = json.loads(out.read_text())
+    assert [row["peer"] for row in d["rows"]] == ["smg", "smg base", "torch"]
+    assert d["isa"] in ("base", "avx2+fma")
+    assert all(row["seconds"] > 0 for row in d["rows"])
+
+
 def test_bench_knn_quick_runs(tmp_path):
     """bench/torch/bench_knn.py --quick: every peer present here runs, and the exact ones (the
     tree tools, on float64 points) return smg's rows."""

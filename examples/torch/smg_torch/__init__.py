@@ -22,6 +22,9 @@ Device: each operator takes CPU or CUDA tensors; the device of its first tensor 
 node_positions) decides, in the compiled module. A CUDA tensor raises NotImplementedError for an
 operator without CUDA code (build_graph, render) or when smg_torch was built without CUDA.
 
+Instruction set: the energy operators run from smg_torch._C_avx2 (-mavx2 -mfma) on a CPU with AVX2
+and FMA, else from _C (SSE2); `isa` says which, SMG_TORCH_ISA=base forces _C (docs/torch.md).
+
 Memory limit: before allocating a large output (dqb's [Q, P, 7] blended frames, render's images
 and buffers, build_graph's [N, k] tables), the request's memory is estimated and refused with a
 ValueError naming the argument that makes it large when above the limit, as smg_cli's
@@ -41,12 +44,55 @@ from typing import NamedTuple, Optional, Sequence, Tuple, Union
 
 import torch
 
-from . import _C  # noqa: E402  (after torch: the module links against libtorch)
+import types
+
+from . import _C as _C_base  # noqa: E402  (after torch: the module links against libtorch)
 
 __all__ = ["Graph", "has_cuda", "build_graph", "knn_points", "node_confidences", "carap", "arap", "lrm", "regularizers",
-           "Regularizers", "dqb", "render", "version", "set_memory_limit", "memory_limit"]
+           "Regularizers", "dqb", "render", "version", "isa", "set_memory_limit", "memory_limit"]
 
-version = _C.version
+version = _C_base.version
+
+
+def _fast_module():
+    """The AVX2 + FMA build of the energy operators (smg_torch._C_avx2) when this CPU has both and
+    SMG_TORCH_ISA (auto, base or avx2; auto when unset) allows it; None for the baseline (_C)."""
+    want = os.environ.get("SMG_TORCH_ISA", "auto").strip().lower() or "auto"
+    if want not in ("auto", "base", "avx2"):
+        raise ValueError("SMG_TORCH_ISA must be auto, base or avx2, got %r" % want)
+    if want == "base":
+        return None
+    if not _C_base._cpu_supports_avx2_fma():
+        if want == "avx2":
+            raise ImportError("SMG_TORCH_ISA=avx2, but this CPU lacks AVX2 or FMA (unset it to run the baseline)")
+        return None
+    try:
+        from . import _C_avx2
+    except ImportError:
+        if want == "avx2":
+            raise ImportError("SMG_TORCH_ISA=avx2, but smg_torch was built without _C_avx2 "
+                              "(CMake SMG_TORCH_AVX2=OFF, setup.py SMG_TORCH_NO_AVX2=1, or not x86-64)") from None
+        return None
+    return _C_avx2
+
+
+_C_fast = _fast_module()
+#: The instruction set the CPU energy operators run: "avx2+fma" (smg_torch._C_avx2) or "base"
+#: (smg_torch._C, x86-64's SSE2). Chosen at import: SMG_TORCH_ISA=base forces the baseline,
+#: =avx2 fails the import where AVX2 + FMA cannot run (docs/torch.md "Instruction sets").
+isa = _C_fast._isa if _C_fast is not None else _C_base._isa
+
+
+def _operators_from(fast):
+    """The operators as the wrappers call them: each name from `fast` (_C_avx2, or None) where it
+    has it (the energy operators), else from _C (skin, splat, graph, the CUDA operators). The
+    memory limit is each module's own state (set_memory_limit sets both); has_cuda is _C's."""
+    own = ("has_cuda", "set_memory_limit", "memory_limit")
+    return types.SimpleNamespace(**{n: getattr(fast, n) if fast is not None and n not in own and hasattr(fast, n)
+                                    else getattr(_C_base, n) for n in dir(_C_base) if not n.startswith("__")})
+
+
+_C = _operators_from(_C_fast)
 
 #: True when the extension was built with its CUDA operators (smg_torch_cuda.cu): then
 #: node_confidences, carap, arap, lrm, regularizers, dqb and knn_points also take CUDA tensors (all on one device) and run on the
@@ -57,7 +103,9 @@ has_cuda = bool(getattr(_C, "has_cuda", False))
 def set_memory_limit(bytes: float) -> None:
     """The memory limit of the large outputs (module docstring), in bytes: 0 < bytes <= 2^50.
     8 GiB by default; at import, SMG_TORCH_MAX_MEMORY_GB (GiB) when set."""
-    _C.set_memory_limit(float(bytes))
+    _C_base.set_memory_limit(float(bytes))
+    if _C_fast is not None:
+        _C_fast.set_memory_limit(float(bytes))
 
 
 def memory_limit() -> float:
