@@ -91,7 +91,7 @@ def som_accel_torch(m):
 def call(fn, xs):
     for x in xs:
         x.grad = None
-    with bench_torch.smg_operators(getattr(fn, "smg_ops", None)):
+    with smg._operators_in_use(getattr(fn, "smg_ops", None)):
         fn(*xs).backward()
 
 

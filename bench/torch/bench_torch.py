@@ -38,7 +38,6 @@ C-ARAP's and LRM's own), and time / floor ("x floor"); the peak of all cores is 
 the start (n/a without either). DQB and render have no count yet ("n/a").
 """
 import argparse
-import contextlib
 import datetime
 import gc
 import json
@@ -64,22 +63,6 @@ import torch_reference as ref  # noqa: E402
 
 sys.path.insert(0, HERE)
 import floor  # noqa: E402  (bench/torch/floor.py: the floor beside each time)
-
-
-@contextlib.contextmanager
-def smg_operators(ops):
-    """smg_torch's wrappers (and compat's) call `ops` (smg_torch._operators_from(None): the baseline
-    module _C) inside, their own outside; nothing when ops is None (--isa-ab)."""
-    if ops is None:
-        yield
-        return
-    import smg_torch.compat as compat
-    saved = smg._C, compat._C
-    smg._C = compat._C = ops
-    try:
-        yield
-    finally:
-        smg._C, compat._C = saved
 
 
 def best_of(fn, repeat):
@@ -628,7 +611,7 @@ def main():
             base_ops, t_a, t_b = smg._operators_from(None), float("inf"), float("inf")
             for _ in range(args.repeat):
                 t_a = min(t_a, best_of(lambda: fwd_bwd(energy_fused, x, q, idx, w), 1))
-                with smg_operators(base_ops):
+                with smg._operators_in_use(base_ops):
                     t_b = min(t_b, best_of(lambda: fwd_bwd(energy_fused, x, q, idx, w), 1))
             rows.append((f"the same, fused, {smg.isa} by turns with the next row, {threads} thread(s)", t_a, t_ref,
                          None))

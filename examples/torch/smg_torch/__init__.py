@@ -37,14 +37,15 @@ they are narrowed: a ValueError names the argument.
 from __future__ import annotations
 
 import collections
+import contextlib
 import functools
 import inspect
 import os
 from typing import NamedTuple, Optional, Sequence, Tuple, Union
 
-import torch
-
 import types
+
+import torch
 
 from . import _C as _C_base  # noqa: E402  (after torch: the module links against libtorch)
 
@@ -93,6 +94,24 @@ def _operators_from(fast):
 
 
 _C = _operators_from(_C_fast)
+
+
+@contextlib.contextmanager
+def _operators_in_use(ops):
+    """Within the block the wrappers (smg_torch's and compat's) call `ops` (an _operators_from
+    namespace), their own after it; nothing changes when ops is None. For tests/torch/test_isa.py
+    and the benchmarks' --isa-ab, which run one build against the other in one process."""
+    global _C
+    if ops is None:
+        yield
+        return
+    from . import compat
+    saved = _C, compat._C
+    _C = compat._C = ops
+    try:
+        yield
+    finally:
+        _C, compat._C = saved
 
 #: True when the extension was built with its CUDA operators (smg_torch_cuda.cu): then
 #: node_confidences, carap, arap, lrm, regularizers, dqb and knn_points also take CUDA tensors (all on one device) and run on the
