@@ -45,6 +45,25 @@ inline void edge_frames(Index n, const S* SMG_RESTRICT R, const S* SMG_RESTRICT 
   }
 }
 
+// d = Rᵀ e over the n lanes of a short window (RigidTerm::node's frame-major layout, e given):
+// R [9][rs] per lane (row c of lane a at R[c·rs + a]), or with rs = 0 one rotation R [9] for all
+// n (a frame's run of edges in the row frame).
+template <class S>
+inline void rotate_lanes(Index n, Index rs, const S* SMG_RESTRICT R, const S* SMG_RESTRICT ex,
+                         const S* SMG_RESTRICT ey, const S* SMG_RESTRICT ez, S* SMG_RESTRICT dx,
+                         S* SMG_RESTRICT dy, S* SMG_RESTRICT dz) {
+  if (rs == 0) {
+    const S R0[9] = {R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]};
+    for (Index a = 0; a < n; ++a) carap_edge_vector(R0, ex[a], ey[a], ez[a], dx[a], dy[a], dz[a]);
+    return;
+  }
+  for (Index a = 0; a < n; ++a) {
+    const S Ra[9] = {R[0 * rs + a], R[1 * rs + a], R[2 * rs + a], R[3 * rs + a], R[4 * rs + a],
+                     R[5 * rs + a], R[6 * rs + a], R[7 * rs + a], R[8 * rs + a]};
+    carap_edge_vector(Ra, ex[a], ey[a], ez[a], dx[a], dy[a], dz[a]);
+  }
+}
+
 // dst[k] += a[k] for three consecutive [n] rows (a [3][n] block into a node's [3][n] block).
 template <class S>
 inline void add3(Index n, S* SMG_RESTRICT dst, const S* SMG_RESTRICT ax,
@@ -178,6 +197,42 @@ inline void backprop(Index n, const S* SMG_RESTRICT R, S* SMG_RESTRICT gx, S* SM
   }
 }
 
+// backprop over the n lanes of a short window, R as rotate_lanes: F overwrites G, each lane's
+// G × d goes to its own rx, ry, rz (the sums over edges are the caller's, in edge order, as
+// backprop's).
+template <class S>
+inline void backprop_lanes(Index n, Index rs, const S* SMG_RESTRICT R, S* SMG_RESTRICT gx,
+                           S* SMG_RESTRICT gy, S* SMG_RESTRICT gz, const S* SMG_RESTRICT h,
+                           const S* SMG_RESTRICT il, const S* SMG_RESTRICT ex,
+                           const S* SMG_RESTRICT ey, const S* SMG_RESTRICT ez,
+                           const S* SMG_RESTRICT dx, const S* SMG_RESTRICT dy,
+                           const S* SMG_RESTRICT dz, S* SMG_RESTRICT rx, S* SMG_RESTRICT ry,
+                           S* SMG_RESTRICT rz) {
+  // Two loops written out (a lambda over the restrict pointers is not vectorised).
+  if (rs == 0) {
+    const S R0[9] = {R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]};
+    for (Index a = 0; a < n; ++a) {
+      S fx, fy, fz;
+      carap_edge_backprop(R0, gx[a], gy[a], gz[a], h[a], il[a], ex[a], ey[a], ez[a], dx[a], dy[a],
+                          dz[a], fx, fy, fz, rx[a], ry[a], rz[a]);
+      gx[a] = fx;
+      gy[a] = fy;
+      gz[a] = fz;
+    }
+    return;
+  }
+  for (Index a = 0; a < n; ++a) {
+    const S Ra[9] = {R[0 * rs + a], R[1 * rs + a], R[2 * rs + a], R[3 * rs + a], R[4 * rs + a],
+                     R[5 * rs + a], R[6 * rs + a], R[7 * rs + a], R[8 * rs + a]};
+    S fx, fy, fz;
+    carap_edge_backprop(Ra, gx[a], gy[a], gz[a], h[a], il[a], ex[a], ey[a], ez[a], dx[a], dy[a],
+                        dz[a], fx, fy, fz, rx[a], ry[a], rz[a]);
+    gx[a] = fx;
+    gy[a] = fy;
+    gz[a] = fz;
+  }
+}
+
 }  // namespace carap_loops
 // One gap of C-ARAP or ARAP: its δ, γ_δ times the energy's scale, and which energy (0: C-ARAP,
 // 1: ARAP) it belongs to.
@@ -259,13 +314,21 @@ struct RigidTerm : TermDefaults {
   bool reads_rotations() const { return true; }
   bool rotation_gradient() const { return want_rotations; }
   Index n_gaps() const { return static_cast<Index>(gaps.size()); }
-  // 16 flattened [edge][frame] arrays, a mask and four P arrays (after max δ zeros) per gap, the
-  // node's rotations [9][span] and gradient rows [3][span] twice; with the neighbour's frame, each
-  // edge's rotations [edge][9][frame] instead of the node's.
+  // Whether a block of ne stored frames runs the short-window layout, its lanes frame-major
+  // (lane l·m_e + e: frame l of the node's e-th active edge) rather than edge-major (e·ne + l). A
+  // window of 1–3 frames (stored unpadded, BlockPlan::padded) would leave the per-edge loops fewer
+  // lanes than one vector: scalar code, half of a two-frame rigid pass (perf, D3DGS's size). Every
+  // lane's arithmetic is the same in both layouts and the gradient's sums over edges keep their
+  // order (in double bitwise the same gradients; in float Eigen's packet sqrt, rsqrt + Newton, and
+  // the scalar remainder fall on other lanes); the energy's sum over lanes runs in another order.
+  static bool lanes_over_edges(Index ne) { return ne < 4; }
+  // 16 flattened [edge][frame] arrays, a mask and four P arrays (after max δ zeros, max δ·K in
+  // the frame-major layout) per gap, the node's rotations [9][span] and gradient rows [3][span]
+  // twice; with the neighbour's frame, each lane's rotation [9][M] instead of the node's.
   Index slot_scalars(const BlockPlan& p) const {
     const Index M = p.M();
     return 16 * BlockPlan::chunk(M) + BlockPlan::chunk(n_gaps() * M) +
-           BlockPlan::chunk(n_gaps() * 4 * (M + p.G)) +
+           BlockPlan::chunk(n_gaps() * 4 * (M + p.G * p.K)) +
            BlockPlan::chunk(frame == RigidFrame::neighbor ? 9 * M : 9 * p.span) +
            2 * BlockPlan::chunk(3 * p.span);
   }
@@ -274,9 +337,10 @@ struct RigidTerm : TermDefaults {
   struct Block {
     S *Ex, *Ey, *Ez, *Dx, *Dy, *Dz, *Len, *InvLen, *Wb[2], *Eacc[2], *Gx, *Gy, *Gz, *H;
     S *masks, *pbase, *R, *Fi, *Ri;
-    Index M = 0, G = 0;
+    Index M = 0, G = 0;  // G: the zeros before each P array (max δ, or max δ·K when flat)
+    bool flat = false;   // frame-major lanes: lanes_over_edges(ne)
     std::vector<Index> active, nbr;
-    std::vector<S> wgt;
+    std::vector<S> wgt, mask_of_frame;  // flat: each gap's mask per frame, [gap][ne]
     S* P(Index g, int c) const { return pbase + (g * 4 + c) * (M + G) + G; }
   };
 
@@ -284,7 +348,8 @@ struct RigidTerm : TermDefaults {
     const BlockPlan& p = *v.plan;
     Block k;
     k.M = p.M();
-    k.G = p.G;
+    k.flat = lanes_over_edges(v.ne);
+    k.G = k.flat ? p.G * p.K : p.G;
     SlotCursor<S> cur{slot};
     const Index M = k.M;
     k.Ex = cur.take(M), k.Ey = cur.take(M), k.Ez = cur.take(M);
@@ -293,10 +358,11 @@ struct RigidTerm : TermDefaults {
     k.Eacc[0] = cur.take(M), k.Eacc[1] = cur.take(M);
     k.Gx = cur.take(M), k.Gy = cur.take(M), k.Gz = cur.take(M), k.H = cur.take(M);
     k.masks = cur.take(n_gaps() * M);
-    k.pbase = cur.take(n_gaps() * 4 * (M + p.G));
+    k.pbase = cur.take(n_gaps() * 4 * (M + p.G * p.K));
     k.R = cur.take(frame == RigidFrame::neighbor ? 9 * M : 9 * p.span);
     k.Fi = cur.take(3 * p.span), k.Ri = cur.take(3 * p.span);
-    if (v.grad()) std::fill(k.pbase, k.pbase + n_gaps() * 4 * (M + p.G), S(0));
+    if (v.grad()) std::fill(k.pbase, k.pbase + n_gaps() * 4 * (M + k.G), S(0));
+    k.mask_of_frame.assign(static_cast<std::size_t>(n_gaps() * v.ne), S(0));
     // γ_δ where the pair's earlier frame is owned and its later frame exists, else 0.
     for (Index g = 0; g < n_gaps(); ++g) {
       const RigidGap<S>& gap = gaps[static_cast<std::size_t>(g)];
@@ -304,6 +370,8 @@ struct RigidTerm : TermDefaults {
       S* mk = k.masks + g * M;
       for (Index e = 0; e < p.K; ++e)
         for (Index l = 0; l < v.ne; ++l) mk[e * v.ne + l] = l < n_d ? S(gap.gamma) : S(0);
+      for (Index l = 0; l < v.ne; ++l)
+        k.mask_of_frame[static_cast<std::size_t>(g * v.ne + l)] = l < n_d ? S(gap.gamma) : S(0);
     }
     k.active.resize(gaps.size());
     k.nbr.resize(static_cast<std::size_t>(p.K));
@@ -355,6 +423,13 @@ struct RigidTerm : TermDefaults {
         for (int c = 0; c < 9; ++c) dst[c * ne + l] = Rl[c];
       }
     };
+    // Lanes: edge-major (lane e·ne + l) or, for a short window (k.flat), frame-major (lane
+    // l·m_e + e; a pair (l, l + δ) of one edge is δ·m_e lanes apart). Frame-major rotations: the
+    // row frame's node i's [9][ne] (one per frame's run of lanes), the neighbour's frame's every
+    // lane's at R [9][m].
+    const bool flat = k.flat;
+    auto lane = [&](Index e, Index l) { return flat ? l * m_e + e : e * ne + l; };
+    const Index step = flat ? m_e : 1;  // lanes between frames l and l + 1 of one edge
     if (!nbr_frame) rotations_of(i, R);
     auto R_of = [&](Index e) { return nbr_frame ? R + 9 * e * ne : R; };
     const S* Xi = Xb + i * n4;
@@ -363,17 +438,45 @@ struct RigidTerm : TermDefaults {
     // frame (E7): C-ARAP's with the confidences, ARAP's with c = 1 and α = 1.
     for (Index e = 0; e < m_e; ++e) {
       const Index j = k.nbr[static_cast<std::size_t>(e)], o = e * ne;
-      if (nbr_frame) rotations_of(j, R + 9 * o);
-      carap_loops::edge_frames(ne, R_of(e), Xi, Xb + j * n4, Ex + o, Ey + o, Ez + o, Dx + o,
-                               Dy + o, Dz + o);
+      if (flat) {  // e here, d for all lanes after the loop
+        const S* Xj = Xb + j * n4;
+        S Rj[9 * 3];
+        if (nbr_frame) rotations_of(j, Rj);
+        for (Index l = 0; l < ne; ++l) {
+          const Index a = l * m_e + e;
+          Ex[a] = Xj[l] - Xi[l];
+          Ey[a] = Xj[ne + l] - Xi[ne + l];
+          Ez[a] = Xj[2 * ne + l] - Xi[2 * ne + l];
+          if (nbr_frame)
+            for (int c = 0; c < 9; ++c) R[c * m + a] = Rj[c * ne + l];
+        }
+      } else {
+        if (nbr_frame) rotations_of(j, R + 9 * o);
+        carap_loops::edge_frames(ne, R_of(e), Xi, Xb + j * n4, Ex + o, Ey + o, Ez + o, Dx + o,
+                                 Dy + o, Dz + o);
+      }
       const S w = k.wgt[static_cast<std::size_t>(e)];
       const S* cj = Xb + j * n4 + 3 * ne;
       if (has[0])
         for (Index l = 0; l < ne; ++l)
-          Wb[0][o + l] = l < nown ? confidence_edge_weight(w, alp_c, cj[l]) : S(0);
+          Wb[0][lane(e, l)] = l < nown ? confidence_edge_weight(w, alp_c, cj[l]) : S(0);
       if (has[1])
         for (Index l = 0; l < ne; ++l)
-          Wb[1][o + l] = l < nown ? confidence_edge_weight(w, L(1), S(1)) : S(0);
+          Wb[1][lane(e, l)] = l < nown ? confidence_edge_weight(w, L(1), S(1)) : S(0);
+    }
+    // A frame's rotation for its run of lanes (row frame), or every lane's (neighbour's frame).
+    S Rl[9];
+    auto frame_rotation = [&](Index l) {
+      for (int c = 0; c < 9; ++c) Rl[c] = R[c * ne + l];
+      return Rl;
+    };
+    if (flat) {
+      if (nbr_frame)
+        carap_loops::rotate_lanes(m, m, R, Ex, Ey, Ez, Dx, Dy, Dz);
+      else
+        for (Index l = 0, o = 0; l < ne; ++l, o += m_e)
+          carap_loops::rotate_lanes(m_e, 0, frame_rotation(l), Ex + o, Ey + o, Ez + o, Dx + o,
+                                    Dy + o, Dz + o);
     }
     carap_loops::lengths(m, Ex, Ey, Ez, Len, InvLen, Eacc[0]);
     if (has[1]) std::fill(Eacc[1], Eacc[1] + m, S(0));
@@ -383,11 +486,15 @@ struct RigidTerm : TermDefaults {
     // T − 1, or that would straddle two edges.
     Index n_active = 0;
     for (Index g = 0; g < n_gaps(); ++g) {
-      const Index d = gaps[static_cast<std::size_t>(g)].delta;
-      if (d >= nr) continue;  // no pair of this gap inside the block
-      const Index n = m - d;
+      const Index delta = gaps[static_cast<std::size_t>(g)].delta;
+      if (delta >= nr) continue;  // no pair of this gap inside the block
+      const Index d = delta * step, n = m - d;
       const int en = gaps[static_cast<std::size_t>(g)].energy;
-      const S* mk = k.masks + g * k.M;
+      S* mk = k.masks + g * k.M;
+      if (flat)  // frame-major: each frame's run of m_e lanes has its frame's mask
+        for (Index l = 0; l < ne; ++l)
+          std::fill(mk + l * m_e, mk + (l + 1) * m_e,
+                    k.mask_of_frame[static_cast<std::size_t>(g * ne + l)]);
       const L lc = en == 0 ? lc_c : lc_a, ll = en == 0 ? ll_c : ll_a;
       const S ep = eps[en];
       // The penalty is a template argument of the loops (one branch per gap, not per term).
@@ -421,7 +528,9 @@ struct RigidTerm : TermDefaults {
     // ∂/∂d^s = Σ_δ (P_δ(s − δ) − P_δ(s)) over every active gap of both energies, up to three
     // per pass.
     S* Gc[4] = {Gx, Gy, Gz, H};
-    auto d_of = [&](Index a) { return gaps[static_cast<std::size_t>(k.active[static_cast<std::size_t>(a)])].delta; };
+    auto d_of = [&](Index a) {
+      return step * gaps[static_cast<std::size_t>(k.active[static_cast<std::size_t>(a)])].delta;
+    };
     auto Pa = [&](Index a, int c) { return k.P(k.active[static_cast<std::size_t>(a)], c); };
     for (int c = 0; c < 4; ++c) {
       Index a = 0;
@@ -449,12 +558,55 @@ struct RigidTerm : TermDefaults {
     auto rotation_rows = [&](Index f) {
       for (Index l = 0; l < nr; ++l) v.add_rotation(l, f, Ri + l, ne);
     };
+    // Frame-major: F and G × d of every lane first (Wb and Len are free after the pair terms),
+    // then their sums over edges in edge order, as backprop adds them.
+    S *Rx = Wb[0], *Ry = Wb[1], *Rz = Len;
+    if (flat) {
+      if (nbr_frame)
+        carap_loops::backprop_lanes(m, m, R, Gx, Gy, Gz, H, InvLen, Ex, Ey, Ez, Dx, Dy, Dz, Rx,
+                                    Ry, Rz);
+      else
+        for (Index l = 0, o = 0; l < ne; ++l, o += m_e)
+          carap_loops::backprop_lanes(m_e, 0, frame_rotation(l), Gx + o, Gy + o, Gz + o, H + o,
+                                      InvLen + o, Ex + o, Ey + o, Ez + o, Dx + o, Dy + o, Dz + o,
+                                      Rx + o, Ry + o, Rz + o);
+    }
     for (Index l = 0; l < 3 * ne; ++l) Fi[l] = Ri[l] = S(0);
+    if (flat && !nbr_frame)  // each frame's sums over its run of edges, in edge order (registers)
+      for (Index l = 0, o = 0; l < ne; ++l, o += m_e) {
+        S sx = S(0), sy = S(0), sz = S(0), tx = S(0), ty = S(0), tz = S(0);
+        for (Index e = 0; e < m_e; ++e) {
+          sx += Gx[o + e], sy += Gy[o + e], sz += Gz[o + e];
+          tx += Rx[o + e], ty += Ry[o + e], tz += Rz[o + e];
+        }
+        Fi[l] = sx, Fi[ne + l] = sy, Fi[2 * ne + l] = sz;
+        Ri[l] = tx, Ri[ne + l] = ty, Ri[2 * ne + l] = tz;
+      }
     for (Index e = 0; e < m_e; ++e) {
       const Index o = e * ne, j = k.nbr[static_cast<std::size_t>(e)];
-      carap_loops::backprop(ne, R_of(e), Gx + o, Gy + o, Gz + o, H + o, InvLen + o, Ex + o,
-                            Ey + o, Ez + o, Dx + o, Dy + o, Dz + o, Fi, Ri);
-      if (x_nbr) carap_loops::add3(ne, GBx + j * n3, Gx + o, Gy + o, Gz + o);
+      if (flat) {
+        S* gj = x_nbr ? GBx + j * n3 : nullptr;
+        for (Index l = 0; l < ne; ++l) {
+          const Index a = l * m_e + e;
+          if (nbr_frame) {
+            Fi[l] += Gx[a];
+            Fi[ne + l] += Gy[a];
+            Fi[2 * ne + l] += Gz[a];
+            Ri[l] += Rx[a];
+            Ri[ne + l] += Ry[a];
+            Ri[2 * ne + l] += Rz[a];
+          }
+          if (x_nbr) {
+            gj[l] += Gx[a];
+            gj[ne + l] += Gy[a];
+            gj[2 * ne + l] += Gz[a];
+          }
+        }
+      } else {
+        carap_loops::backprop(ne, R_of(e), Gx + o, Gy + o, Gz + o, H + o, InvLen + o, Ex + o,
+                              Ey + o, Ez + o, Dx + o, Dy + o, Dz + o, Fi, Ri);
+        if (x_nbr) carap_loops::add3(ne, GBx + j * n3, Gx + o, Gy + o, Gz + o);
+      }
       if (nbr_frame && want_r) {  // this edge's rotation part is R_j's (E24)
         rotation_rows(j);
         for (Index l = 0; l < 3 * ne; ++l) Ri[l] = S(0);
