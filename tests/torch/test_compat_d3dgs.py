@@ -159,6 +159,25 @@ def test_d3dgs_gradcheck():
                                     eps=1e-6, atol=1e-7, rtol=1e-6)
 
 
+def test_d3dgs_passes_side_by_side_equal_in_turn():
+    """With 2 intra-op threads rigid's and rot's passes run side by side (compat._side_by_side);
+    with 1 in turn: the losses and gradients are the same bits, float32 and float64."""
+    before = torch.get_num_threads()
+    try:
+        for dtype in (torch.float32, torch.float64):
+            fg_pts, unnorm, *rest = scene(N=500, seed=3, dtype=dtype)
+            inputs = (fg_pts, F.normalize(unnorm, dim=-1), *rest)
+            out = {}
+            for threads in (1, 2):
+                torch.set_num_threads(threads)
+                out[threads] = _grads(d3dgs_losses, *inputs)
+            assert smg.compat._SIDE_POOL is not None  # the two-thread run took the side-by-side path
+            assert out[1][0] == out[2][0]
+            assert torch.equal(out[1][1], out[2][1]) and torch.equal(out[1][2], out[2][2])
+    finally:
+        torch.set_num_threads(before)
+
+
 def test_d3dgs_float32():
     fg_pts, unnorm, prev_pts, prev_rot, idx, w, d0 = scene(seed=6)
     fg_rot = F.normalize(unnorm, dim=-1)

@@ -89,6 +89,25 @@ def test_ds4d_float64(order, seed):
         assert rel(x, y) <= 1e-7
 
 
+def test_ds4d_passes_side_by_side_equal_in_turn():
+    """With 2 intra-op threads the rigidity and scale passes run side by side
+    (compat._side_by_side); with 1 in turn: the losses and all six gradients are the same bits."""
+    before = torch.get_num_threads()
+    try:
+        for dtype in (torch.float32, torch.float64):
+            inputs = scene(seed=5, dtype=dtype)
+            out = {}
+            for threads in (1, 2):
+                torch.set_num_threads(threads)
+                ea, ga, _, _ = both(inputs)
+                out[threads] = ([float(e) for e in ea], ga)
+            assert smg.compat._SIDE_POOL is not None  # the two-thread run took the side-by-side path
+            assert out[1][0] == out[2][0]
+            assert all(torch.equal(a, b) for a, b in zip(out[1][1], out[2][1]))
+    finally:
+        torch.set_num_threads(before)
+
+
 def test_ds4d_float32_against_the_float64_reading():
     ea, ga, eb, gb = both(scene(dtype=torch.float32, seed=3))
     assert ea[0].dtype == torch.float32 and ea[1].dtype == torch.float32

@@ -21,6 +21,7 @@ Dynamic Gaussian Marbles' `_cache_isometry_knn`).
 """
 from __future__ import annotations
 
+import concurrent.futures
 import math
 import numbers
 from typing import Optional, Sequence, Tuple
@@ -300,6 +301,26 @@ def _shift_gaps(shifts, shift_weights, T, rows, reduce):
         gaps.append(s)
         weights.append(abs(g) / ((T - s) * rows) if reduce == "mean" else abs(g))
     return out
+
+
+_SIDE_POOL = None
+
+
+def _side_by_side(cpu, *calls):
+    """The results of independent calls (functions of no arguments), in order. On CPU tensors with
+    torch's intra-op threads > 1, the first runs on a worker thread beside the others: a two-frame
+    pass of smg's fused step is one block of frames, one core (docs/math/energy.md, "Kernel and
+    determinism"), so two such passes side by side use two. Bit for bit what running them in turn
+    gives: smg's bindings release the GIL and keep their scratch per thread (thread_local
+    workspaces), and each pass's sums do not depend on the thread it runs on."""
+    global _SIDE_POOL
+    if not cpu or len(calls) < 2 or torch.get_num_threads() < 2:
+        return [c() for c in calls]
+    if _SIDE_POOL is None:
+        _SIDE_POOL = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="smg_side")
+    first = _SIDE_POOL.submit(calls[0])
+    rest = [c() for c in calls[1:]]
+    return [first.result()] + rest
 
 
 def _fused(x, q, idx, w, terms, need_x, need_q):
@@ -761,7 +782,8 @@ class _D3dgsPartsFunction(torch.autograd.Function):
     with its gradient (each loss has its own weight upstream, and the two passes cost less than
     an energy pass and a gradient pass of both: 281 against 385 ms at N = 100 000, K = 20, 2
     threads); else one energy-only pass with both. Backward: g_r·∇rigid + g_q·∇rot of the frame-1
-    rows (fg's; the previous state gets none)."""
+    rows (fg's; the previous state gets none). The two passes run side by side (_side_by_side:
+    each is a two-frame window, one core)."""
 
     @staticmethod
     def forward(ctx, fg_pts, fg_rot, prev_pts, prev_rot, idx, w, scale, floor):
@@ -771,8 +793,9 @@ class _D3dgsPartsFunction(torch.autograd.Function):
         if not (need_x or need_q):
             e, _, _ = _fused(x, q, idx, w, _d3dgs_terms(scale, scale), False, False)
             return fg_pts.new_tensor(e["arap"] + floor), fg_pts.new_tensor(e["relrot"] + floor)
-        er, gxr, gqr = _fused(x, q, idx, w, _d3dgs_terms(scale, 0.0), need_x, need_q)
-        eq, gxq, gqq = _fused(x, q, idx, w, _d3dgs_terms(0.0, scale), need_x, need_q)
+        (er, gxr, gqr), (eq, gxq, gqq) = _side_by_side(
+            not x.is_cuda, lambda: _fused(x, q, idx, w, _d3dgs_terms(scale, 0.0), need_x, need_q),
+            lambda: _fused(x, q, idx, w, _d3dgs_terms(0.0, scale), need_x, need_q))
         ctx.grads = tuple(None if g is None else g[1] for g in (gxr, gqr, gxq, gqq))
         return fg_pts.new_tensor(er["arap"] + floor), fg_pts.new_tensor(eq["relrot"] + floor)
 
@@ -956,14 +979,13 @@ class _TwoFrameArapFunction(torch.autograd.Function):
     x = [x0, x1], q = [q0, q1] (raw quaternions, normalised by smg), every edge weighted inside the
     root and the sum scaled by `scale`, plus `floor` (the self edges' sqrt(1e-20)·scale the graph
     left out); nothing held constant: the gradient reaches all four inputs, from the one pass
-    that computes the value (where a gradient is wanted). op: the caller, for _first_order."""
+    that computes the value (where a gradient is wanted). The pass is the caller's
+    (`_two_frame_arap_pass`, so that two of them can run side by side): `result` is its
+    (energies, grad x, grad q). op: the caller, for _first_order."""
 
     @staticmethod
-    def forward(ctx, x0, x1, q0, q1, idx, w, scale, floor, op):
-        need_x = ctx.needs_input_grad[0] or ctx.needs_input_grad[1]
-        need_q = ctx.needs_input_grad[2] or ctx.needs_input_grad[3]
-        e, gx, gq = _fused(torch.stack((x0.detach(), x1.detach())), torch.stack((q0.detach(), q1.detach())), idx, w,
-                           _d3dgs_terms(scale, 0.0), need_x, need_q)
+    def forward(ctx, x0, x1, q0, q1, floor, result, op):
+        e, gx, gq = result
         ctx.grads = (None, None) if gx is None else (gx[0], gx[1])
         ctx.grads += (None, None) if gq is None else (gq[0], gq[1])
         ctx.op = op
@@ -973,7 +995,18 @@ class _TwoFrameArapFunction(torch.autograd.Function):
     @_first_order("compat.ds4d_losses")
     def backward(ctx, g):
         return tuple(None if t is None or not need else t * g
-                     for t, need in zip(ctx.grads, ctx.needs_input_grad[:4])) + (None,) * 5
+                     for t, need in zip(ctx.grads, ctx.needs_input_grad[:4])) + (None,) * 3
+
+
+def _two_frame_arap_pass(x0, x1, q0, q1, idx, w, scale):
+    """The pass _TwoFrameArapFunction returns, as a function of no arguments (for _side_by_side):
+    with the position and rotation gradients where autograd will want them (grad mode on and the
+    input requiring one, which is what the Function's needs_input_grad then says)."""
+    grad = torch.is_grad_enabled()
+    need_x = grad and (x0.requires_grad or x1.requires_grad)
+    need_q = grad and (q0.requires_grad or q1.requires_grad)
+    return lambda: _fused(torch.stack((x0.detach(), x1.detach())), torch.stack((q0.detach(), q1.detach())), idx, w,
+                          _d3dgs_terms(scale, 0.0), need_x, need_q)
 
 
 def ds4d_losses(pos_curr: torch.Tensor, pos_prev: torch.Tensor, rot_deform_curr: torch.Tensor,
@@ -1054,12 +1087,15 @@ def ds4d_losses(pos_curr: torch.Tensor, pos_prev: torch.Tensor, rot_deform_curr:
     scale = 1.0 / (N * K)
     floor = n_self * math.sqrt(_D3DGS_EPS) * scale
     q0, q1 = (rot_curr, rot_prev) if order == "upstream" else (rot_prev, rot_curr)
-    rigidity = _TwoFrameArapFunction.apply(pos_prev, pos_curr, q0, q1, g_idx, g_w, scale, floor, "compat.ds4d_losses")
     s = sc_prev - sc_base
     ident = torch.zeros((N, 4), dtype=pos_curr.dtype, device=pos_curr.device)
     ident[:, 0] = 1
-    scale_loss = _TwoFrameArapFunction.apply(torch.zeros_like(s), s, ident, ident, g_idx, g_w, scale, floor,
-                                             "compat.ds4d_losses")
+    zero = torch.zeros_like(s)
+    # The two passes side by side (each a two-frame window: one core each).
+    rig, sca = _side_by_side(not pos_curr.is_cuda, _two_frame_arap_pass(pos_prev, pos_curr, q0, q1, g_idx, g_w, scale),
+                             _two_frame_arap_pass(zero, s, ident, ident, g_idx, g_w, scale))
+    rigidity = _TwoFrameArapFunction.apply(pos_prev, pos_curr, q0, q1, floor, rig, "compat.ds4d_losses")
+    scale_loss = _TwoFrameArapFunction.apply(zero, s, ident, ident, floor, sca, "compat.ds4d_losses")
     return scale_loss, rigidity
 
 
