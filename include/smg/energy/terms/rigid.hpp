@@ -46,20 +46,17 @@ inline void edge_frames(Index n, const S* SMG_RESTRICT R, const S* SMG_RESTRICT 
 }
 
 // d = Rᵀ e over the n lanes of a short window (RigidTerm::node's frame-major layout, e given):
-// R [9][rs] per lane (row c of lane a at R[c·rs + a]), or with rs = 0 one rotation R [9] for all
-// n (a frame's run of edges in the row frame).
-template <class S>
+// row c of lane a's rotation at R[c·rs + a·LS]: LS = 1 one rotation per lane (R [9][rs]), LS = 0
+// one rotation R [9] for all n (a frame's run of edges in the row frame; rs = 1). LS is a template
+// argument so that the loop is vectorised with R broadcast or loaded per lane.
+template <Index LS, class S>
 inline void rotate_lanes(Index n, Index rs, const S* SMG_RESTRICT R, const S* SMG_RESTRICT ex,
                          const S* SMG_RESTRICT ey, const S* SMG_RESTRICT ez, S* SMG_RESTRICT dx,
                          S* SMG_RESTRICT dy, S* SMG_RESTRICT dz) {
-  if (rs == 0) {
-    const S R0[9] = {R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]};
-    for (Index a = 0; a < n; ++a) carap_edge_vector(R0, ex[a], ey[a], ez[a], dx[a], dy[a], dz[a]);
-    return;
-  }
   for (Index a = 0; a < n; ++a) {
-    const S Ra[9] = {R[0 * rs + a], R[1 * rs + a], R[2 * rs + a], R[3 * rs + a], R[4 * rs + a],
-                     R[5 * rs + a], R[6 * rs + a], R[7 * rs + a], R[8 * rs + a]};
+    const S Ra[9] = {R[0 * rs + a * LS], R[1 * rs + a * LS], R[2 * rs + a * LS],
+                     R[3 * rs + a * LS], R[4 * rs + a * LS], R[5 * rs + a * LS],
+                     R[6 * rs + a * LS], R[7 * rs + a * LS], R[8 * rs + a * LS]};
     carap_edge_vector(Ra, ex[a], ey[a], ez[a], dx[a], dy[a], dz[a]);
   }
 }
@@ -197,10 +194,10 @@ inline void backprop(Index n, const S* SMG_RESTRICT R, S* SMG_RESTRICT gx, S* SM
   }
 }
 
-// backprop over the n lanes of a short window, R as rotate_lanes: F overwrites G, each lane's
-// G × d goes to its own rx, ry, rz (the sums over edges are the caller's, in edge order, as
+// backprop over the n lanes of a short window, R, rs and LS as rotate_lanes: F overwrites G, each
+// lane's G × d goes to its own rx, ry, rz (the sums over edges are the caller's, in edge order, as
 // backprop's).
-template <class S>
+template <Index LS, class S>
 inline void backprop_lanes(Index n, Index rs, const S* SMG_RESTRICT R, S* SMG_RESTRICT gx,
                            S* SMG_RESTRICT gy, S* SMG_RESTRICT gz, const S* SMG_RESTRICT h,
                            const S* SMG_RESTRICT il, const S* SMG_RESTRICT ex,
@@ -208,22 +205,10 @@ inline void backprop_lanes(Index n, Index rs, const S* SMG_RESTRICT R, S* SMG_RE
                            const S* SMG_RESTRICT dx, const S* SMG_RESTRICT dy,
                            const S* SMG_RESTRICT dz, S* SMG_RESTRICT rx, S* SMG_RESTRICT ry,
                            S* SMG_RESTRICT rz) {
-  // Two loops written out (a lambda over the restrict pointers is not vectorised).
-  if (rs == 0) {
-    const S R0[9] = {R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8]};
-    for (Index a = 0; a < n; ++a) {
-      S fx, fy, fz;
-      carap_edge_backprop(R0, gx[a], gy[a], gz[a], h[a], il[a], ex[a], ey[a], ez[a], dx[a], dy[a],
-                          dz[a], fx, fy, fz, rx[a], ry[a], rz[a]);
-      gx[a] = fx;
-      gy[a] = fy;
-      gz[a] = fz;
-    }
-    return;
-  }
   for (Index a = 0; a < n; ++a) {
-    const S Ra[9] = {R[0 * rs + a], R[1 * rs + a], R[2 * rs + a], R[3 * rs + a], R[4 * rs + a],
-                     R[5 * rs + a], R[6 * rs + a], R[7 * rs + a], R[8 * rs + a]};
+    const S Ra[9] = {R[0 * rs + a * LS], R[1 * rs + a * LS], R[2 * rs + a * LS],
+                     R[3 * rs + a * LS], R[4 * rs + a * LS], R[5 * rs + a * LS],
+                     R[6 * rs + a * LS], R[7 * rs + a * LS], R[8 * rs + a * LS]};
     S fx, fy, fz;
     carap_edge_backprop(Ra, gx[a], gy[a], gz[a], h[a], il[a], ex[a], ey[a], ez[a], dx[a], dy[a],
                         dz[a], fx, fy, fz, rx[a], ry[a], rz[a]);
@@ -472,10 +457,10 @@ struct RigidTerm : TermDefaults {
     };
     if (flat) {
       if (nbr_frame)
-        carap_loops::rotate_lanes(m, m, R, Ex, Ey, Ez, Dx, Dy, Dz);
+        carap_loops::rotate_lanes<1>(m, m, R, Ex, Ey, Ez, Dx, Dy, Dz);
       else
         for (Index l = 0, o = 0; l < ne; ++l, o += m_e)
-          carap_loops::rotate_lanes(m_e, 0, frame_rotation(l), Ex + o, Ey + o, Ez + o, Dx + o,
+          carap_loops::rotate_lanes<0>(m_e, 1, frame_rotation(l), Ex + o, Ey + o, Ez + o, Dx + o,
                                     Dy + o, Dz + o);
     }
     carap_loops::lengths(m, Ex, Ey, Ez, Len, InvLen, Eacc[0]);
@@ -563,11 +548,11 @@ struct RigidTerm : TermDefaults {
     S *Rx = Wb[0], *Ry = Wb[1], *Rz = Len;
     if (flat) {
       if (nbr_frame)
-        carap_loops::backprop_lanes(m, m, R, Gx, Gy, Gz, H, InvLen, Ex, Ey, Ez, Dx, Dy, Dz, Rx,
+        carap_loops::backprop_lanes<1>(m, m, R, Gx, Gy, Gz, H, InvLen, Ex, Ey, Ez, Dx, Dy, Dz, Rx,
                                     Ry, Rz);
       else
         for (Index l = 0, o = 0; l < ne; ++l, o += m_e)
-          carap_loops::backprop_lanes(m_e, 0, frame_rotation(l), Gx + o, Gy + o, Gz + o, H + o,
+          carap_loops::backprop_lanes<0>(m_e, 1, frame_rotation(l), Gx + o, Gy + o, Gz + o, H + o,
                                       InvLen + o, Ex + o, Ey + o, Ez + o, Dx + o, Dy + o, Dz + o,
                                       Rx + o, Ry + o, Rz + o);
     }
